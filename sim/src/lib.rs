@@ -1,0 +1,1 @@
+//! FOIS ray tracer.
