@@ -1,1 +1,26 @@
-#![cfg_attr(not(feature = "std"), no_std)]
+//! The FOIS node ↔ host contract: message types, config rules and framing.
+//!
+//! `no_std`, no allocation on the device side. Enable `std` on the host
+//! (adds [`framing::encode_to_vec`]) and `defmt` for `defmt::Format` derives.
+//! The wire format and the compatibility rules are in `protocol/README.md`.
+#![cfg_attr(not(any(feature = "std", test)), no_std)]
+#![deny(missing_docs)]
+
+pub mod config;
+pub mod framing;
+pub mod messages;
+
+pub use config::{Config, ConfigError, ConfigField, FIELDS, FieldSpec};
+#[cfg(any(feature = "std", test))]
+pub use framing::encode_to_vec;
+pub use framing::{
+    DecodeStats, EncodeError, FrameDecoder, FrameError, MAX_FRAME, MAX_PAYLOAD, encode,
+};
+pub use messages::*;
+
+/// The protocol version this crate speaks (in [`Hello::protocol_version`]).
+/// Bump it on any breaking change (see `protocol/README.md`, Compatibility).
+pub const PROTOCOL_VERSION: u16 = 1;
+
+/// Baud rate of the node's UART link (ST-LINK virtual COM port), 8N1.
+pub const BAUD_RATE: u32 = 115_200;

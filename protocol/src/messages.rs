@@ -1,0 +1,317 @@
+//! The messages that cross the wire, in both directions.
+//!
+//! Compatibility rules (see `protocol/README.md`): the field order and the
+//! enum variant order of every type here are frozen for a given
+//! [`PROTOCOL_VERSION`](crate::PROTOCOL_VERSION). [`Hello`] and the envelope
+//! ([`DeviceFrame`]: `seq`, then variant 0 = `Hello`) never change shape, so a
+//! host of any version can read which version a node speaks. Any other change
+//! is breaking: add a message (a new variant at the end) and bump the version.
+
+use postcard::experimental::max_size::MaxSize;
+use serde::{Deserialize, Serialize};
+
+use crate::config::{Config, ConfigError};
+
+/// Every frame a node sends: a sequence number that grows by one per frame
+/// (wrapping), so the host can count lost frames, and the message.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct DeviceFrame {
+    /// Frame counter, +1 for every frame the node sends, of any kind.
+    pub seq: u32,
+    /// The message.
+    pub msg: DeviceMsg,
+}
+
+/// Messages from the node to the host.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DeviceMsg {
+    /// Sent at boot and every second until streaming starts; frozen shape.
+    Hello(Hello),
+    /// One output frame of the synchronous detector.
+    Measurement(Measurement),
+    /// A detector or fault transition, with the values that caused it.
+    Event(Event),
+    /// A command was carried out.
+    Ack(Ack),
+    /// A command was refused or could not be read.
+    Error(ErrorReply),
+}
+
+/// Who the node is. Frozen: this shape never changes, whatever the version.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Hello {
+    /// The [`PROTOCOL_VERSION`](crate::PROTOCOL_VERSION) the node speaks.
+    pub protocol_version: u16,
+    /// Firmware version, semantic: major, minor, patch.
+    pub firmware_version: [u8; 3],
+    /// Board name, ASCII, zero-padded (see [`Hello::board_name`]).
+    pub board: [u8; 16],
+    /// The MCU's 96-bit unique id.
+    pub unique_id: [u8; 12],
+    /// Why the node last reset.
+    pub reset_reason: ResetReason,
+}
+
+impl Hello {
+    /// Pack an ASCII board name (truncated to 16 bytes) into the fixed field.
+    pub fn board_from_str(name: &str) -> [u8; 16] {
+        let mut out = [0u8; 16];
+        for (dst, src) in out.iter_mut().zip(name.bytes()) {
+            *dst = src;
+        }
+        out
+    }
+
+    /// The board name without its zero padding (`"?"` if it is not UTF-8).
+    pub fn board_name(&self) -> &str {
+        let end = self
+            .board
+            .iter()
+            .position(|&b| b == 0)
+            .unwrap_or(self.board.len());
+        core::str::from_utf8(&self.board[..end]).unwrap_or("?")
+    }
+}
+
+/// Why the MCU last reset (from the RCC reset flags on the STM32).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ResetReason {
+    /// Power-on or brown-out reset.
+    PowerOn,
+    /// The NRST pin (reset button, debugger).
+    Pin,
+    /// A software reset (the `Reset` command).
+    Software,
+    /// The independent watchdog fired: the firmware hung.
+    IndependentWatchdog,
+    /// The window watchdog fired.
+    WindowWatchdog,
+    /// Low-power management reset.
+    LowPower,
+    /// No flag was set, or several that do not fit one cause.
+    Unknown,
+}
+
+/// What the ice rule currently concludes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum DetectorState {
+    /// No optical signature: the face is dry (I1 near its dark baseline).
+    Dry,
+    /// Optical signature above the freezing limit: water, not ice.
+    Wet,
+    /// Optical signature at or below the freezing limit: ice. Alarm output on.
+    Ice,
+}
+
+/// Bits of [`Measurement::flags`]. A frame with any `SATURATED_*` bit is
+/// invalid: its currents must not be used.
+pub mod flags {
+    /// Channel 1 hit the ADC's full scale (too much ambient light): invalid.
+    pub const SATURATED_CH1: u16 = 1 << 0;
+    /// Channel 2 hit the ADC's full scale: invalid.
+    pub const SATURATED_CH2: u16 = 1 << 1;
+    /// The NTC reads open circuit (fault); temperature from the internal sensor.
+    pub const NTC_OPEN: u16 = 1 << 2;
+    /// The NTC reads short circuit (fault); temperature from the internal sensor.
+    pub const NTC_SHORT: u16 = 1 << 3;
+    /// The stored config was corrupt or of an old version: defaults in use.
+    pub const CONFIG_DEFAULTED: u16 = 1 << 4;
+    /// No dark baseline has been stored: the rule uses a zero baseline.
+    pub const NO_BASELINE: u16 = 1 << 5;
+    /// The alarm output (PA9) is on.
+    pub const ALARM: u16 = 1 << 6;
+    /// The alarm was acknowledged by the user (output stays on while iced).
+    pub const ALARM_ACKED: u16 = 1 << 7;
+    /// V_DDA measured through VREFINT is outside 2.0–3.6 V: currents doubtful.
+    pub const VDDA_OUT_OF_RANGE: u16 = 1 << 8;
+    /// The persisted config or baseline could not be written to flash.
+    pub const STORAGE_FAILED: u16 = 1 << 9;
+
+    /// Bits that make a frame's currents unusable.
+    pub const INVALID_MASK: u16 = SATURATED_CH1 | SATURATED_CH2;
+    /// Bits that are faults (raised/cleared by [`EventKind`](crate::EventKind)).
+    pub const FAULT_MASK: u16 =
+        NTC_OPEN | NTC_SHORT | CONFIG_DEFAULTED | VDDA_OUT_OF_RANGE | STORAGE_FAILED;
+}
+
+/// One output frame: K LED-on/LED-off cycles averaged.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Measurement {
+    /// Milliseconds since boot.
+    pub uptime_ms: u64,
+    /// Channel 1 net photocurrent (LED on − LED off), nA.
+    pub i1_na: i32,
+    /// Channel 2 net photocurrent (LED on − LED off), nA.
+    pub i2_na: i32,
+    /// Channel 1 ambient level (LED off), nA.
+    pub ambient1_na: u32,
+    /// Channel 2 ambient level (LED off), nA.
+    pub ambient2_na: u32,
+    /// Air temperature, 0.01 °C (NTC; internal sensor when the NTC fails).
+    pub temperature_centi_c: i16,
+    /// Analog supply measured through VREFINT, mV.
+    pub vdda_mv: u16,
+    /// Validity and fault bits, see [`flags`].
+    pub flags: u16,
+    /// The ice rule's state after this frame.
+    pub state: DetectorState,
+}
+
+impl Measurement {
+    /// True when the currents may be used (no saturation).
+    pub fn is_valid(&self) -> bool {
+        self.flags & flags::INVALID_MASK == 0
+    }
+}
+
+/// A transition of the detector or of a fault.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Event {
+    /// Milliseconds since boot.
+    pub uptime_ms: u64,
+    /// What happened.
+    pub kind: EventKind,
+    /// Channel 1 net current of the frame that caused it, nA.
+    pub i1_na: i32,
+    /// Channel 2 net current of the frame that caused it, nA.
+    pub i2_na: i32,
+    /// Channel 1 rise over its dark baseline, nA (what the rule compares).
+    pub rise1_na: i32,
+    /// Air temperature, 0.01 °C.
+    pub temperature_centi_c: i16,
+    /// Consecutive frames that met the condition.
+    pub frames: u16,
+}
+
+/// Kinds of [`Event`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum EventKind {
+    /// Dry/wet → ice: the alarm output goes on.
+    IceOnset,
+    /// Ice → dry/wet: the alarm output goes off.
+    IceCleared,
+    /// Dry → wet: a water film above the freezing limit (no alarm).
+    WetOnset,
+    /// Wet → dry.
+    WetCleared,
+    /// Fault bits (see [`flags::FAULT_MASK`]) that became set.
+    FaultRaised(u16),
+    /// Fault bits that became clear.
+    FaultCleared(u16),
+}
+
+/// A command carried out; `id` is the command's.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Ack {
+    /// The id of the [`HostFrame`] answered.
+    pub id: u16,
+    /// What the command produced.
+    pub result: AckResult,
+}
+
+/// The result carried by an [`Ack`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum AckResult {
+    /// Answer to [`Command::GetInfo`].
+    Info(Hello),
+    /// Answer to [`Command::GetConfig`] and [`Command::SetConfig`] (the config now in force).
+    Config(Config),
+    /// Streaming runs at this frame period.
+    Streaming {
+        /// Output frame period, ms.
+        frame_period_ms: u32,
+    },
+    /// Streaming stopped.
+    Stopped,
+    /// Dark calibration done: the new baseline (net currents of a dry face).
+    DarkCalibrated(Baseline),
+    /// The alarm was acknowledged.
+    AlarmAcknowledged,
+    /// The node resets right after this frame.
+    Resetting,
+}
+
+/// Dark (dry-face) baseline of both channels, subtracted by the ice rule.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Baseline {
+    /// Channel 1 net current of the dry face, nA.
+    pub i1_na: i32,
+    /// Channel 2 net current of the dry face, nA.
+    pub i2_na: i32,
+}
+
+/// A command refused, or a frame that could not be read.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct ErrorReply {
+    /// The id of the command, or `None` when the frame was unreadable.
+    pub id: Option<u16>,
+    /// Why.
+    pub code: ErrorCode,
+}
+
+/// Reasons for an [`ErrorReply`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum ErrorCode {
+    /// A frame failed COBS decoding or its CRC: nothing was carried out.
+    Garbled,
+    /// A frame passed its CRC but is not a command of this version.
+    UnknownCommand,
+    /// A frame was longer than [`MAX_FRAME`](crate::MAX_FRAME).
+    Oversized,
+    /// The config was refused; nothing changed.
+    InvalidConfig(ConfigError),
+    /// The requested frame period is out of range.
+    InvalidRate,
+    /// Dark calibration refused: the channels are not steady or saturated.
+    CalibrationFailed,
+    /// Writing flash failed; the change holds until the next reset.
+    StorageFailed,
+}
+
+/// A frame from the host: an id (echoed in the answer) and a command.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct HostFrame {
+    /// Chosen by the host; the node's [`Ack`] or [`ErrorReply`] carries it back.
+    pub id: u16,
+    /// The command.
+    pub cmd: Command,
+}
+
+/// Commands from the host. Every one is answered by an `Ack` or an `Error`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Command {
+    /// Answer with the node's [`Hello`].
+    GetInfo,
+    /// Answer with the config in force.
+    GetConfig,
+    /// Validate, apply and persist a whole config.
+    SetConfig(Config),
+    /// Stream measurements at this frame period (ms), or at the config's when `None`.
+    StartStream {
+        /// Output frame period, ms; `None` = the config's `frame_period_ms`.
+        frame_period_ms: Option<u32>,
+    },
+    /// Stop streaming measurements (events and answers still flow).
+    StopStream,
+    /// Take the current readings of a dry, clean face as the dark baseline.
+    CalibrateDark,
+    /// Acknowledge the ice alarm.
+    AckAlarm,
+    /// Reset the node.
+    Reset,
+}
