@@ -1,0 +1,282 @@
+//! Golden-byte snapshots of the wire format: one frame per message variant,
+//! compared byte for byte. Any reorder or renumbering of a field or variant
+//! changes these bytes and fails here: that is a breaking change (bump
+//! `PROTOCOL_VERSION`, see protocol/README.md) — never "fix" a snapshot
+//! without one.
+
+use fois_protocol::*;
+
+fn hello() -> Hello {
+    Hello {
+        protocol_version: 1,
+        firmware_version: [0, 1, 0],
+        board: Hello::board_from_str("NUCLEO-F446RE"),
+        unique_id: [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12],
+        reset_reason: ResetReason::IndependentWatchdog,
+    }
+}
+
+fn config() -> Config {
+    Config {
+        frame_period_ms: 100,
+        cycles_per_frame: 8,
+        settle_us: 200,
+        load_r1_ohm: 22_000,
+        load_r2_ohm: 22_000,
+        onset_rise_na: 1_000,
+        onset_frames: 5,
+        clear_rise_na: 500,
+        clear_frames: 50,
+        freeze_limit_centi_c: 100,
+        thaw_limit_centi_c: 300,
+        stream_on_boot: true,
+    }
+}
+
+fn device(seq: u32, msg: DeviceMsg) -> Vec<u8> {
+    encode_to_vec(&DeviceFrame { seq, msg })
+}
+
+fn host(id: u16, cmd: Command) -> Vec<u8> {
+    encode_to_vec(&HostFrame { id, cmd })
+}
+
+/// (name, frame bytes) for every variant of both directions.
+fn cases() -> Vec<(&'static str, Vec<u8>)> {
+    vec![
+        ("hello", device(0, DeviceMsg::Hello(hello()))),
+        (
+            "measurement",
+            device(
+                1,
+                DeviceMsg::Measurement(Measurement {
+                    uptime_ms: 1_000,
+                    i1_na: 25_000,
+                    i2_na: -12,
+                    ambient1_na: 40_000,
+                    ambient2_na: 300,
+                    temperature_centi_c: -512,
+                    vdda_mv: 3_300,
+                    flags: flags::ALARM | flags::NO_BASELINE,
+                    state: DetectorState::Ice,
+                }),
+            ),
+        ),
+        (
+            "event_ice_onset",
+            device(
+                2,
+                DeviceMsg::Event(Event {
+                    uptime_ms: 2_000,
+                    kind: EventKind::IceOnset,
+                    i1_na: 1_800,
+                    i2_na: 200,
+                    rise1_na: 1_500,
+                    temperature_centi_c: -300,
+                    frames: 5,
+                }),
+            ),
+        ),
+        (
+            "event_fault_raised",
+            device(
+                3,
+                DeviceMsg::Event(Event {
+                    uptime_ms: 3_000,
+                    kind: EventKind::FaultRaised(flags::NTC_OPEN),
+                    i1_na: 0,
+                    i2_na: 0,
+                    rise1_na: 0,
+                    temperature_centi_c: 2_100,
+                    frames: 1,
+                }),
+            ),
+        ),
+        (
+            "ack_info",
+            device(
+                4,
+                DeviceMsg::Ack(Ack {
+                    id: 7,
+                    result: AckResult::Info(hello()),
+                }),
+            ),
+        ),
+        (
+            "ack_config",
+            device(
+                5,
+                DeviceMsg::Ack(Ack {
+                    id: 8,
+                    result: AckResult::Config(config()),
+                }),
+            ),
+        ),
+        (
+            "ack_streaming",
+            device(
+                6,
+                DeviceMsg::Ack(Ack {
+                    id: 9,
+                    result: AckResult::Streaming {
+                        frame_period_ms: 100,
+                    },
+                }),
+            ),
+        ),
+        (
+            "ack_stopped",
+            device(
+                7,
+                DeviceMsg::Ack(Ack {
+                    id: 10,
+                    result: AckResult::Stopped,
+                }),
+            ),
+        ),
+        (
+            "ack_dark",
+            device(
+                8,
+                DeviceMsg::Ack(Ack {
+                    id: 11,
+                    result: AckResult::DarkCalibrated(Baseline {
+                        i1_na: 13_000,
+                        i2_na: 2_500,
+                    }),
+                }),
+            ),
+        ),
+        (
+            "ack_alarm",
+            device(
+                9,
+                DeviceMsg::Ack(Ack {
+                    id: 12,
+                    result: AckResult::AlarmAcknowledged,
+                }),
+            ),
+        ),
+        (
+            "ack_reset",
+            device(
+                10,
+                DeviceMsg::Ack(Ack {
+                    id: 13,
+                    result: AckResult::Resetting,
+                }),
+            ),
+        ),
+        (
+            "error_garbled",
+            device(
+                11,
+                DeviceMsg::Error(ErrorReply {
+                    id: None,
+                    code: ErrorCode::Garbled,
+                }),
+            ),
+        ),
+        (
+            "error_config",
+            device(
+                12,
+                DeviceMsg::Error(ErrorReply {
+                    id: Some(14),
+                    code: ErrorCode::InvalidConfig(ConfigError::AboveMax(ConfigField::SettleUs)),
+                }),
+            ),
+        ),
+        ("cmd_get_info", host(1, Command::GetInfo)),
+        ("cmd_get_config", host(2, Command::GetConfig)),
+        ("cmd_set_config", host(3, Command::SetConfig(config()))),
+        (
+            "cmd_start",
+            host(
+                4,
+                Command::StartStream {
+                    frame_period_ms: Some(200),
+                },
+            ),
+        ),
+        ("cmd_stop", host(5, Command::StopStream)),
+        ("cmd_dark", host(6, Command::CalibrateDark)),
+        ("cmd_ack_alarm", host(7, Command::AckAlarm)),
+        ("cmd_reset", host(8, Command::Reset)),
+    ]
+}
+
+const GOLDEN: &[(&str, &str)] = &[
+    (
+        "hello",
+        "01 01 02 01 02 01 0e 4e 55 43 4c 45 4f 2d 46 34 34 36 52 45 01 01 12 01 02 03 04 05 06 07 08 09 0a 0b 0c 03 27 a5 0b 17 00",
+    ),
+    (
+        "measurement",
+        "18 01 01 e8 07 d0 86 03 17 c0 b8 02 ac 02 ff 07 e4 19 60 02 ad 13 23 a1 00",
+    ),
+    (
+        "event_ice_onset",
+        "05 02 02 d0 0f 0e 90 1c 90 03 b8 17 d7 04 05 0e 95 a9 66 00",
+    ),
+    (
+        "event_fault_raised",
+        "07 03 02 b8 17 04 04 01 01 08 e8 20 01 ee f6 d0 34 00",
+    ),
+    (
+        "ack_info",
+        "04 04 03 07 02 01 02 01 0e 4e 55 43 4c 45 4f 2d 46 34 34 36 52 45 01 01 12 01 02 03 04 05 06 07 08 09 0a 0b 0c 03 8e cd d8 33 00",
+    ),
+    (
+        "ack_config",
+        "1e 05 03 08 01 64 08 c8 01 f0 ab 01 f0 ab 01 e8 07 05 f4 03 32 c8 01 d8 04 01 7c 32 c7 92 00",
+    ),
+    ("ack_streaming", "0a 06 03 09 02 64 1f 51 ef 2c 00"),
+    ("ack_stopped", "09 07 03 0a 03 cc e0 33 dd 00"),
+    ("ack_dark", "0e 08 03 0b 04 90 cb 01 88 27 b1 24 10 6d 00"),
+    ("ack_alarm", "09 09 03 0c 05 4c 95 d5 82 00"),
+    ("ack_reset", "09 0a 03 0d 06 59 5a 72 10 00"),
+    ("error_garbled", "03 0b 04 01 05 c1 f0 4c f1 00"),
+    ("error_config", "0c 0c 04 01 0e 03 01 02 ab 47 b1 e9 00"),
+    ("cmd_get_info", "02 01 05 be 23 c2 58 00"),
+    ("cmd_get_config", "07 02 01 eb 40 e8 04 00"),
+    (
+        "cmd_set_config",
+        "1c 03 02 64 08 c8 01 f0 ab 01 f0 ab 01 e8 07 05 f4 03 32 c8 01 d8 04 01 31 bc a4 40 00",
+    ),
+    ("cmd_start", "0a 04 03 01 c8 01 d4 f9 f1 54 00"),
+    ("cmd_stop", "07 05 04 a3 22 c3 3b 00"),
+    ("cmd_dark", "07 06 05 f6 41 e9 67 00"),
+    ("cmd_ack_alarm", "07 07 06 0d 21 fb e7 00"),
+    ("cmd_reset", "07 08 07 54 0d 64 17 00"),
+];
+
+fn hex(bytes: &[u8]) -> String {
+    bytes
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+#[test]
+fn wire_format_matches_golden_bytes() {
+    let cases = cases();
+    if GOLDEN.is_empty() {
+        for (name, bytes) in &cases {
+            println!("(\"{name}\", \"{}\"),", hex(bytes));
+        }
+        panic!("no golden bytes recorded");
+    }
+    assert_eq!(cases.len(), GOLDEN.len(), "a case was added or removed");
+    for ((name, bytes), (gname, ghex)) in cases.iter().zip(GOLDEN) {
+        assert_eq!(name, gname);
+        assert_eq!(&hex(bytes), ghex, "wire bytes of `{name}` changed");
+    }
+}
+
+#[test]
+fn protocol_version_is_frozen_with_these_bytes() {
+    // The snapshots above belong to version 1. A new version gets new snapshots.
+    assert_eq!(PROTOCOL_VERSION, 1);
+}
