@@ -447,10 +447,12 @@ mod tests {
         let mut c = Config::default();
         c.thaw_limit_centi_c = c.freeze_limit_centi_c;
         assert_eq!(c.validate(), Err(ConfigError::ThawNotAboveFreeze));
-        let mut c = Config::default();
         // 64 cycles x 2 x 5000 us = 640 ms > half of 100 ms.
-        c.cycles_per_frame = 64;
-        c.settle_us = 5_000;
+        let mut c = Config {
+            cycles_per_frame: 64,
+            settle_us: 5_000,
+            ..Config::default()
+        };
         assert_eq!(c.validate(), Err(ConfigError::CyclesDoNotFitPeriod));
         c.frame_period_ms = 1_280;
         assert_eq!(c.validate(), Ok(()));
