@@ -1,1 +1,243 @@
-fn main() {}
+//! `cargo xtask`: the project's task runner.
+//!
+//! - `cargo xtask ci`   — every check the README promises, in order: format,
+//!   clippy (host crates, and the firmware on its thumb target), the whole
+//!   test suite, the firmware's release cross-build with its size budget, and
+//!   the firmware logic on an emulated Cortex-M4F (when qemu-system-arm is
+//!   installed).
+//! - `cargo xtask size` — cross-build the firmware and check its size budget.
+//! - `cargo xtask qemu` — run the firmware logic under qemu-system-arm.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Instant;
+
+use anyhow::{Context, Result, bail};
+
+/// Flash budget of the firmware image (issue 2).
+const FLASH_BUDGET_BYTES: u64 = 64 * 1024;
+/// Static RAM budget (.data + .bss; the stack comes on top, flip-link places it below).
+const RAM_BUDGET_BYTES: u64 = 16 * 1024;
+const THUMB: &str = "thumbv7em-none-eabihf";
+
+fn main() -> Result<()> {
+    let task = std::env::args().nth(1).unwrap_or_else(|| "help".into());
+    let root = project_root();
+    std::env::set_current_dir(&root)?;
+    match task.as_str() {
+        "ci" => ci(),
+        "size" => firmware_size().map(|_| ()),
+        "qemu" => qemu(true),
+        _ => {
+            eprintln!(
+                "usage: cargo xtask <task>\n\n\
+                 tasks:\n  \
+                 ci     format, clippy (host + thumb), tests, firmware size budget, QEMU run\n  \
+                 size   cross-build the firmware (release) and check flash <= 64 KiB, RAM <= 16 KiB\n  \
+                 qemu   run the firmware logic tests on qemu-system-arm (mps2-an386)"
+            );
+            if task == "help" || task == "--help" {
+                Ok(())
+            } else {
+                bail!("unknown task `{task}`")
+            }
+        }
+    }
+}
+
+fn project_root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .parent()
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|| PathBuf::from("."))
+}
+
+/// Run a command, echoing it, failing on a non-zero exit.
+fn run(program: &str, args: &[&str]) -> Result<()> {
+    eprintln!("\n$ {program} {}", args.join(" "));
+    let status = Command::new(program)
+        .args(args)
+        .status()
+        .with_context(|| format!("could not start `{program}`"))?;
+    if !status.success() {
+        bail!("`{program} {}` failed ({status})", args.join(" "));
+    }
+    Ok(())
+}
+
+fn have(program: &str) -> bool {
+    Command::new("sh")
+        .args(["-c", &format!("command -v {program} >/dev/null 2>&1")])
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false)
+}
+
+fn ci() -> Result<()> {
+    let started = Instant::now();
+    let mut steps: Vec<(String, f64)> = Vec::new();
+    let mut step = |name: &str, f: &mut dyn FnMut() -> Result<()>| -> Result<()> {
+        let t = Instant::now();
+        eprintln!("\n=== {name} ===");
+        f().with_context(|| format!("CI step `{name}` failed"))?;
+        steps.push((name.to_string(), t.elapsed().as_secs_f64()));
+        Ok(())
+    };
+
+    step("tools", &mut || {
+        // The firmware links through flip-link (stack overflow protection).
+        if !have("flip-link") {
+            run("cargo", &["install", "flip-link", "--locked"])?;
+        }
+        Ok(())
+    })?;
+    step("format", &mut || run("cargo", &["fmt", "--all", "--", "--check"]))?;
+    step("clippy (host)", &mut || {
+        run(
+            "cargo",
+            &["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"],
+        )
+    })?;
+    step("clippy (firmware, thumb)", &mut || {
+        run("cargo", &["fw-clippy", "--", "-D", "warnings"])
+    })?;
+    step("tests", &mut || run("cargo", &["test", "--workspace"]))?;
+    let mut size = None;
+    step("firmware size", &mut || {
+        size = Some(firmware_size()?);
+        Ok(())
+    })?;
+    step("firmware on emulated Cortex-M4F", &mut || qemu(false))?;
+
+    eprintln!("\n=== summary ===");
+    for (name, secs) in &steps {
+        eprintln!("  {name:<34} {secs:>7.1} s");
+    }
+    if let Some((flash, ram)) = size {
+        eprintln!(
+            "  firmware image: flash {flash} B ({:.1} KiB of {} KiB), static RAM {ram} B ({:.1} KiB of {} KiB)",
+            flash as f64 / 1024.0,
+            FLASH_BUDGET_BYTES / 1024,
+            ram as f64 / 1024.0,
+            RAM_BUDGET_BYTES / 1024
+        );
+    }
+    eprintln!("  total {:.1} s: all checks passed", started.elapsed().as_secs_f64());
+    Ok(())
+}
+
+/// Cross-build the release image and check it against the budget.
+/// Returns (flash bytes, static RAM bytes).
+fn firmware_size() -> Result<(u64, u64)> {
+    run("cargo", &["fw"])?;
+    let elf = PathBuf::from(format!("target/{THUMB}/firmware/fois-node"));
+    let sysroot = String::from_utf8(
+        Command::new("rustc")
+            .args(["--print", "sysroot"])
+            .output()?
+            .stdout,
+    )?;
+    let host = host_triple()?;
+    let size_tool = PathBuf::from(sysroot.trim())
+        .join("lib/rustlib")
+        .join(host)
+        .join("bin/llvm-size");
+    let out = Command::new(&size_tool)
+        .args(["-A", "-d"])
+        .arg(&elf)
+        .output()
+        .with_context(|| {
+            format!(
+                "could not run {} (rustup component llvm-tools)",
+                size_tool.display()
+            )
+        })?;
+    if !out.status.success() {
+        bail!("llvm-size failed: {}", String::from_utf8_lossy(&out.stderr));
+    }
+    let (flash, ram) = parse_sizes(&String::from_utf8(out.stdout)?);
+    println!(
+        "firmware image {}: flash {flash} B ({:.1} KiB, budget {} KiB), static RAM {ram} B ({:.1} KiB, budget {} KiB)",
+        elf.display(),
+        flash as f64 / 1024.0,
+        FLASH_BUDGET_BYTES / 1024,
+        ram as f64 / 1024.0,
+        RAM_BUDGET_BYTES / 1024
+    );
+    if flash > FLASH_BUDGET_BYTES {
+        bail!("flash {flash} B is over the budget of {FLASH_BUDGET_BYTES} B");
+    }
+    if ram > RAM_BUDGET_BYTES {
+        bail!("static RAM {ram} B is over the budget of {RAM_BUDGET_BYTES} B");
+    }
+    Ok((flash, ram))
+}
+
+/// Flash = what is programmed (vector table, code, read-only data, the
+/// initial values of .data); RAM = .data + .bss + .uninit.
+fn parse_sizes(llvm_size_a: &str) -> (u64, u64) {
+    let mut flash = 0;
+    let mut ram = 0;
+    for line in llvm_size_a.lines() {
+        let mut cols = line.split_whitespace();
+        let (Some(name), Some(size)) = (cols.next(), cols.next()) else {
+            continue;
+        };
+        let Ok(size) = size.parse::<u64>() else {
+            continue;
+        };
+        match name {
+            ".vector_table" | ".text" | ".rodata" => flash += size,
+            ".data" => {
+                flash += size;
+                ram += size;
+            }
+            ".bss" | ".uninit" => ram += size,
+            _ => {}
+        }
+    }
+    (flash, ram)
+}
+
+fn host_triple() -> Result<String> {
+    let out = Command::new("rustc").arg("-vV").output()?;
+    let text = String::from_utf8(out.stdout)?;
+    text.lines()
+        .find_map(|l| l.strip_prefix("host: "))
+        .map(str::to_string)
+        .context("rustc -vV printed no host triple")
+}
+
+/// Run the firmware's hardware-free logic on qemu-system-arm (mps2-an386).
+/// In CI it is skipped, with a message, when QEMU is not installed.
+fn qemu(required: bool) -> Result<()> {
+    let script = Path::new("firmware/qemu-test/run.sh");
+    if !script.exists() {
+        eprintln!("skipped: {} does not exist yet", script.display());
+        return Ok(());
+    }
+    if !have("qemu-system-arm") {
+        if required {
+            bail!("qemu-system-arm is not installed (apt-get install qemu-system-arm)");
+        }
+        eprintln!("skipped: qemu-system-arm is not installed (apt-get install qemu-system-arm)");
+        return Ok(());
+    }
+    run("bash", &[&script.to_string_lossy()])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::parse_sizes;
+
+    #[test]
+    fn sizes_from_llvm_size_output() {
+        let text = "fois-node  :\nsection              size        addr\n\
+                    .vector_table         408   134217728\n.text               20000   134218136\n\
+                    .rodata               3000   134238136\n.data                  56   536870912\n\
+                    .gnu.sgstubs             0   134241200\n.bss                  1200   536870968\n\
+                    .uninit               1024   536872168\n.defmt                  12           0\n\
+                    .debug_info         90000           0\nTotal              115700\n";
+        assert_eq!(parse_sizes(text), (408 + 20_000 + 3_000 + 56, 56 + 1_200 + 1_024));
+    }
+}
