@@ -1,1 +1,22 @@
-//! FOIS ray tracer.
+//! FOIS ray tracer: the fibre-optic ice sensor of the thesis (chapters 3 and 5).
+//!
+//! * [`laws`]: Snell, Fresnel, Beer–Lambert, fibre acceptance (thesis §3.1).
+//! * [`accretion_curve`]: one physical accretion, currents I1(d), I2(d) in µA.
+//! * [`analytic`]: the conventional overlap model (thesis §2.1, §3.3).
+//! * [`montecarlo`]: mean μ(d), covariance Σ(d), fits and the Cramér–Rao bound (§5.4).
+#![warn(missing_docs)]
+
+pub mod analytic;
+pub mod consts;
+pub mod geometry;
+pub mod laws;
+pub mod model;
+pub mod montecarlo;
+
+pub use analytic::analytic_curve;
+pub use geometry::{Geometry, Region};
+pub use model::{
+    Coupling, Curve, CurvePoint, IceKind, IceParams, SensorKind, SensorModel, SimConfig, SimError,
+    accretion_curve,
+};
+pub use montecarlo::{CrlbPoint, McPoint, MonteCarlo, crlb, monte_carlo};

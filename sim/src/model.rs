@@ -1,0 +1,617 @@
+//! The sensor model and the ray tracer of one accretion (thesis §3.2, §5.3).
+
+use glam::{DVec2, DVec3};
+use rand_core::Rng;
+use rand_pcg::Pcg32;
+
+use crate::consts::*;
+use crate::geometry::{Geometry, Region};
+use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
+
+/// The medium that accretes on the face (thesis §3.4, §5.2.3, §5.3).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum IceKind {
+    /// Ideal clear ice: flat surface, no bubbles, no diffuse reflection (§3.3).
+    Flat,
+    /// Glazed ice: δ_S ~ U(±15°), P_B = 0.0015, δ_R ~ U(±30°) (§5.3.3, Fig. 5.14).
+    Glazed,
+    /// Rime ice: δ_S ~ U(±10°), P_B = 0.21, δ_R = 0 (§5.3.4).
+    Rime,
+    /// Clear water: n = 1.33, flat, no bubbles (§5.2.3).
+    Water,
+}
+
+impl IceKind {
+    /// The model parameters of this medium.
+    pub fn params(self) -> IceParams {
+        let deg = std::f64::consts::PI / 180.0;
+        match self {
+            IceKind::Flat => IceParams {
+                n_medium: N_ICE,
+                p_bubble: 0.0,
+                slope_max_rad: 0.0,
+                diffuse_max_rad: 0.0,
+            },
+            IceKind::Glazed => IceParams {
+                n_medium: N_ICE,
+                p_bubble: 0.0015,
+                slope_max_rad: 15.0 * deg,
+                diffuse_max_rad: 30.0 * deg,
+            },
+            IceKind::Rime => IceParams {
+                n_medium: N_ICE,
+                p_bubble: 0.21,
+                slope_max_rad: 10.0 * deg,
+                diffuse_max_rad: 0.0,
+            },
+            IceKind::Water => IceParams {
+                n_medium: N_WATER,
+                p_bubble: 0.0,
+                slope_max_rad: 0.0,
+                diffuse_max_rad: 0.0,
+            },
+        }
+    }
+
+    /// Name used on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            IceKind::Flat => "flat",
+            IceKind::Glazed => "glazed",
+            IceKind::Rime => "rime",
+            IceKind::Water => "water",
+        }
+    }
+}
+
+/// Parameters of the accreted medium. `IceKind::params` gives the thesis presets; change
+/// them in a `SimConfig` for studies (e.g. glazed ice without diffuse reflection, Fig. 5.13).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IceParams {
+    /// Refractive index of the medium.
+    pub n_medium: f64,
+    /// Probability P_B that a ray meets a bubble in one layer of `BUBBLE_LAYER_MM`.
+    pub p_bubble: f64,
+    /// Surface slopes δ_S ~ U(±slope_max) in x and in y, drawn once per accretion, rad.
+    pub slope_max_rad: f64,
+    /// Diffuse deflection δ_R ~ U(±diffuse_max) of each reflected ray, drawn per ray per
+    /// surface (i.e. per new layer), rad.
+    pub diffuse_max_rad: f64,
+}
+
+/// Sensor construction (thesis §4.4, §5.2.1).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum SensorKind {
+    /// Transparent separation between the bundles: light reflected at the fibre face leaks
+    /// into the signal bundles, giving a dry offset (thesis §5.2.1, Fig. 5.5).
+    A,
+    /// Opaque separation: no leak, a dry face reads ~0 (Fig. 5.6). The thesis's rime sensor.
+    #[default]
+    B,
+}
+
+/// How a returning ray couples into a signal fibre.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum Coupling {
+    /// Thesis-literal (eqs. 3.24–3.25): any ray landing on a bundle enters with the Fresnel
+    /// transmittance at its refraction angle.
+    #[default]
+    ThesisLiteral,
+    /// Additionally require that the refracted ray lies inside the guided cone (θ_max,f,
+    /// eq. 3.18) around the signal fibres' axis, which leans toward +x by the inclination
+    /// like the source fibres. Rejects almost every specular return (see README).
+    AcceptanceCone,
+}
+
+/// Configuration of a simulation.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SimConfig {
+    /// The accreted medium.
+    pub ice: IceKind,
+    /// Sensor construction.
+    pub sensor: SensorKind,
+    /// Face geometry.
+    pub geometry: Geometry,
+    /// Largest thickness, mm (default 15).
+    pub max_mm: f64,
+    /// Thickness step of the output curve, mm (default 0.1).
+    pub step_mm: f64,
+    /// Medium parameters (defaults from `ice.params()`).
+    pub params: IceParams,
+    /// Coupling model (default thesis-literal).
+    pub coupling: Coupling,
+    /// Draw the fibre angles θ_f (default true); false: every fibre emits along its axis.
+    pub fibre_spread: bool,
+    /// Seed of the fibre angles, drawn once per model set-up (the sensor), not per accretion.
+    pub fibre_seed: u64,
+}
+
+impl SimConfig {
+    /// The thesis parameters for this medium, sensor and geometry; 0–15 mm in 0.1 mm.
+    pub fn new(ice: IceKind, sensor: SensorKind, geometry: Geometry) -> Self {
+        SimConfig {
+            ice,
+            sensor,
+            geometry,
+            max_mm: 15.0,
+            step_mm: 0.1,
+            params: ice.params(),
+            coupling: Coupling::ThesisLiteral,
+            fibre_spread: true,
+            fibre_seed: DEFAULT_FIBRE_SEED,
+        }
+    }
+
+    /// Check the numbers; `Err` with a message for the user.
+    pub fn validate(&self) -> Result<(), SimError> {
+        if !(self.step_mm.is_finite() && self.step_mm > 0.0) {
+            return Err(SimError::BadParam(format!(
+                "step must be a positive number of mm, got {}",
+                self.step_mm
+            )));
+        }
+        if !(self.max_mm.is_finite() && self.max_mm >= 0.0 && self.max_mm <= MAX_THICKNESS_MM) {
+            return Err(SimError::BadParam(format!(
+                "max thickness must be in 0..={MAX_THICKNESS_MM} mm, got {}",
+                self.max_mm
+            )));
+        }
+        if self.max_mm / self.step_mm > 100_000.0 {
+            return Err(SimError::BadParam(
+                "too many thickness steps (> 100000)".into(),
+            ));
+        }
+        let p = &self.params;
+        if !(0.0..=1.0).contains(&p.p_bubble) {
+            return Err(SimError::BadParam(
+                "bubble probability must be in 0..=1".into(),
+            ));
+        }
+        if !(p.n_medium.is_finite() && p.n_medium > 1.0) {
+            return Err(SimError::BadParam("refractive index must be > 1".into()));
+        }
+        let lim = 20f64.to_radians();
+        if !(0.0..=lim).contains(&p.slope_max_rad) {
+            return Err(SimError::BadParam(
+                "surface slope must be in 0..=20°".into(),
+            ));
+        }
+        if !(0.0..=(60f64.to_radians())).contains(&p.diffuse_max_rad) {
+            return Err(SimError::BadParam(
+                "diffuse angle must be in 0..=60°".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The output thicknesses 0, step, 2·step, … ≤ max_mm.
+    pub fn thicknesses_mm(&self) -> Vec<f64> {
+        let n = (self.max_mm / self.step_mm + 1e-9).floor() as usize;
+        (0..=n).map(|i| i as f64 * self.step_mm).collect()
+    }
+}
+
+/// Errors of the simulator.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SimError {
+    /// A parameter is out of range.
+    #[error("bad parameter: {0}")]
+    BadParam(String),
+}
+
+/// Currents at one thickness. `i1_ua = i1_refl_ua + i1_scat_ua` (eq. 3.26); the dry-face leak
+/// of Sensor A is reflection at the fibre face and is counted in `i*_refl_ua`.
+#[derive(Clone, Copy, Debug, PartialEq, Default)]
+pub struct CurvePoint {
+    /// Mean ice thickness d, mm.
+    pub thickness_mm: f64,
+    /// Current of phototransistor 1, µA.
+    pub i1_ua: f64,
+    /// Current of phototransistor 2, µA.
+    pub i2_ua: f64,
+    /// Part of I1 from reflection (ice/air surface, and the leak of Sensor A), µA.
+    pub i1_refl_ua: f64,
+    /// Part of I1 from bubble scattering, µA.
+    pub i1_scat_ua: f64,
+    /// Part of I2 from reflection, µA.
+    pub i2_refl_ua: f64,
+    /// Part of I2 from bubble scattering, µA.
+    pub i2_scat_ua: f64,
+}
+
+/// Currents as a function of thickness.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct Curve {
+    /// Points in increasing thickness.
+    pub points: Vec<CurvePoint>,
+}
+
+impl Curve {
+    /// (I1, I2) in µA at `thickness_mm`: linear interpolation, clamped at the ends.
+    /// Thickness 0 is the dry face (Sensor A shows its dry offset there, Sensor B ~0).
+    pub fn currents_at(&self, thickness_mm: f64) -> (f64, f64) {
+        let p = &self.points;
+        match p.len() {
+            0 => return (0.0, 0.0),
+            1 => return (p[0].i1_ua, p[0].i2_ua),
+            _ => {}
+        }
+        if thickness_mm.is_nan() || thickness_mm <= p[0].thickness_mm {
+            return (p[0].i1_ua, p[0].i2_ua);
+        }
+        let last = p[p.len() - 1];
+        if thickness_mm >= last.thickness_mm {
+            return (last.i1_ua, last.i2_ua);
+        }
+        let k = p.partition_point(|q| q.thickness_mm <= thickness_mm);
+        let (a, b) = (p[k - 1], p[k]);
+        let w = (thickness_mm - a.thickness_mm) / (b.thickness_mm - a.thickness_mm);
+        (
+            a.i1_ua + w * (b.i1_ua - a.i1_ua),
+            a.i2_ua + w * (b.i2_ua - a.i2_ua),
+        )
+    }
+
+    /// The thicknesses, mm.
+    pub fn thicknesses_mm(&self) -> Vec<f64> {
+        self.points.iter().map(|p| p.thickness_mm).collect()
+    }
+}
+
+/// One source fibre's ray, fixed at model set-up.
+#[derive(Clone, Copy, Debug)]
+struct SourceRay {
+    /// Position on the face, mm.
+    p0: DVec2,
+    /// Direction in the medium (unit, z > 0).
+    dir: DVec3,
+    /// Flux that enters the medium: Φ_ray · T(fibre→medium), W.
+    flux_in_w: f64,
+    /// Flux reflected at a dry fibre/air face, W (Sensor A leak).
+    refl_air_w: f64,
+    /// Flux reflected at the fibre/medium face, W (Sensor A leak under ice).
+    refl_med_w: f64,
+}
+
+/// The sensor with its fibres set up: trace accretions with it.
+#[derive(Clone, Debug)]
+pub struct SensorModel {
+    cfg: SimConfig,
+    rays: Vec<SourceRay>,
+    thick: Vec<f64>,
+    /// Unit vector along the signal fibres' axis (pointing into the medium).
+    fibre_axis: DVec3,
+    cos_accept: f64,
+}
+
+/// Uniform f64 in [0, 1).
+#[inline]
+fn uniform(rng: &mut Pcg32) -> f64 {
+    (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
+}
+
+/// Uniform in (0, 1].
+#[inline]
+fn uniform_open0(rng: &mut Pcg32) -> f64 {
+    1.0 - uniform(rng)
+}
+
+/// Standard normal by Box–Muller.
+fn std_normal(rng: &mut Pcg32) -> f64 {
+    let u1 = uniform_open0(rng);
+    let u2 = uniform(rng);
+    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+}
+
+/// SplitMix64 finaliser: spreads (seed, run) into a PCG state.
+#[inline]
+pub(crate) fn mix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The PCG state of accretion `run` of `seed`.
+#[inline]
+pub(crate) fn accretion_key(seed: u64, run: u64) -> u64 {
+    mix64(mix64(seed) ^ run.wrapping_mul(0xD6E8_FEB8_6659_FD93))
+}
+
+/// Stream ids: 0 = accretion (slopes); 2 + 2r = bubbles of ray r; 3 + 2r = diffuse of ray r.
+const STREAM_ACCRETION: u64 = 0;
+
+/// Geometric number of failures before the first success, P(success) = p.
+#[inline]
+fn geometric_gap(rng: &mut Pcg32, ln_q: f64) -> u32 {
+    if ln_q == f64::NEG_INFINITY {
+        return 0;
+    }
+    let g = (uniform_open0(rng).ln() / ln_q).floor();
+    if g >= (u32::MAX / 2) as f64 {
+        u32::MAX / 2
+    } else {
+        g as u32
+    }
+}
+
+impl SensorModel {
+    /// Set up the sensor: source fibres on their grid, fibre angles θ_f ~ N(0, θ_max/5)
+    /// clipped to ±θ_max,f with a uniform azimuth (eqs. 3.17–3.20), drawn from `fibre_seed`.
+    pub fn new(cfg: &SimConfig) -> Self {
+        let n_med = cfg.params.n_medium;
+        let th_max = theta_max(NA, N_AIR); // (3.17)
+        let th_max_f = theta_max_fibre(th_max, N_AIR, N_FIBRE); // (3.18)
+        let sigma = th_max / 5.0;
+        let grid = cfg.geometry.source_grid_mm();
+        let flux_ray = SOURCE_FLUX_W / grid.len() as f64;
+        let mut rng = Pcg32::new(mix64(cfg.fibre_seed), 1);
+        let incl = INCLINATION_DEG.to_radians();
+        let (si, ci) = incl.sin_cos();
+        let face_in = DVec3::new(0.0, 0.0, -1.0); // normal on the fibre side
+        let rays = grid
+            .into_iter()
+            .map(|(x, y)| {
+                let (th_f, beta) = if cfg.fibre_spread {
+                    let th = (sigma * std_normal(&mut rng)).clamp(-th_max_f, th_max_f);
+                    (th, std::f64::consts::TAU * uniform(&mut rng))
+                } else {
+                    (0.0, 0.0)
+                };
+                // Direction inside an upright fibre (Fig. 3.15) ...
+                let (st, ct) = th_f.sin_cos();
+                let f = DVec3::new(st * beta.cos(), st * beta.sin(), ct);
+                // ... turned toward +x by the inclination about y: eq. 3.20 in 3-D
+                // (θ_i,x = θ_f,x + θ_Incl for rays in the x–z plane).
+                let fi = DVec3::new(f.x * ci + f.z * si, f.y, -f.x * si + f.z * ci);
+                let cos_i = fi.z;
+                let (dir, t) = match refract(fi, face_in, N_FIBRE, n_med) {
+                    Some(d) => (d, fresnel_transmittance(cos_i, N_FIBRE, n_med)),
+                    None => (DVec3::Z, 0.0),
+                };
+                SourceRay {
+                    p0: DVec2::new(x, y),
+                    dir,
+                    flux_in_w: flux_ray * t,
+                    refl_air_w: flux_ray * fr_dielectric(cos_i, N_FIBRE, N_AIR),
+                    refl_med_w: flux_ray * fr_dielectric(cos_i, N_FIBRE, n_med),
+                }
+            })
+            .collect();
+        SensorModel {
+            cfg: cfg.clone(),
+            rays,
+            thick: cfg.thicknesses_mm(),
+            fibre_axis: DVec3::new(si, 0.0, ci),
+            cos_accept: th_max_f.cos(),
+        }
+    }
+
+    /// Number of source rays.
+    pub fn n_rays(&self) -> usize {
+        self.rays.len()
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &SimConfig {
+        &self.cfg
+    }
+
+    /// Number of ray evaluations (rays × thicknesses) of one accretion.
+    pub fn ray_evaluations(&self) -> u64 {
+        self.rays.len() as u64 * self.thick.len() as u64
+    }
+
+    /// Fraction of a downward ray (direction `s`, s.z < 0) that enters a signal fibre
+    /// (eqs. 3.24–3.25 with the Fresnel transmittance, plus the optional acceptance cone).
+    #[inline]
+    fn couple(&self, s: DVec3) -> f64 {
+        let n_med = self.cfg.params.n_medium;
+        let cos_i = -s.z;
+        let t = fresnel_transmittance(cos_i, n_med, N_FIBRE);
+        match self.cfg.coupling {
+            Coupling::ThesisLiteral => t,
+            Coupling::AcceptanceCone => match refract(s, DVec3::Z, n_med, N_FIBRE) {
+                Some(tr) if tr.dot(-self.fibre_axis) >= self.cos_accept => t,
+                _ => 0.0,
+            },
+        }
+    }
+
+    /// Trace one accretion: one physical ice body grown from 0 to `max_mm`, deterministic
+    /// in (seed, run). Cost O(rays × (thicknesses + bubbles)).
+    pub fn accretion(&self, seed: u64, run: u64) -> Curve {
+        let cfg = &self.cfg;
+        let p = cfg.params;
+        let geo = cfg.geometry;
+        let cx = geo.centre_x_mm();
+        let n_med = p.n_medium;
+        let alpha = ALPHA_PER_MM;
+        let key = accretion_key(seed, run);
+        let mut acc = Pcg32::new(key, STREAM_ACCRETION);
+        let sx = p.slope_max_rad * (2.0 * uniform(&mut acc) - 1.0);
+        let sy = p.slope_max_rad * (2.0 * uniform(&mut acc) - 1.0);
+        let (tx, ty) = (sx.tan(), sy.tan());
+        let normal = DVec3::new(-tx, -ty, 1.0).normalize();
+        let nt = self.thick.len();
+        let mut refl = vec![[0.0f64; 2]; nt];
+        let mut scat_delta = vec![[0.0f64; 2]; nt];
+        let mut leak = vec![0.0f64; nt];
+        let ln_q = if p.p_bubble > 0.0 {
+            (1.0 - p.p_bubble).ln()
+        } else {
+            0.0
+        };
+        let diffuse = p.diffuse_max_rad > 0.0;
+        let sensor_a = cfg.sensor == SensorKind::A;
+        let first_wet = self.thick.iter().position(|&d| d > 0.0).unwrap_or(nt);
+
+        for (r, ray) in self.rays.iter().enumerate() {
+            if sensor_a {
+                for l in leak.iter_mut().take(first_wet) {
+                    *l += ray.refl_air_w;
+                }
+            }
+            let v = ray.dir;
+            let a = tx * (ray.p0.x - cx) + ty * ray.p0.y;
+            let den = v.z - tx * v.x - ty * v.y;
+            if ray.flux_in_w <= 0.0 || den <= 1e-9 {
+                continue;
+            }
+            let slope_xy = DVec2::new(v.x, v.y) / v.z;
+            let mut bub = Pcg32::new(key, 2 + 2 * r as u64);
+            let mut dif = Pcg32::new(key, 3 + 2 * r as u64);
+            let mut next_layer: u32 = if p.p_bubble > 0.0 {
+                geometric_gap(&mut bub, ln_q)
+            } else {
+                u32::MAX
+            };
+            let mut fwd = ray.flux_in_w;
+            // Specular reflection is fixed per accretion when there is no diffuse angle.
+            let fixed = reflect_setup(v, normal, n_med);
+            let fixed_couple = fixed.map(|(_, rd)| self.couple(rd));
+
+            for i in first_wet..nt {
+                let d = self.thick[i];
+                let h0 = d + a;
+                if h0 <= 0.0 {
+                    if sensor_a {
+                        leak[i] += ray.refl_air_w;
+                    }
+                    continue;
+                }
+                if sensor_a {
+                    leak[i] += ray.refl_med_w;
+                }
+                // Bubbles frozen in below the new surface.
+                while next_layer != u32::MAX {
+                    let z_top = (next_layer as f64 + 1.0) * BUBBLE_LAYER_MM;
+                    let z_b = (next_layer as f64 + 0.5) * BUBBLE_LAYER_MM;
+                    let b = ray.p0 + slope_xy * z_b;
+                    let h_b = d + tx * (b.x - cx) + ty * b.y;
+                    if z_top > h_b {
+                        break;
+                    }
+                    // Scattered part: 5 % deflected toward the face (Fig. 3.11).
+                    let cos_b = uniform_open0(&mut bub); // isotropic over the lower hemisphere
+                    let (c_phi, s_phi) = unit_circle(&mut bub);
+                    let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
+                    let reach = z_b / cos_b;
+                    let land = b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
+                    let k = bundle_index(geo.region(land.x, land.y));
+                    if k < 2 {
+                        let s = DVec3::new(sin_b * c_phi, sin_b * s_phi, -cos_b);
+                        let path = z_b / v.z + reach;
+                        scat_delta[i][k] +=
+                            fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
+                    }
+                    fwd *= FORWARD_FRACTION;
+                    let gap = geometric_gap(&mut bub, ln_q);
+                    next_layer = next_layer.saturating_add(1).saturating_add(gap);
+                    if next_layer >= u32::MAX / 2 {
+                        next_layer = u32::MAX;
+                    }
+                }
+                // Reflection at the ice/air surface.
+                let t_up = h0 / den;
+                let (rfl, rd, cpl) = if diffuse {
+                    let dr = p.diffuse_max_rad * (2.0 * uniform(&mut dif) - 1.0);
+                    // δ_R deflects the reflected ray by δ_R (eq. 3.22): micro-facet normal
+                    // turned by δ_R/2 about the y axis.
+                    let (sh, ch) = (0.5 * dr).sin_cos();
+                    let nrm = DVec3::new(
+                        normal.x * ch + normal.z * sh,
+                        normal.y,
+                        -normal.x * sh + normal.z * ch,
+                    );
+                    match reflect_setup(v, nrm, n_med) {
+                        Some((rr, rd)) => (rr, rd, self.couple(rd)),
+                        None => continue,
+                    }
+                } else {
+                    match (fixed, fixed_couple) {
+                        (Some((rr, rd)), Some(c)) => (rr, rd, c),
+                        _ => continue,
+                    }
+                };
+                if cpl <= 0.0 {
+                    continue;
+                }
+                let z_hit = v.z * t_up;
+                let t_down = z_hit / -rd.z;
+                let land = ray.p0 + DVec2::new(v.x, v.y) * t_up + DVec2::new(rd.x, rd.y) * t_down;
+                let k = bundle_index(geo.region(land.x, land.y));
+                if k < 2 {
+                    refl[i][k] += fwd * rfl * cpl * (-alpha * (t_up + t_down)).exp();
+                }
+            }
+        }
+
+        // Flux to current.
+        let ua = RESPONSIVITY_A_PER_W * 1e6;
+        let mut points = Vec::with_capacity(nt);
+        let mut scat = [0.0f64; 2];
+        for i in 0..nt {
+            scat[0] += scat_delta[i][0];
+            scat[1] += scat_delta[i][1];
+            let i1_refl = (refl[i][0] + SENSOR_A_LEAK[0] * leak[i]) * ua;
+            let i2_refl = (refl[i][1] + SENSOR_A_LEAK[1] * leak[i]) * ua;
+            let i1_scat = scat[0] * ua;
+            let i2_scat = scat[1] * ua;
+            points.push(CurvePoint {
+                thickness_mm: self.thick[i],
+                i1_ua: i1_refl + i1_scat,
+                i2_ua: i2_refl + i2_scat,
+                i1_refl_ua: i1_refl,
+                i1_scat_ua: i1_scat,
+                i2_refl_ua: i2_refl,
+                i2_scat_ua: i2_scat,
+            });
+        }
+        Curve { points }
+    }
+}
+
+/// Reflection of `v` at a surface with upward normal `nrm`: (Fresnel reflectance, reflected
+/// direction), `None` if the ray does not meet the surface from below or does not return
+/// toward the face.
+#[inline]
+fn reflect_setup(v: DVec3, nrm: DVec3, n_med: f64) -> Option<(f64, DVec3)> {
+    let cos_i = v.dot(nrm);
+    if cos_i <= 0.0 {
+        return None;
+    }
+    let rd = crate::laws::reflect(v, nrm);
+    if rd.z >= -1e-9 {
+        return None;
+    }
+    Some((fr_dielectric(cos_i, n_med, N_AIR), rd))
+}
+
+/// A uniformly distributed point on the unit circle, by rejection (no trigonometry).
+#[inline]
+fn unit_circle(rng: &mut Pcg32) -> (f64, f64) {
+    loop {
+        let a = 2.0 * uniform(rng) - 1.0;
+        let b = 2.0 * uniform(rng) - 1.0;
+        let q = a * a + b * b;
+        if q > 1e-12 && q <= 1.0 {
+            let s = q.sqrt().recip();
+            return (a * s, b * s);
+        }
+    }
+}
+
+#[inline]
+fn bundle_index(r: Region) -> usize {
+    match r {
+        Region::Bundle1 => 0,
+        Region::Bundle2 => 1,
+        _ => 2,
+    }
+}
+
+/// One physical accretion of `cfg`, deterministic in (seed, run).
+pub fn accretion_curve(cfg: &SimConfig, seed: u64, run: u64) -> Curve {
+    SensorModel::new(cfg).accretion(seed, run)
+}
