@@ -1,4 +1,10 @@
 //! `foisctl` as a library: every subcommand lives in its own module so the
 //! hardware-in-loop suite and the benchmarks can drive the same code.
 
+pub mod commands;
+pub mod csvlog;
+pub mod exit;
+pub mod link;
+pub mod monitor;
 pub mod sim_cmd;
+pub mod timefmt;

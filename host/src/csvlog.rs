@@ -1,0 +1,539 @@
+//! The durable measurement log: one CSV file with a header, one row per
+//! measurement, event, answer, gap, link change or rejected frame, each with
+//! the host's time. Opened in append mode, so a reconnect or a restart of
+//! `foisctl monitor` continues the same file. Rows are handed to the kernel
+//! at least every [`FLUSH_INTERVAL`], so a `kill -9` of the logger loses at
+//! most that much.
+//!
+//! Columns ([`HEADER`]), empty where they do not apply:
+//!
+//! | column | unit | meaning |
+//! | --- | --- | --- |
+//! | `host_time_utc` | ISO-8601 | host clock when the row was made |
+//! | `host_unix_ms` | ms | the same, Unix milliseconds |
+//! | `kind` | | `measurement`, `event`, `hello`, `ack`, `error`, `gap`, `link_lost`, `link_up`, `node_restart`, `rejected`, `note` |
+//! | `seq` | | the node's frame sequence number |
+//! | `uptime_ms` | ms | node time since boot |
+//! | `i1_ua`, `i2_ua` | µA | net photocurrents (LED on − off) |
+//! | `ambient1_ua`, `ambient2_ua` | µA | ambient level (LED off) |
+//! | `temperature_c` | °C | air temperature |
+//! | `vdda_mv` | mV | analog supply |
+//! | `state` | | `Dry`, `Wet`, `Ice` |
+//! | `alarm` | 0/1 | alarm output on |
+//! | `valid` | 0/1 | currents usable (no saturation) |
+//! | `flags` | | raw flag bits (`fois_protocol::flags`) |
+//! | `frames_lost` | frames | `gap` rows: frames missing from the sequence |
+//! | `detail` | | event kind, error, answer, reason |
+
+use std::fs::{File, OpenOptions};
+use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use fois_protocol::{
+    Ack, AckResult, DetectorState, DeviceMsg, ErrorReply, Event, EventKind, Hello, Measurement,
+    flags,
+};
+
+use crate::timefmt::{iso_utc, unix_ms_now};
+
+/// The header line (without newline).
+pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,frames_lost,detail";
+
+/// Rows reach the kernel at least this often (kill -9 loses at most this).
+pub const FLUSH_INTERVAL: Duration = Duration::from_millis(250);
+
+/// Errors of the log file.
+#[derive(Debug, thiserror::Error)]
+pub enum LogError {
+    /// The file could not be opened, read or written.
+    #[error("log file {path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The file exists with another first line.
+    #[error(
+        "log file {0} exists but is not a foisctl log of this layout (its header differs); choose another file"
+    )]
+    ForeignHeader(PathBuf),
+}
+
+/// One row of the log. Build it with the constructors, then [`CsvLog::write`].
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Row {
+    /// Host time, Unix ms (0 = now, filled in by the writer).
+    pub host_unix_ms: u64,
+    /// Row kind (see the module doc).
+    pub kind: &'static str,
+    /// Node sequence number.
+    pub seq: Option<u32>,
+    /// Node uptime, ms.
+    pub uptime_ms: Option<u64>,
+    /// I1, µA.
+    pub i1_ua: Option<f64>,
+    /// I2, µA.
+    pub i2_ua: Option<f64>,
+    /// Ambient 1, µA.
+    pub ambient1_ua: Option<f64>,
+    /// Ambient 2, µA.
+    pub ambient2_ua: Option<f64>,
+    /// Air temperature, °C.
+    pub temperature_c: Option<f64>,
+    /// V_DDA, mV.
+    pub vdda_mv: Option<u16>,
+    /// Detector state.
+    pub state: Option<DetectorState>,
+    /// Alarm output.
+    pub alarm: Option<bool>,
+    /// Currents usable.
+    pub valid: Option<bool>,
+    /// Raw flags.
+    pub flags: Option<u16>,
+    /// Frames lost (gap rows).
+    pub frames_lost: Option<u64>,
+    /// Free text.
+    pub detail: String,
+}
+
+fn na_to_ua(na: i64) -> f64 {
+    na as f64 / 1000.0
+}
+
+impl Row {
+    /// A row of `kind` with only a detail text.
+    pub fn note(kind: &'static str, detail: impl Into<String>) -> Row {
+        Row {
+            kind,
+            detail: detail.into(),
+            ..Row::default()
+        }
+    }
+
+    /// A measurement row.
+    pub fn measurement(seq: u32, m: &Measurement) -> Row {
+        Row {
+            kind: "measurement",
+            seq: Some(seq),
+            uptime_ms: Some(m.uptime_ms),
+            i1_ua: Some(na_to_ua(m.i1_na.into())),
+            i2_ua: Some(na_to_ua(m.i2_na.into())),
+            ambient1_ua: Some(na_to_ua(m.ambient1_na.into())),
+            ambient2_ua: Some(na_to_ua(m.ambient2_na.into())),
+            temperature_c: Some(f64::from(m.temperature_centi_c) / 100.0),
+            vdda_mv: Some(m.vdda_mv),
+            state: Some(m.state),
+            alarm: Some(m.flags & flags::ALARM != 0),
+            valid: Some(m.is_valid()),
+            flags: Some(m.flags),
+            ..Row::default()
+        }
+    }
+
+    /// An event row.
+    pub fn event(seq: u32, e: &Event) -> Row {
+        Row {
+            kind: "event",
+            seq: Some(seq),
+            uptime_ms: Some(e.uptime_ms),
+            i1_ua: Some(na_to_ua(e.i1_na.into())),
+            i2_ua: Some(na_to_ua(e.i2_na.into())),
+            temperature_c: Some(f64::from(e.temperature_centi_c) / 100.0),
+            detail: format!(
+                "{} rise1_ua={:.3} frames={}",
+                event_name(&e.kind),
+                na_to_ua(e.rise1_na.into()),
+                e.frames
+            ),
+            ..Row::default()
+        }
+    }
+
+    /// A row for any device message.
+    pub fn device(seq: u32, msg: &DeviceMsg) -> Row {
+        match msg {
+            DeviceMsg::Measurement(m) => Row::measurement(seq, m),
+            DeviceMsg::Event(e) => Row::event(seq, e),
+            DeviceMsg::Hello(h) => Row {
+                seq: Some(seq),
+                ..Row::note("hello", hello_text(h))
+            },
+            DeviceMsg::Ack(a) => Row {
+                seq: Some(seq),
+                ..Row::note("ack", ack_text(a))
+            },
+            DeviceMsg::Error(e) => Row {
+                seq: Some(seq),
+                ..Row::note("error", error_text(e))
+            },
+        }
+    }
+
+    /// A gap of `lost` frames before `seq`.
+    pub fn gap(seq: u32, lost: u64) -> Row {
+        Row {
+            seq: Some(seq),
+            frames_lost: Some(lost),
+            ..Row::note("gap", format!("{lost} frame(s) missing before seq {seq}"))
+        }
+    }
+}
+
+/// Short name of an event kind (`IceOnset`, `FaultRaised(0x0004)`).
+pub fn event_name(kind: &EventKind) -> String {
+    match kind {
+        EventKind::FaultRaised(b) => format!("FaultRaised(0x{b:04x})"),
+        EventKind::FaultCleared(b) => format!("FaultCleared(0x{b:04x})"),
+        other => format!("{other:?}"),
+    }
+}
+
+/// One line describing a node.
+pub fn hello_text(h: &Hello) -> String {
+    let [a, b, c] = h.firmware_version;
+    let id: String = h.unique_id.iter().map(|b| format!("{b:02x}")).collect();
+    format!(
+        "board={} firmware={a}.{b}.{c} protocol={} id={id} reset={:?}",
+        h.board_name(),
+        h.protocol_version,
+        h.reset_reason
+    )
+}
+
+/// One line describing an answer.
+pub fn ack_text(a: &Ack) -> String {
+    let what = match &a.result {
+        AckResult::Info(h) => format!("Info {}", hello_text(h)),
+        AckResult::Config(c) => format!("Config {c:?}"),
+        AckResult::Streaming { frame_period_ms } => {
+            format!("Streaming frame_period_ms={frame_period_ms}")
+        }
+        AckResult::Stopped => "Stopped".into(),
+        AckResult::DarkCalibrated(b) => format!(
+            "DarkCalibrated i1_ua={:.3} i2_ua={:.3}",
+            na_to_ua(b.i1_na.into()),
+            na_to_ua(b.i2_na.into())
+        ),
+        AckResult::AlarmAcknowledged => "AlarmAcknowledged".into(),
+        AckResult::Resetting => "Resetting".into(),
+    };
+    format!("id={} {what}", a.id)
+}
+
+/// One line describing an error reply.
+pub fn error_text(e: &ErrorReply) -> String {
+    let id = e.id.map_or("none".to_string(), |i| i.to_string());
+    let why = match &e.code {
+        fois_protocol::ErrorCode::InvalidConfig(c) => format!("InvalidConfig: {c}"),
+        other => format!("{other:?}"),
+    };
+    format!("id={id} {why}")
+}
+
+/// The CSV log file.
+pub struct CsvLog {
+    path: PathBuf,
+    out: BufWriter<File>,
+    last_flush: Instant,
+    rows: u64,
+}
+
+impl CsvLog {
+    /// Open (create or append to) `path`. A new or empty file gets the
+    /// header; an existing file must start with it.
+    pub fn open(path: &Path) -> Result<CsvLog, LogError> {
+        let io = |source| LogError::Io {
+            path: path.to_path_buf(),
+            source,
+        };
+        let file = OpenOptions::new()
+            .create(true)
+            .append(true)
+            .read(true)
+            .open(path)
+            .map_err(io)?;
+        let len = file.metadata().map_err(io)?.len();
+        let mut needs_newline = false;
+        if len > 0 {
+            let mut first = String::new();
+            BufReader::new(File::open(path).map_err(io)?)
+                .read_line(&mut first)
+                .map_err(io)?;
+            if first.trim_end() != HEADER {
+                return Err(LogError::ForeignHeader(path.to_path_buf()));
+            }
+            // A logger killed mid-row leaves a partial last line: end it so
+            // the next row starts on its own line.
+            use std::io::{Read, Seek, SeekFrom};
+            let mut f = File::open(path).map_err(io)?;
+            f.seek(SeekFrom::End(-1)).map_err(io)?;
+            let mut last = [0u8; 1];
+            f.read_exact(&mut last).map_err(io)?;
+            needs_newline = last[0] != b'\n';
+        }
+        let mut log = CsvLog {
+            path: path.to_path_buf(),
+            out: BufWriter::with_capacity(64 * 1024, file),
+            last_flush: Instant::now(),
+            rows: 0,
+        };
+        if len == 0 {
+            writeln!(log.out, "{HEADER}").map_err(io)?;
+            log.flush()?;
+        } else if needs_newline {
+            writeln!(log.out).map_err(io)?;
+        }
+        Ok(log)
+    }
+
+    /// The file's path.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Rows written by this writer.
+    pub fn rows(&self) -> u64 {
+        self.rows
+    }
+
+    /// Append a row (timestamped now if `host_unix_ms` is 0); flushes if the
+    /// last flush is older than [`FLUSH_INTERVAL`].
+    pub fn write(&mut self, row: &Row) -> Result<(), LogError> {
+        let ms = if row.host_unix_ms == 0 {
+            unix_ms_now()
+        } else {
+            row.host_unix_ms
+        };
+        let line = format_row(ms, row);
+        self.out
+            .write_all(line.as_bytes())
+            .map_err(|source| LogError::Io {
+                path: self.path.clone(),
+                source,
+            })?;
+        self.rows += 1;
+        self.tick()
+    }
+
+    /// Flush if due; call it at least every 100 ms even when no rows come.
+    pub fn tick(&mut self) -> Result<(), LogError> {
+        if self.last_flush.elapsed() >= FLUSH_INTERVAL {
+            self.flush()?;
+        }
+        Ok(())
+    }
+
+    /// Hand every buffered row to the kernel now.
+    pub fn flush(&mut self) -> Result<(), LogError> {
+        self.last_flush = Instant::now();
+        self.out.flush().map_err(|source| LogError::Io {
+            path: self.path.clone(),
+            source,
+        })
+    }
+
+    /// Flush and ask the disk to keep it (on exit).
+    pub fn close(mut self) -> Result<(), LogError> {
+        self.flush()?;
+        self.out
+            .get_ref()
+            .sync_data()
+            .map_err(|source| LogError::Io {
+                path: self.path.clone(),
+                source,
+            })
+    }
+}
+
+fn opt<T: std::fmt::Display>(v: Option<T>) -> String {
+    v.map_or(String::new(), |v| v.to_string())
+}
+
+fn fixed(v: Option<f64>, decimals: usize) -> String {
+    v.map_or(String::new(), |v| format!("{v:.decimals$}"))
+}
+
+fn csv_field(s: &str) -> String {
+    if s.contains([',', '"', '\n', '\r']) {
+        format!("\"{}\"", s.replace('"', "\"\""))
+    } else {
+        s.to_string()
+    }
+}
+
+/// The CSV line of a row (with newline).
+pub fn format_row(host_unix_ms: u64, r: &Row) -> String {
+    format!(
+        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+        iso_utc(host_unix_ms),
+        host_unix_ms,
+        r.kind,
+        opt(r.seq),
+        opt(r.uptime_ms),
+        fixed(r.i1_ua, 3),
+        fixed(r.i2_ua, 3),
+        fixed(r.ambient1_ua, 3),
+        fixed(r.ambient2_ua, 3),
+        fixed(r.temperature_c, 2),
+        opt(r.vdda_mv),
+        r.state.map_or(String::new(), |s| format!("{s:?}")),
+        opt(r.alarm.map(u8::from)),
+        opt(r.valid.map(u8::from)),
+        opt(r.flags),
+        opt(r.frames_lost),
+        csv_field(&r.detail)
+    )
+}
+
+/// A log read back: the header's columns and every row as text fields.
+#[derive(Debug, Clone, Default)]
+pub struct LogTable {
+    /// Column names.
+    pub columns: Vec<String>,
+    /// Rows, fields as text.
+    pub rows: Vec<Vec<String>>,
+}
+
+impl LogTable {
+    /// Read a CSV file with a header (a foisctl log, or any CSV with the
+    /// columns a command needs). A partial last line is ignored.
+    pub fn read(path: &Path) -> anyhow::Result<LogTable> {
+        use anyhow::Context;
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("cannot read log {}", path.display()))?;
+        let mut lines = text.lines();
+        let header = lines
+            .next()
+            .with_context(|| format!("log {} is empty", path.display()))?;
+        let columns: Vec<String> = split_csv(header).into_iter().collect();
+        let complete = text.ends_with('\n');
+        let all: Vec<&str> = lines.collect();
+        let n = all.len();
+        let mut rows = Vec::with_capacity(n);
+        for (i, line) in all.into_iter().enumerate() {
+            if line.is_empty() || (i + 1 == n && !complete) {
+                continue;
+            }
+            let fields = split_csv(line);
+            if fields.len() == columns.len() {
+                rows.push(fields);
+            }
+        }
+        Ok(LogTable { columns, rows })
+    }
+
+    /// Index of a column.
+    pub fn col(&self, name: &str) -> Option<usize> {
+        self.columns.iter().position(|c| c == name)
+    }
+
+    /// The numbers of a column for rows where `keep` is true (NaN if empty).
+    pub fn numbers(&self, col: usize) -> Vec<f64> {
+        self.rows
+            .iter()
+            .map(|r| r[col].trim().parse::<f64>().unwrap_or(f64::NAN))
+            .collect()
+    }
+}
+
+/// Split one CSV line (RFC 4180 quoting).
+pub fn split_csv(line: &str) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut cur = String::new();
+    let mut quoted = false;
+    let mut chars = line.chars().peekable();
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                cur.push('"');
+                chars.next();
+            }
+            ('"', true) => quoted = false,
+            ('"', false) if cur.is_empty() => quoted = true,
+            (',', false) => out.push(std::mem::take(&mut cur)),
+            (c, _) => cur.push(c),
+        }
+    }
+    out.push(cur);
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn meas() -> Measurement {
+        Measurement {
+            uptime_ms: 1234,
+            i1_na: 25_500,
+            i2_na: -7,
+            ambient1_na: 100,
+            ambient2_na: 0,
+            temperature_centi_c: -512,
+            vdda_mv: 3300,
+            flags: flags::ALARM,
+            state: DetectorState::Ice,
+        }
+    }
+
+    #[test]
+    fn row_text_matches_header() {
+        let line = format_row(0, &Row::measurement(42, &meas()));
+        assert_eq!(
+            line,
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,\n"
+        );
+        assert_eq!(split_csv(line.trim_end()).len(), split_csv(HEADER).len());
+        let g = format_row(5, &Row::gap(10, 3));
+        let f = split_csv(g.trim_end());
+        assert_eq!(f[2], "gap");
+        assert_eq!(f[15], "3");
+    }
+
+    #[test]
+    fn quoting_round_trips() {
+        let r = Row::note("note", "a, \"b\"");
+        let line = format_row(1, &r);
+        let f = split_csv(line.trim_end());
+        assert_eq!(f.last().unwrap(), "a, \"b\"");
+        assert_eq!(f.len(), 17);
+    }
+
+    #[test]
+    fn append_keeps_header_once_and_refuses_foreign_files() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("log.csv");
+        {
+            let mut log = CsvLog::open(&p).unwrap();
+            log.write(&Row::measurement(1, &meas())).unwrap();
+            log.close().unwrap();
+        }
+        // A partial line, as a kill -9 mid-write could leave.
+        std::fs::OpenOptions::new()
+            .append(true)
+            .open(&p)
+            .unwrap()
+            .write_all(b"2026-01-01T00:00")
+            .unwrap();
+        {
+            let mut log = CsvLog::open(&p).unwrap();
+            log.write(&Row::measurement(2, &meas())).unwrap();
+            log.close().unwrap();
+        }
+        let t = LogTable::read(&p).unwrap();
+        assert_eq!(t.columns.len(), 17);
+        let seqs: Vec<&str> = t.rows.iter().map(|r| r[3].as_str()).collect();
+        assert_eq!(seqs, ["1", "2"]);
+        let text = std::fs::read_to_string(&p).unwrap();
+        assert_eq!(text.matches("host_time_utc").count(), 1);
+
+        let other = dir.path().join("other.csv");
+        std::fs::write(&other, "a,b\n1,2\n").unwrap();
+        assert!(matches!(
+            CsvLog::open(&other),
+            Err(LogError::ForeignHeader(_))
+        ));
+    }
+}

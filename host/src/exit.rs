@@ -1,0 +1,66 @@
+//! Exit codes of `foisctl` and the error type that carries them.
+
+use std::fmt;
+
+/// Success.
+pub const OK: i32 = 0;
+/// Any other failure (I/O, unreadable log, plotting).
+pub const FAILURE: i32 = 1;
+/// Bad command line (clap's own code).
+pub const USAGE: i32 = 2;
+/// The serial port could not be opened.
+pub const PORT: i32 = 3;
+/// The node did not answer in time (or the link was lost).
+pub const TIMEOUT: i32 = 4;
+/// The node speaks another protocol version.
+pub const INCOMPATIBLE: i32 = 5;
+/// The node answered with an `Error` (command refused).
+pub const REFUSED: i32 = 6;
+/// A `KEY=VALUE` was refused on the host (unknown key, not a number, out of range).
+pub const INVALID_VALUE: i32 = 7;
+
+/// The exit-code table, for `--help`.
+pub const TABLE: &str = "Exit codes: 0 success; 1 other failure (I/O, unreadable file); \
+2 bad command line; 3 serial port cannot be opened; 4 no answer from the node in time; \
+5 node speaks an incompatible protocol version; 6 node refused the command (Error reply); \
+7 KEY=VALUE refused on the host (unknown key, not a number, out of range).";
+
+/// An error with the exit code it maps to.
+#[derive(Debug)]
+pub struct Exit {
+    /// Process exit code.
+    pub code: i32,
+    /// What to tell the user.
+    pub message: String,
+}
+
+impl Exit {
+    /// An error with a code.
+    pub fn new(code: i32, message: impl Into<String>) -> Exit {
+        Exit {
+            code,
+            message: message.into(),
+        }
+    }
+}
+
+impl fmt::Display for Exit {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(&self.message)
+    }
+}
+
+impl std::error::Error for Exit {}
+
+/// The exit code of an `anyhow` error: the [`Exit`] code inside it, else 1.
+pub fn code_of(err: &anyhow::Error) -> i32 {
+    err.chain()
+        .find_map(|e| e.downcast_ref::<Exit>().map(|x| x.code))
+        .or_else(|| {
+            err.chain().find_map(|e| {
+                e.downcast_ref::<crate::link::LinkError>()
+                    .map(|l| l.exit_code())
+            })
+        })
+        .unwrap_or(FAILURE)
+}

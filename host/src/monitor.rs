@@ -1,0 +1,359 @@
+//! `foisctl monitor`: live view of a node, durable CSV log, reconnects when
+//! the port comes back.
+
+use std::io::IsTerminal;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use fois_protocol::{Command, DetectorState, DeviceMsg, Measurement, flags};
+
+use crate::csvlog::{CsvLog, Row, ack_text, error_text, event_name, hello_text};
+use crate::exit;
+use crate::link::{Incoming, Link, LinkError, SeqEvent, SeqTracker, open_port};
+
+/// What `monitor` does.
+#[derive(Debug, Clone)]
+pub struct MonitorOptions {
+    /// Serial port path.
+    pub port: String,
+    /// Baud rate.
+    pub baud: u32,
+    /// CSV log file (appended).
+    pub log: Option<PathBuf>,
+    /// Stop after this long (None: until Ctrl-C).
+    pub duration: Option<Duration>,
+    /// Time allowed for the handshake.
+    pub handshake_timeout: Duration,
+    /// Print plain status lines even on a terminal.
+    pub plain: bool,
+    /// Print nothing but errors and the summary.
+    pub quiet: bool,
+}
+
+impl MonitorOptions {
+    /// Defaults for a port.
+    pub fn new(port: impl Into<String>) -> Self {
+        MonitorOptions {
+            port: port.into(),
+            baud: fois_protocol::BAUD_RATE,
+            log: None,
+            duration: None,
+            handshake_timeout: Duration::from_secs(3),
+            plain: false,
+            quiet: false,
+        }
+    }
+}
+
+/// Totals at the end of a monitor run.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct MonitorSummary {
+    /// Frames decoded.
+    pub frames: u64,
+    /// Measurements received.
+    pub measurements: u64,
+    /// Frames missing from the sequence.
+    pub lost: u64,
+    /// Frames the decoder rejected.
+    pub rejected: u64,
+    /// Times the link was lost.
+    pub disconnects: u64,
+    /// Rows written to the log.
+    pub log_rows: u64,
+    /// The last measurement.
+    pub last: Option<Measurement>,
+    /// Ice onsets seen.
+    pub ice_onsets: u64,
+}
+
+/// The live view: a redrawn status line on a terminal, periodic lines
+/// otherwise; events as lines above it.
+struct View {
+    bar: Option<indicatif::ProgressBar>,
+    quiet: bool,
+    last_line: Instant,
+}
+
+impl View {
+    fn new(plain: bool, quiet: bool) -> View {
+        let bar = (!plain && !quiet && std::io::stdout().is_terminal()).then(|| {
+            let b = indicatif::ProgressBar::new_spinner();
+            b.set_style(
+                indicatif::ProgressStyle::with_template("{spinner:.cyan} {msg}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_spinner()),
+            );
+            b.enable_steady_tick(Duration::from_millis(200));
+            b
+        });
+        View {
+            bar,
+            quiet,
+            last_line: Instant::now() - Duration::from_secs(10),
+        }
+    }
+
+    fn say(&self, text: &str) {
+        if self.quiet {
+            return;
+        }
+        match &self.bar {
+            Some(b) => b.println(text),
+            None => println!("{text}"),
+        }
+    }
+
+    fn status(&mut self, text: String) {
+        if self.quiet {
+            return;
+        }
+        match &self.bar {
+            Some(b) => b.set_message(text),
+            None => {
+                if self.last_line.elapsed() >= Duration::from_secs(1) {
+                    self.last_line = Instant::now();
+                    println!("{text}");
+                }
+            }
+        }
+    }
+
+    fn finish(&self) {
+        if let Some(b) = &self.bar {
+            b.finish_and_clear();
+        }
+    }
+}
+
+/// One status line from the last measurement and the counters.
+pub fn status_line(m: Option<&Measurement>, s: &MonitorSummary) -> String {
+    let head = match m {
+        None => "waiting for measurements".to_string(),
+        Some(m) => {
+            let alarm = if m.flags & flags::ALARM != 0 {
+                if m.flags & flags::ALARM_ACKED != 0 {
+                    "ALARM (acked)"
+                } else {
+                    "ALARM"
+                }
+            } else {
+                "off"
+            };
+            let state = match m.state {
+                DetectorState::Dry => "Dry",
+                DetectorState::Wet => "Wet",
+                DetectorState::Ice => "ICE",
+            };
+            format!(
+                "I1 {:8.3} µA  I2 {:8.3} µA  ambient {:7.2}/{:7.2} µA  {:6.2} °C  state {state:3}  alarm {alarm}{}",
+                m.i1_na as f64 / 1000.0,
+                m.i2_na as f64 / 1000.0,
+                m.ambient1_na as f64 / 1000.0,
+                m.ambient2_na as f64 / 1000.0,
+                f64::from(m.temperature_centi_c) / 100.0,
+                if m.is_valid() { "" } else { "  SATURATED" }
+            )
+        }
+    };
+    format!(
+        "{head}  | frames {} lost {} rejected {}",
+        s.frames, s.lost, s.rejected
+    )
+}
+
+struct Session<'a> {
+    log: Option<CsvLog>,
+    view: View,
+    sum: MonitorSummary,
+    rejected_before: u64,
+    stop: &'a AtomicBool,
+}
+
+impl Session<'_> {
+    fn row(&mut self, row: Row) -> anyhow::Result<()> {
+        if let Some(log) = &mut self.log {
+            log.write(&row)?;
+        }
+        Ok(())
+    }
+
+    fn handle(&mut self, inc: Incoming) -> anyhow::Result<()> {
+        match inc {
+            Incoming::Rejected(e) => {
+                self.sum.rejected += 1;
+                self.row(Row::note("rejected", format!("{e:?}")))?;
+            }
+            Incoming::Frame(f, ev) => {
+                self.sum.frames += 1;
+                match ev {
+                    SeqEvent::Gap(n) => {
+                        self.sum.lost += n;
+                        self.view
+                            .say(&format!("! {n} frame(s) lost before seq {}", f.seq));
+                        self.row(Row::gap(f.seq, n))?;
+                    }
+                    SeqEvent::Restart => {
+                        self.view.say(&format!(
+                            "! node restarted (sequence went back to {})",
+                            f.seq
+                        ));
+                        self.row(Row {
+                            seq: Some(f.seq),
+                            ..Row::note("node_restart", "sequence number went backwards")
+                        })?;
+                    }
+                    _ => {}
+                }
+                match &f.msg {
+                    DeviceMsg::Measurement(m) => {
+                        self.sum.measurements += 1;
+                        self.sum.last = Some(m.clone());
+                    }
+                    DeviceMsg::Event(e) => {
+                        if e.kind == fois_protocol::EventKind::IceOnset {
+                            self.sum.ice_onsets += 1;
+                        }
+                        self.view.say(&format!(
+                            "* event {} at uptime {:.1} s: I1 {:.3} µA, rise {:.3} µA, {:.2} °C",
+                            event_name(&e.kind),
+                            e.uptime_ms as f64 / 1000.0,
+                            e.i1_na as f64 / 1000.0,
+                            e.rise1_na as f64 / 1000.0,
+                            f64::from(e.temperature_centi_c) / 100.0
+                        ));
+                    }
+                    DeviceMsg::Ack(a) => self.view.say(&format!("  ack {}", ack_text(a))),
+                    DeviceMsg::Error(e) => self.view.say(&format!("! error {}", error_text(e))),
+                    DeviceMsg::Hello(h) => self.view.say(&format!("  hello {}", hello_text(h))),
+                }
+                self.row(Row::device(f.seq, &f.msg))?;
+            }
+        }
+        Ok(())
+    }
+
+    fn tick(&mut self) -> anyhow::Result<()> {
+        if let Some(log) = &mut self.log {
+            log.tick()?;
+        }
+        let line = status_line(self.sum.last.as_ref(), &self.sum);
+        self.view.status(line);
+        Ok(())
+    }
+}
+
+/// Run the monitor until `stop` is set, the duration ends, or an error
+/// that reconnecting cannot fix (bad port at start, incompatible node).
+pub fn run(opts: &MonitorOptions, stop: &AtomicBool) -> anyhow::Result<MonitorSummary> {
+    let log = match &opts.log {
+        Some(p) => Some(CsvLog::open(p)?),
+        None => None,
+    };
+    let mut s = Session {
+        log,
+        view: View::new(opts.plain, opts.quiet),
+        sum: MonitorSummary::default(),
+        rejected_before: 0,
+        stop,
+    };
+    let result = run_session(opts, &mut s);
+    s.view.finish();
+    let mut sum = s.sum.clone();
+    if let Some(log) = s.log.take() {
+        sum.log_rows = log.rows();
+        let path = log.path().display().to_string();
+        log.close()
+            .with_context(|| format!("closing the log {path}"))?;
+    }
+    result.map(|_| sum)
+}
+
+fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
+    let start = Instant::now();
+    let done = |s: &Session| {
+        s.stop.load(Ordering::Relaxed) || opts.duration.is_some_and(|d| start.elapsed() >= d)
+    };
+    let mut tracker = SeqTracker::default();
+    let mut connected_once = false;
+    let mut waiting_said = false;
+    while !done(s) {
+        let port = match open_port(&opts.port, opts.baud) {
+            Ok(p) => p,
+            Err(e) if !connected_once => return Err(e.into()),
+            Err(e) => {
+                if !waiting_said {
+                    s.view.say(&format!(
+                        "  waiting for {} to come back ({e})",
+                        opts.port
+                    ));
+                    waiting_said = true;
+                }
+                s.tick()?;
+                std::thread::sleep(Duration::from_millis(200));
+                continue;
+            }
+        };
+        let mut link = Link::new(port, opts.port.clone());
+        let _ = link.port_mut().clear(serialport::ClearBuffer::Input);
+        link.seq = tracker.clone();
+        let hello = match link.handshake(opts.handshake_timeout) {
+            Ok(h) => h,
+            Err(e @ LinkError::Incompatible { .. }) => return Err(e.into()),
+            Err(e) if !connected_once => return Err(e.into()),
+            Err(e) => {
+                if !waiting_said {
+                    s.view.say(&format!("  reconnect failed, retrying: {e}"));
+                    waiting_said = true;
+                }
+                s.tick()?;
+                std::thread::sleep(Duration::from_millis(200));
+                continue;
+            }
+        };
+        waiting_said = false;
+        let text = hello_text(&hello);
+        s.view.say(&format!(
+            "{} {} ({text})",
+            if connected_once { "reconnected to" } else { "connected to" },
+            opts.port
+        ));
+        s.row(Row::note("link_up", format!("port={} {text}", opts.port)))?;
+        connected_once = true;
+        link.send(Command::StartStream {
+            frame_period_ms: None,
+        })?;
+        s.rejected_before = s.sum.rejected;
+        let lost = loop {
+            if done(s) {
+                break None;
+            }
+            match link.poll() {
+                Ok(incs) => {
+                    for inc in incs {
+                        s.handle(inc)?;
+                    }
+                }
+                Err(e) => break Some(e),
+            }
+            s.tick()?;
+        };
+        tracker = link.seq.clone();
+        if let Some(e) = lost {
+            s.sum.disconnects += 1;
+            s.view.say(&format!(
+                "! {e}; waiting for it to return (Ctrl-C to quit)"
+            ));
+            s.row(Row::note("link_lost", e.to_string()))?;
+            if let Some(log) = &mut s.log {
+                log.flush()?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Map errors of `monitor` to exit codes (see [`exit`]).
+pub fn exit_code(err: &anyhow::Error) -> i32 {
+    exit::code_of(err)
+}
