@@ -1,0 +1,525 @@
+//! The whole node behind the hardware traits: measurement, the ice rule,
+//! outputs, persistence and the command link. The board binary, the host's
+//! virtual node and the HIL suite all drive this same type.
+
+use embedded_hal::delay::DelayNs;
+use embedded_hal::digital::OutputPin;
+use fois_protocol::{
+    Ack, AckResult, Baseline, Command, Config, DetectorState, DeviceFrame, DeviceMsg, ErrorCode,
+    ErrorReply, Event, EventKind, FrameDecoder, Hello, HostFrame, MAX_FRAME, Measurement,
+    PROTOCOL_VERSION, encode, flags,
+};
+
+use crate::dispatch::{self, BUTTON_ID};
+use crate::hal::{BoardInfo, PhotoAdc, Storage};
+use crate::measure::{self, Currents};
+use crate::ntc::{self, NtcReading};
+use crate::persist::{self, LoadError, MAX_RECORD, Record};
+use crate::rule::{Rule, RuleInput};
+use crate::vref;
+
+/// Firmware version sent in [`Hello`] (the crate's version).
+pub const FIRMWARE_VERSION: [u8; 3] = [
+    parse_u8(env!("CARGO_PKG_VERSION_MAJOR")),
+    parse_u8(env!("CARGO_PKG_VERSION_MINOR")),
+    parse_u8(env!("CARGO_PKG_VERSION_PATCH")),
+];
+
+const fn parse_u8(s: &str) -> u8 {
+    let b = s.as_bytes();
+    let mut i = 0;
+    let mut v: u8 = 0;
+    while i < b.len() {
+        v = v.wrapping_mul(10).wrapping_add(b[i].wrapping_sub(b'0'));
+        i += 1;
+    }
+    v
+}
+
+/// Dark calibration averages this many frames of K cycles.
+pub const CAL_FRAMES: u16 = 4;
+
+/// Everything one frame measured (also what a [`Measurement`] carries).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameValues {
+    /// Net and ambient currents.
+    pub currents: Currents,
+    /// Air temperature, 0.01 °C.
+    pub temperature_centi_c: i16,
+    /// V_DDA, mV (as measured).
+    pub vdda_mv: u16,
+    /// Measurement flags (validity, NTC, V_DDA); node flags are added later.
+    pub flags: u16,
+}
+
+/// The node. Type parameters: ADC, LED (PB0), alarm output (PA9), indicator
+/// (LD2, PA5), delay (settle waits), storage (config + baseline record).
+pub struct Node<A, L, AL, IND, D, S>
+where
+    A: PhotoAdc,
+    L: OutputPin,
+    AL: OutputPin,
+    IND: OutputPin,
+    D: DelayNs,
+    S: Storage,
+{
+    adc: A,
+    led: L,
+    alarm: AL,
+    indicator: IND,
+    delay: D,
+    storage: S,
+    info: BoardInfo,
+    config: Config,
+    baseline: Option<Baseline>,
+    config_defaulted: bool,
+    storage_failed: bool,
+    rule: Rule,
+    seq: u32,
+    streaming: bool,
+    stream_period_ms: Option<u32>,
+    decoder: FrameDecoder<MAX_FRAME>,
+    reported_faults: u16,
+    reset_request: bool,
+    last: Option<Measurement>,
+}
+
+impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
+where
+    A: PhotoAdc,
+    L: OutputPin,
+    AL: OutputPin,
+    IND: OutputPin,
+    D: DelayNs,
+    S: Storage,
+{
+    /// Build the node: loads config + baseline from `storage`. An empty store
+    /// gives the defaults; a corrupt or old record gives the defaults and the
+    /// `CONFIG_DEFAULTED` fault. The LED and the outputs start off.
+    pub fn new(
+        adc: A,
+        led: L,
+        alarm: AL,
+        indicator: IND,
+        delay: D,
+        mut storage: S,
+        info: BoardInfo,
+    ) -> Self {
+        let mut buf = [0xFFu8; MAX_RECORD];
+        let loaded = match storage.read(&mut buf) {
+            Ok(n) => persist::decode(buf.get(..n).unwrap_or(&[])),
+            Err(_) => Err(LoadError::Corrupt),
+        };
+        let (config, baseline, config_defaulted) = match loaded {
+            Ok(r) => (r.config, r.baseline, false),
+            Err(LoadError::Empty) => (Config::default(), None, false),
+            Err(_) => (Config::default(), None, true),
+        };
+        let info = BoardInfo {
+            cal: info.cal.or_typical(),
+            ..info
+        };
+        let mut node = Node {
+            adc,
+            led,
+            alarm,
+            indicator,
+            delay,
+            storage,
+            info,
+            streaming: config.stream_on_boot,
+            config,
+            baseline,
+            config_defaulted,
+            storage_failed: false,
+            rule: Rule::new(),
+            seq: 0,
+            stream_period_ms: None,
+            decoder: FrameDecoder::new(),
+            reported_faults: 0,
+            reset_request: false,
+            last: None,
+        };
+        let _ = node.led.set_low();
+        node.drive_outputs();
+        node
+    }
+
+    /// Who this node is.
+    pub fn hello(&self) -> Hello {
+        Hello {
+            protocol_version: PROTOCOL_VERSION,
+            firmware_version: FIRMWARE_VERSION,
+            board: Hello::board_from_str(self.info.board),
+            unique_id: self.info.unique_id,
+            reset_reason: self.info.reset_reason,
+        }
+    }
+
+    /// Send a `Hello` frame.
+    pub fn send_hello(&mut self, tx: &mut impl FnMut(&[u8])) {
+        let hello = self.hello();
+        self.send(DeviceMsg::Hello(hello), tx);
+    }
+
+    /// One output frame: K LED-off/LED-on cycles (settle waits through the
+    /// delay), currents, temperature, V_DDA, the ice rule, the outputs. Sends
+    /// a `Measurement` if streaming, then any `Event`s (rule transition first,
+    /// then faults raised/cleared).
+    pub fn run_frame(&mut self, now_ms: u64, tx: &mut impl FnMut(&[u8])) {
+        let values = self.measure_frame();
+        let rise1 = self.rise1(values.currents.net_na[0]);
+        let valid = values.flags & flags::INVALID_MASK == 0;
+        let transition = self.rule.step(
+            &self.config,
+            RuleInput {
+                rise1_na: rise1,
+                temperature_centi_c: values.temperature_centi_c,
+                valid,
+            },
+        );
+        self.drive_outputs();
+        let flags = values.flags | self.node_flags();
+        let m = Measurement {
+            uptime_ms: now_ms,
+            i1_na: values.currents.net_na[0],
+            i2_na: values.currents.net_na[1],
+            ambient1_na: values.currents.ambient_na[0],
+            ambient2_na: values.currents.ambient_na[1],
+            temperature_centi_c: values.temperature_centi_c,
+            vdda_mv: values.vdda_mv,
+            flags,
+            state: self.rule.state(),
+        };
+        if self.streaming {
+            self.send(DeviceMsg::Measurement(m.clone()), tx);
+        }
+        let event = |kind: EventKind, frames: u16| Event {
+            uptime_ms: now_ms,
+            kind,
+            i1_na: m.i1_na,
+            i2_na: m.i2_na,
+            rise1_na: rise1,
+            temperature_centi_c: m.temperature_centi_c,
+            frames,
+        };
+        if let Some(t) = transition {
+            self.send(DeviceMsg::Event(event(t.kind, t.frames)), tx);
+        }
+        let faults = flags & flags::FAULT_MASK;
+        let raised = faults & !self.reported_faults;
+        let cleared = self.reported_faults & !faults;
+        if raised != 0 {
+            self.send(
+                DeviceMsg::Event(event(EventKind::FaultRaised(raised), 1)),
+                tx,
+            );
+        }
+        if cleared != 0 {
+            self.send(
+                DeviceMsg::Event(event(EventKind::FaultCleared(cleared), 1)),
+                tx,
+            );
+        }
+        self.reported_faults = faults;
+        self.last = Some(m);
+    }
+
+    /// Bytes received from the host link, in any chunking. Each complete
+    /// frame is answered through `tx`: an `Ack`, or an `Error` (garbled,
+    /// unknown, out of range). Never stops the measurement.
+    pub fn handle_rx(&mut self, bytes: &[u8], now_ms: u64, tx: &mut impl FnMut(&[u8])) {
+        let _ = now_ms;
+        for &b in bytes {
+            match self.decoder.push::<HostFrame>(b) {
+                None => {}
+                Some(Ok(frame)) => self.execute(frame, tx),
+                Some(Err(e)) => {
+                    self.send(DeviceMsg::Error(dispatch::frame_error_reply(e)), tx);
+                }
+            }
+        }
+    }
+
+    /// The user button (B1). While iced it acknowledges the alarm (the
+    /// output stays on while the ice holds); otherwise it runs a dark
+    /// calibration (the user cleaned the dry face and pressed the button).
+    /// Either way an unsolicited `Ack` (or `Error`) with id
+    /// [`BUTTON_ID`](crate::dispatch::BUTTON_ID) reports what happened.
+    pub fn button_pressed(&mut self, now_ms: u64, tx: &mut impl FnMut(&[u8])) {
+        let _ = now_ms;
+        let cmd = if self.rule.alarm() {
+            Command::AckAlarm
+        } else {
+            Command::CalibrateDark
+        };
+        self.execute(HostFrame { id: BUTTON_ID, cmd }, tx);
+    }
+
+    /// The output frame period now in force, ms (the `StartStream` rate
+    /// while streaming with one, else the config's).
+    pub fn frame_period_ms(&self) -> u32 {
+        self.stream_period_ms.unwrap_or(self.config.frame_period_ms)
+    }
+
+    /// True while measurements are streamed.
+    pub fn is_streaming(&self) -> bool {
+        self.streaming
+    }
+
+    /// The ice rule's state.
+    pub fn state(&self) -> DetectorState {
+        self.rule.state()
+    }
+
+    /// The config in force.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The dark baseline in use (`None`: zero baseline, `NO_BASELINE` flag).
+    pub fn baseline(&self) -> Option<Baseline> {
+        self.baseline
+    }
+
+    /// The last frame's measurement (also when not streaming).
+    pub fn last_measurement(&self) -> Option<&Measurement> {
+        self.last.as_ref()
+    }
+
+    /// Frames sent so far (the next frame's sequence number).
+    pub fn next_seq(&self) -> u32 {
+        self.seq
+    }
+
+    /// True once after a `Reset` command was acknowledged: the board then
+    /// resets; the virtual node builds a new `Node`.
+    pub fn take_reset_request(&mut self) -> bool {
+        core::mem::replace(&mut self.reset_request, false)
+    }
+
+    /// Give the parts back (tests, the virtual node's restart).
+    pub fn into_parts(self) -> (A, L, AL, IND, D, S) {
+        (
+            self.adc,
+            self.led,
+            self.alarm,
+            self.indicator,
+            self.delay,
+            self.storage,
+        )
+    }
+
+    // ---- internals ----
+
+    fn rise1(&self, i1_na: i32) -> i32 {
+        let base = self.baseline.map_or(0, |b| b.i1_na);
+        i1_na.saturating_sub(base)
+    }
+
+    fn node_flags(&self) -> u16 {
+        let mut f = 0;
+        if self.config_defaulted {
+            f |= flags::CONFIG_DEFAULTED;
+        }
+        if self.storage_failed {
+            f |= flags::STORAGE_FAILED;
+        }
+        if self.baseline.is_none() {
+            f |= flags::NO_BASELINE;
+        }
+        if self.rule.alarm() {
+            f |= flags::ALARM;
+        }
+        if self.rule.acked() {
+            f |= flags::ALARM_ACKED;
+        }
+        f
+    }
+
+    fn drive_outputs(&mut self) {
+        let on = self.rule.alarm();
+        if on {
+            let _ = self.alarm.set_high();
+            let _ = self.indicator.set_high();
+        } else {
+            let _ = self.alarm.set_low();
+            let _ = self.indicator.set_low();
+        }
+    }
+
+    /// Acquire one frame and convert it (no rule, no output).
+    fn measure_frame(&mut self) -> FrameValues {
+        let acq = measure::acquire(
+            &mut self.adc,
+            &mut self.led,
+            &mut self.delay,
+            self.config.cycles_per_frame,
+            self.config.settle_us,
+        );
+        let cal = self.info.cal;
+        let vdda_mv = vref::vdda_mv(&cal, self.adc.read_vrefint());
+        let mut flags = 0u16;
+        if !vref::vdda_in_range(vdda_mv) {
+            flags |= flags::VDDA_OUT_OF_RANGE;
+        }
+        let conv_mv = vref::vdda_for_conversion(vdda_mv);
+        let currents = measure::currents(
+            &acq,
+            conv_mv,
+            [self.config.load_r1_ohm, self.config.load_r2_ohm],
+        );
+        if acq.saturated[0] {
+            flags |= flags::SATURATED_CH1;
+        }
+        if acq.saturated[1] {
+            flags |= flags::SATURATED_CH2;
+        }
+        let temperature_centi_c = match ntc::temperature(self.adc.read_ntc()) {
+            NtcReading::Ok(t) => t,
+            fault => {
+                flags |= if fault == NtcReading::Open {
+                    flags::NTC_OPEN
+                } else {
+                    flags::NTC_SHORT
+                };
+                let code = self.adc.read_internal_temp();
+                vref::internal_temp_centi_c(&cal, code, conv_mv)
+            }
+        };
+        FrameValues {
+            currents,
+            temperature_centi_c,
+            vdda_mv,
+            flags,
+        }
+    }
+
+    fn send(&mut self, msg: DeviceMsg, tx: &mut impl FnMut(&[u8])) {
+        let frame = DeviceFrame { seq: self.seq, msg };
+        let mut buf = [0u8; MAX_FRAME];
+        if let Ok(n) = encode(&frame, &mut buf)
+            && let Some(bytes) = buf.get(..n)
+        {
+            tx(bytes);
+            self.seq = self.seq.wrapping_add(1);
+        }
+    }
+
+    fn reply(&mut self, id: u16, result: Result<AckResult, ErrorCode>, tx: &mut impl FnMut(&[u8])) {
+        let msg = match result {
+            Ok(result) => DeviceMsg::Ack(Ack { id, result }),
+            Err(code) => DeviceMsg::Error(ErrorReply { id: Some(id), code }),
+        };
+        self.send(msg, tx);
+    }
+
+    fn execute(&mut self, frame: HostFrame, tx: &mut impl FnMut(&[u8])) {
+        let id = frame.id;
+        let result = match frame.cmd {
+            Command::GetInfo => Ok(AckResult::Info(self.hello())),
+            Command::GetConfig => Ok(AckResult::Config(self.config.clone())),
+            Command::SetConfig(cfg) => self.set_config(cfg),
+            Command::StartStream { frame_period_ms } => {
+                match dispatch::stream_period(&self.config, frame_period_ms) {
+                    Ok(period) => {
+                        self.streaming = true;
+                        self.stream_period_ms = frame_period_ms.map(|_| period);
+                        Ok(AckResult::Streaming {
+                            frame_period_ms: period,
+                        })
+                    }
+                    Err(code) => Err(code),
+                }
+            }
+            Command::StopStream => {
+                self.streaming = false;
+                self.stream_period_ms = None;
+                Ok(AckResult::Stopped)
+            }
+            Command::CalibrateDark => self.calibrate_dark(),
+            Command::AckAlarm => {
+                self.rule.acknowledge();
+                Ok(AckResult::AlarmAcknowledged)
+            }
+            Command::Reset => {
+                self.reset_request = true;
+                Ok(AckResult::Resetting)
+            }
+        };
+        self.reply(id, result, tx);
+    }
+
+    fn set_config(&mut self, cfg: Config) -> Result<AckResult, ErrorCode> {
+        cfg.validate().map_err(ErrorCode::InvalidConfig)?;
+        let unchanged = cfg == self.config && !self.config_defaulted && !self.storage_failed;
+        self.config = cfg;
+        self.config_defaulted = false;
+        // A StartStream rate that no longer fits the new K × settle is dropped.
+        if let Some(p) = self.stream_period_ms
+            && dispatch::stream_period(&self.config, Some(p)).is_err()
+        {
+            self.stream_period_ms = None;
+        }
+        if !unchanged {
+            self.persist()?;
+        }
+        Ok(AckResult::Config(self.config.clone()))
+    }
+
+    fn calibrate_dark(&mut self) -> Result<AckResult, ErrorCode> {
+        if self.rule.alarm() {
+            // An iced face is not a dark reference.
+            return Err(ErrorCode::CalibrationFailed);
+        }
+        let mut min = [i32::MAX; 2];
+        let mut max = [i32::MIN; 2];
+        let mut sum = [0i64; 2];
+        for _ in 0..CAL_FRAMES {
+            let v = self.measure_frame();
+            if v.flags & flags::INVALID_MASK != 0 {
+                return Err(ErrorCode::CalibrationFailed);
+            }
+            for ch in 0..2 {
+                let i = v.currents.net_na[ch];
+                min[ch] = min[ch].min(i);
+                max[ch] = max[ch].max(i);
+                sum[ch] += i64::from(i);
+            }
+        }
+        // Steady: the spread over the frames stays under half the onset rise.
+        let tolerance = i64::from(self.config.onset_rise_na / 2);
+        for ch in 0..2 {
+            if i64::from(max[ch]) - i64::from(min[ch]) > tolerance {
+                return Err(ErrorCode::CalibrationFailed);
+            }
+        }
+        let n = i64::from(CAL_FRAMES);
+        let baseline = Baseline {
+            i1_na: (sum[0] / n) as i32,
+            i2_na: (sum[1] / n) as i32,
+        };
+        self.baseline = Some(baseline);
+        self.persist()?;
+        Ok(AckResult::DarkCalibrated(baseline))
+    }
+
+    fn persist(&mut self) -> Result<(), ErrorCode> {
+        let record = Record {
+            config: self.config.clone(),
+            baseline: self.baseline,
+        };
+        let mut buf = [0u8; MAX_RECORD];
+        let n = persist::encode(&record, &mut buf);
+        let written = match buf.get(..n) {
+            Some(bytes) if n > 0 => self.storage.write(bytes).is_ok(),
+            _ => false,
+        };
+        self.storage_failed = !written;
+        if written {
+            Ok(())
+        } else {
+            Err(ErrorCode::StorageFailed)
+        }
+    }
+}

@@ -1,0 +1,157 @@
+//! The persisted record: config + dark baseline, with a version and a CRC.
+//!
+//! ```text
+//! | magic "FOIS" 4 B | version u16 LE | length u16 LE | postcard(Record) | CRC-32 u32 LE |
+//! ```
+//! The CRC (CRC-32/ISO-HDLC, the `crc` crate) covers everything before it.
+//! Erased flash (0xFF) or an empty store is *empty*: defaults, no fault. A bad
+//! magic, version, length, CRC, postcard body or a config that fails
+//! [`Config::validate`] is *corrupt*: defaults and `CONFIG_DEFAULTED`.
+
+use fois_protocol::framing::CRC;
+use fois_protocol::{Baseline, Config};
+use postcard::experimental::max_size::MaxSize;
+use serde::{Deserialize, Serialize};
+
+/// First four bytes of a record.
+pub const MAGIC: [u8; 4] = *b"FOIS";
+/// Record layout version; bump when [`Record`] changes shape. An older
+/// record is refused (defaults + fault), never misread.
+pub const RECORD_VERSION: u16 = 1;
+const HEADER: usize = 8;
+const CRC_LEN: usize = 4;
+/// The largest record, bytes.
+pub const MAX_RECORD: usize = HEADER + Record::POSTCARD_MAX_SIZE + CRC_LEN;
+
+/// What is kept across resets.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+pub struct Record {
+    /// The config in force.
+    pub config: Config,
+    /// The dark baseline, once calibrated.
+    pub baseline: Option<Baseline>,
+}
+
+/// Why a stored record was not used.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum LoadError {
+    /// Nothing was ever stored (erased or empty): defaults, not a fault.
+    Empty,
+    /// A record of another layout version.
+    OldVersion,
+    /// Bad magic, length, CRC, body, or a config that fails validation.
+    Corrupt,
+}
+
+/// Encode `record` into `out`; returns the record's length.
+pub fn encode(record: &Record, out: &mut [u8; MAX_RECORD]) -> usize {
+    let body_len = match out.get_mut(HEADER..MAX_RECORD - CRC_LEN) {
+        Some(body) => match postcard::to_slice(record, body) {
+            Ok(b) => b.len(),
+            Err(_) => return 0,
+        },
+        None => return 0,
+    };
+    out[..4].copy_from_slice(&MAGIC);
+    out[4..6].copy_from_slice(&RECORD_VERSION.to_le_bytes());
+    out[6..8].copy_from_slice(&(body_len as u16).to_le_bytes());
+    let end = HEADER + body_len;
+    let crc = CRC.checksum(&out[..end]).to_le_bytes();
+    out[end..end + CRC_LEN].copy_from_slice(&crc);
+    end + CRC_LEN
+}
+
+/// Decode a record from stored bytes (which may run on past its end).
+pub fn decode(bytes: &[u8]) -> Result<Record, LoadError> {
+    if bytes.iter().all(|&b| b == 0xFF) {
+        return Err(LoadError::Empty); // also an empty slice
+    }
+    let header = bytes.get(..HEADER).ok_or(LoadError::Corrupt)?;
+    if header.get(..4) != Some(&MAGIC[..]) {
+        return Err(LoadError::Corrupt);
+    }
+    let version = u16::from_le_bytes([header[4], header[5]]);
+    let body_len = usize::from(u16::from_le_bytes([header[6], header[7]]));
+    let end = HEADER.checked_add(body_len).ok_or(LoadError::Corrupt)?;
+    let signed = bytes.get(..end).ok_or(LoadError::Corrupt)?;
+    let crc_bytes = bytes.get(end..end + CRC_LEN).ok_or(LoadError::Corrupt)?;
+    let stored_crc = u32::from_le_bytes([crc_bytes[0], crc_bytes[1], crc_bytes[2], crc_bytes[3]]);
+    if CRC.checksum(signed) != stored_crc {
+        return Err(LoadError::Corrupt);
+    }
+    if version != RECORD_VERSION {
+        return Err(LoadError::OldVersion);
+    }
+    let body = signed.get(HEADER..).ok_or(LoadError::Corrupt)?;
+    let record: Record = match postcard::take_from_bytes(body) {
+        Ok((r, [])) => r,
+        _ => return Err(LoadError::Corrupt),
+    };
+    record.config.validate().map_err(|_| LoadError::Corrupt)?;
+    Ok(record)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn sample() -> Record {
+        Record {
+            config: Config {
+                onset_rise_na: 1_234,
+                ..Config::default()
+            },
+            baseline: Some(Baseline {
+                i1_na: -40,
+                i2_na: 12,
+            }),
+        }
+    }
+
+    #[test]
+    fn round_trip_with_trailing_erased_flash() {
+        let mut buf = [0u8; MAX_RECORD];
+        let n = encode(&sample(), &mut buf);
+        assert!(n > HEADER + CRC_LEN && n <= MAX_RECORD);
+        let mut flash = [0xFFu8; 256];
+        flash[..n].copy_from_slice(&buf[..n]);
+        assert_eq!(decode(&flash), Ok(sample()));
+        assert_eq!(decode(&buf[..n]), Ok(sample()));
+    }
+
+    #[test]
+    fn empty_corrupt_and_old() {
+        assert_eq!(decode(&[]), Err(LoadError::Empty));
+        assert_eq!(decode(&[0xFF; 64]), Err(LoadError::Empty));
+        let mut buf = [0u8; MAX_RECORD];
+        let n = encode(&sample(), &mut buf);
+        // Every single bit flip is caught.
+        for i in 0..n {
+            for bit in 0..8 {
+                let mut b = buf;
+                b[i] ^= 1 << bit;
+                assert!(decode(&b[..n]).is_err(), "flip {i}.{bit} accepted");
+            }
+        }
+        // Truncated.
+        assert_eq!(decode(&buf[..n - 1]), Err(LoadError::Corrupt));
+        // Old version with a valid CRC.
+        let mut old = buf;
+        old[4..6].copy_from_slice(&0u16.to_le_bytes());
+        let crc = CRC.checksum(&old[..n - 4]).to_le_bytes();
+        old[n - 4..n].copy_from_slice(&crc);
+        assert_eq!(decode(&old[..n]), Err(LoadError::OldVersion));
+        // A well-formed record whose config breaks the rule is corrupt.
+        let bad = Record {
+            config: Config {
+                clear_rise_na: 5_000,
+                onset_rise_na: 1_000,
+                ..Config::default()
+            },
+            baseline: None,
+        };
+        let n = encode(&bad, &mut buf);
+        assert_eq!(decode(&buf[..n]), Err(LoadError::Corrupt));
+    }
+}

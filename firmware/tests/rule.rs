@@ -1,0 +1,281 @@
+//! Every path of the ice rule, each with its one-field-wrong twins: the same
+//! frames with one value just on the wrong side of its limit must not fire.
+
+use fois_firmware::rule::{Rule, RuleInput, Transition};
+use fois_protocol::{Config, DetectorState, EventKind};
+
+fn cfg() -> Config {
+    Config::default()
+}
+
+fn frame(rise1_na: i32, temperature_centi_c: i16) -> RuleInput {
+    RuleInput {
+        rise1_na,
+        temperature_centi_c,
+        valid: true,
+    }
+}
+
+/// Feed `n` copies of `input`; return the transitions.
+fn feed(rule: &mut Rule, c: &Config, input: RuleInput, n: u32) -> Vec<Transition> {
+    (0..n).filter_map(|_| rule.step(c, input)).collect()
+}
+
+fn iced(c: &Config) -> Rule {
+    let mut r = Rule::new();
+    let cold_film = frame(c.onset_rise_na as i32 + 1, c.freeze_limit_centi_c);
+    feed(&mut r, c, cold_film, c.onset_frames.into());
+    assert_eq!(r.state(), DetectorState::Ice);
+    r
+}
+
+fn wet(c: &Config) -> Rule {
+    let mut r = Rule::new();
+    let warm_film = frame(c.onset_rise_na as i32 + 1, c.freeze_limit_centi_c + 1);
+    feed(&mut r, c, warm_film, c.onset_frames.into());
+    assert_eq!(r.state(), DetectorState::Wet);
+    r
+}
+
+#[test]
+fn defaults_are_the_documented_ones() {
+    let c = cfg();
+    assert_eq!(c.load_r1_ohm, 10_000);
+    assert_eq!((c.onset_rise_na, c.clear_rise_na), (1_000, 500));
+    assert_eq!((c.onset_frames, c.clear_frames), (30, 300));
+    assert_eq!((c.freeze_limit_centi_c, c.thaw_limit_centi_c), (50, 250));
+}
+
+#[test]
+fn dry_to_ice_after_n_cold_frames() {
+    let c = cfg();
+    let n = u32::from(c.onset_frames);
+    let good = frame(c.onset_rise_na as i32 + 1, c.freeze_limit_centi_c);
+    let mut r = Rule::new();
+    assert!(feed(&mut r, &c, good, n - 1).is_empty());
+    assert_eq!(r.state(), DetectorState::Dry);
+    let t = r.step(&c, good).expect("N-th frame fires");
+    assert_eq!(t.kind, EventKind::IceOnset);
+    assert_eq!(t.frames, c.onset_frames);
+    assert_eq!((t.from, t.to), (DetectorState::Dry, DetectorState::Ice));
+    assert!(r.alarm());
+
+    // One field wrong: rise exactly at the threshold (not above).
+    let mut r = Rule::new();
+    assert!(
+        feed(
+            &mut r,
+            &c,
+            frame(c.onset_rise_na as i32, c.freeze_limit_centi_c),
+            10 * n
+        )
+        .is_empty()
+    );
+    // One field wrong: 0.01 °C above the freezing limit → wet, not ice.
+    let mut r = Rule::new();
+    let t = feed(
+        &mut r,
+        &c,
+        frame(c.onset_rise_na as i32 + 1, c.freeze_limit_centi_c + 1),
+        n,
+    );
+    assert_eq!(t.len(), 1);
+    assert_eq!(t[0].kind, EventKind::WetOnset);
+    assert!(!r.alarm());
+    // One field wrong: the run is broken once (one frame under) → starts over.
+    let mut r = Rule::new();
+    assert!(feed(&mut r, &c, good, n - 1).is_empty());
+    assert!(
+        r.step(&c, frame(c.onset_rise_na as i32, c.freeze_limit_centi_c))
+            .is_none()
+    );
+    assert!(feed(&mut r, &c, good, n - 1).is_empty());
+    assert_eq!(r.state(), DetectorState::Dry);
+    assert!(r.step(&c, good).is_some());
+    // One field wrong: invalid (saturated) frames never count.
+    let mut r = Rule::new();
+    let invalid = RuleInput {
+        valid: false,
+        ..good
+    };
+    assert!(feed(&mut r, &c, invalid, 10 * n).is_empty());
+    assert_eq!(r.state(), DetectorState::Dry);
+}
+
+#[test]
+fn invalid_frames_neither_advance_nor_reset() {
+    let c = cfg();
+    let n = u32::from(c.onset_frames);
+    let good = frame(c.onset_rise_na as i32 + 1, -500);
+    let mut r = Rule::new();
+    assert!(feed(&mut r, &c, good, n - 1).is_empty());
+    assert!(
+        feed(
+            &mut r,
+            &c,
+            RuleInput {
+                valid: false,
+                ..frame(0, 2_000)
+            },
+            5
+        )
+        .is_empty()
+    );
+    assert_eq!(r.step(&c, good).map(|t| t.kind), Some(EventKind::IceOnset));
+}
+
+#[test]
+fn wet_freezes_to_ice_and_dries_to_dry() {
+    let c = cfg();
+    let n = u32::from(c.onset_frames);
+    let m = u32::from(c.clear_frames);
+    let mut r = wet(&c);
+    let cold_film = frame(c.onset_rise_na as i32 + 1, c.freeze_limit_centi_c);
+    assert!(feed(&mut r, &c, cold_film, n - 1).is_empty());
+    let t = r.step(&c, cold_film).expect("water froze");
+    assert_eq!(
+        (t.kind, t.from, t.to),
+        (EventKind::IceOnset, DetectorState::Wet, DetectorState::Ice)
+    );
+    // One field wrong: the water stays 0.01 °C above the limit.
+    let mut r = wet(&c);
+    assert!(
+        feed(
+            &mut r,
+            &c,
+            frame(c.onset_rise_na as i32 + 1, c.freeze_limit_centi_c + 1),
+            10 * n
+        )
+        .is_empty()
+    );
+    assert_eq!(r.state(), DetectorState::Wet);
+
+    // Wet → Dry after M frames below the clear threshold.
+    let mut r = wet(&c);
+    let dry = frame(c.clear_rise_na as i32 - 1, 1_000);
+    assert!(feed(&mut r, &c, dry, m - 1).is_empty());
+    let t = r.step(&c, dry).expect("dried");
+    assert_eq!(
+        (t.kind, t.frames, t.to),
+        (EventKind::WetCleared, c.clear_frames, DetectorState::Dry)
+    );
+    // One field wrong: rise exactly at the clear threshold (hysteresis band).
+    let mut r = wet(&c);
+    assert!(feed(&mut r, &c, frame(c.clear_rise_na as i32, 1_000), 2 * m).is_empty());
+    assert_eq!(r.state(), DetectorState::Wet);
+}
+
+#[test]
+fn ice_clears_after_m_frames_with_hysteresis() {
+    let c = cfg();
+    let m = u32::from(c.clear_frames);
+    let gone = frame(c.clear_rise_na as i32 - 1, -1_000);
+    let mut r = iced(&c);
+    assert!(feed(&mut r, &c, gone, m - 1).is_empty());
+    let t = r.step(&c, gone).expect("cleared");
+    assert_eq!(
+        (t.kind, t.frames, t.to),
+        (EventKind::IceCleared, c.clear_frames, DetectorState::Dry)
+    );
+    assert!(!r.alarm());
+
+    // One field wrong: between clear and onset (the hysteresis band) holds the alarm.
+    let mut r = iced(&c);
+    let band = frame(c.clear_rise_na as i32, -1_000);
+    assert!(feed(&mut r, &c, band, 3 * m).is_empty());
+    assert!(r.alarm());
+    // One field wrong: one frame back above the clear level restarts the count.
+    let mut r = iced(&c);
+    assert!(feed(&mut r, &c, gone, m - 1).is_empty());
+    assert!(r.step(&c, band).is_none());
+    assert!(feed(&mut r, &c, gone, m - 1).is_empty());
+    assert!(r.alarm());
+    assert!(r.step(&c, gone).is_some());
+}
+
+#[test]
+fn ice_clears_when_it_thaws() {
+    let c = cfg();
+    let n = u32::from(c.onset_frames);
+    let melting = frame(c.onset_rise_na as i32 * 5, c.thaw_limit_centi_c + 1);
+    let mut r = iced(&c);
+    assert!(feed(&mut r, &c, melting, n - 1).is_empty());
+    let t = r.step(&c, melting).expect("thawed");
+    // The film is still seen: it is water now.
+    assert_eq!(
+        (t.kind, t.frames, t.to),
+        (EventKind::IceCleared, c.onset_frames, DetectorState::Wet)
+    );
+    // Thawed and gone at once → dry.
+    let mut r = iced(&c);
+    let t = feed(&mut r, &c, frame(0, c.thaw_limit_centi_c + 1), n);
+    assert_eq!(t.last().map(|t| t.to), Some(DetectorState::Dry));
+    // One field wrong: exactly at the thaw limit holds the alarm.
+    let mut r = iced(&c);
+    assert!(
+        feed(
+            &mut r,
+            &c,
+            frame(c.onset_rise_na as i32 * 5, c.thaw_limit_centi_c),
+            10 * n
+        )
+        .is_empty()
+    );
+    assert!(r.alarm());
+    // Between freeze and thaw limits the ice holds too (temperature hysteresis).
+    let mut r = iced(&c);
+    assert!(
+        feed(
+            &mut r,
+            &c,
+            frame(
+                c.onset_rise_na as i32 * 5,
+                (c.freeze_limit_centi_c + c.thaw_limit_centi_c) / 2
+            ),
+            10 * n
+        )
+        .is_empty()
+    );
+    assert!(r.alarm());
+}
+
+#[test]
+fn acknowledge_holds_until_the_ice_clears() {
+    let c = cfg();
+    let mut r = Rule::new();
+    assert!(!r.acknowledge(), "nothing to acknowledge while dry");
+    let mut r = iced(&c);
+    assert!(r.acknowledge());
+    assert!(r.acked() && r.alarm());
+    feed(&mut r, &c, frame(0, -1_000), c.clear_frames.into());
+    assert!(!r.alarm() && !r.acked());
+    // A new alarm is not acknowledged.
+    feed(
+        &mut r,
+        &c,
+        frame(c.onset_rise_na as i32 + 1, -1_000),
+        c.onset_frames.into(),
+    );
+    assert!(r.alarm() && !r.acked());
+}
+
+#[test]
+fn extreme_inputs_do_not_panic() {
+    let c = Config {
+        onset_frames: 1,
+        clear_frames: 1,
+        ..cfg()
+    };
+    let mut r = Rule::new();
+    for &(rise, t) in &[
+        (i32::MAX, i16::MIN),
+        (i32::MIN, i16::MAX),
+        (i32::MAX, i16::MAX),
+        (0, 0),
+    ] {
+        let _ = r.step(&c, frame(rise, t));
+    }
+    // Counters saturate instead of overflowing.
+    let mut r = Rule::new();
+    feed(&mut r, &c, frame(i32::MAX, i16::MAX), 70_000);
+}
