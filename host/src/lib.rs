@@ -8,3 +8,5 @@ pub mod link;
 pub mod monitor;
 pub mod sim_cmd;
 pub mod timefmt;
+pub mod virtual_hw;
+pub mod virtual_node;

@@ -1,0 +1,427 @@
+//! The virtual node: the firmware's own [`Node`] on virtual hardware, in
+//! virtual time, and a server that puts its UART on a pseudo-terminal so any
+//! serial tool talks to it as to a board.
+//!
+//! The runner does what the board's main loop does: a `Hello` at boot and
+//! every second until streaming starts, one frame every frame period, host
+//! bytes to `handle_rx`, and a fresh `Node` (same storage) after a `Reset`.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use fois_firmware::{BoardInfo, MemStorage, Node};
+use fois_protocol::ResetReason;
+
+use crate::virtual_hw::{Environment, SimAdc, Truth, VirtualClock, VirtualDelay, VirtualPin};
+
+/// The firmware node on virtual hardware.
+pub type FirmwareNode = Node<SimAdc, VirtualPin, VirtualPin, VirtualPin, VirtualDelay, MemStorage>;
+
+/// How to build a virtual node.
+#[derive(Debug, Clone)]
+pub struct NodeOptions {
+    /// Seed of the ADC noise.
+    pub seed: u64,
+    /// Board name in `Hello`.
+    pub board: &'static str,
+    /// Initial storage (config + baseline record); empty = defaults.
+    pub storage: MemStorage,
+    /// Press the user button (dark calibration) at this virtual time, s,
+    /// if the face is dry then. `None`: never.
+    pub calibrate_at_s: Option<f64>,
+}
+
+impl Default for NodeOptions {
+    fn default() -> Self {
+        NodeOptions {
+            seed: 1,
+            board: "virtual-f446",
+            storage: MemStorage::new(),
+            calibrate_at_s: Some(1.0),
+        }
+    }
+}
+
+/// A node + its virtual hardware.
+pub struct VirtualNode {
+    node: Option<FirmwareNode>,
+    clock: VirtualClock,
+    led: VirtualPin,
+    alarm: VirtualPin,
+    indicator: VirtualPin,
+    env: Arc<Environment>,
+    opts: NodeOptions,
+    next_frame_ns: u64,
+    next_hello_ns: u64,
+    booted: bool,
+    resets: u32,
+    frames: u64,
+}
+
+const NS_PER_MS: u64 = 1_000_000;
+
+impl VirtualNode {
+    /// Build a node at virtual time 0 in `env`.
+    pub fn new(env: Arc<Environment>, opts: NodeOptions) -> Self {
+        let clock = VirtualClock::new();
+        let led = VirtualPin::with_clock(clock.clone());
+        let alarm = VirtualPin::with_clock(clock.clone());
+        let indicator = VirtualPin::with_clock(clock.clone());
+        let mut vn = VirtualNode {
+            node: None,
+            clock,
+            led,
+            alarm,
+            indicator,
+            env,
+            opts,
+            next_frame_ns: 0,
+            next_hello_ns: 0,
+            booted: false,
+            resets: 0,
+            frames: 0,
+        };
+        vn.build(ResetReason::PowerOn, vn.opts.storage.clone());
+        vn
+    }
+
+    fn build(&mut self, reason: ResetReason, storage: MemStorage) {
+        let adc = SimAdc::new(
+            self.clock.clone(),
+            self.led.clone(),
+            self.env.clone(),
+            self.opts.seed.wrapping_add(u64::from(self.resets)),
+        );
+        let mut info = BoardInfo::simulated(self.opts.board);
+        info.reset_reason = reason;
+        info.unique_id = *b"FOIS-VIRTUAL";
+        self.node = Some(Node::new(
+            adc,
+            self.led.clone(),
+            self.alarm.clone(),
+            self.indicator.clone(),
+            VirtualDelay::new(self.clock.clone()),
+            storage,
+            info,
+        ));
+        self.booted = false;
+    }
+
+    fn node_mut(&mut self) -> &mut FirmwareNode {
+        // Always Some outside `reset`.
+        self.node.as_mut().expect("virtual node present")
+    }
+
+    /// The firmware node.
+    pub fn node(&self) -> &FirmwareNode {
+        self.node.as_ref().expect("virtual node present")
+    }
+
+    /// Shared virtual clock.
+    pub fn clock(&self) -> &VirtualClock {
+        &self.clock
+    }
+
+    /// The environment.
+    pub fn env(&self) -> &Arc<Environment> {
+        &self.env
+    }
+
+    /// The conditions now.
+    pub fn truth(&self) -> Truth {
+        self.env.truth(self.clock.now_ns())
+    }
+
+    /// Alarm output (PA9) level.
+    pub fn alarm_on(&self) -> bool {
+        self.alarm.is_high()
+    }
+
+    /// The alarm pin (edges with virtual times).
+    pub fn alarm_pin(&self) -> &VirtualPin {
+        &self.alarm
+    }
+
+    /// The indicator pin (LD2).
+    pub fn indicator_pin(&self) -> &VirtualPin {
+        &self.indicator
+    }
+
+    /// The LED pin.
+    pub fn led_pin(&self) -> &VirtualPin {
+        &self.led
+    }
+
+    /// Frames run so far.
+    pub fn frames(&self) -> u64 {
+        self.frames
+    }
+
+    /// Resets carried out (the `Reset` command).
+    pub fn resets(&self) -> u32 {
+        self.resets
+    }
+
+    /// Virtual time of the next frame, ns.
+    pub fn next_frame_ns(&self) -> u64 {
+        self.next_frame_ns
+    }
+
+    /// The earliest virtual time something is due (frame or hello), ns.
+    pub fn next_due_ns(&self) -> u64 {
+        if !self.booted {
+            return self.clock.now_ns();
+        }
+        if self.node().is_streaming() {
+            self.next_frame_ns
+        } else {
+            self.next_frame_ns.min(self.next_hello_ns)
+        }
+    }
+
+    /// Bytes from the host.
+    pub fn handle_rx(&mut self, bytes: &[u8], tx: &mut impl FnMut(&[u8])) {
+        let now = self.clock.now_ms();
+        self.node_mut().handle_rx(bytes, now, tx);
+        self.after_commands(tx);
+    }
+
+    /// The user button.
+    pub fn press_button(&mut self, tx: &mut impl FnMut(&[u8])) {
+        let now = self.clock.now_ms();
+        self.node_mut().button_pressed(now, tx);
+    }
+
+    fn after_commands(&mut self, tx: &mut impl FnMut(&[u8])) {
+        if self.node_mut().take_reset_request() {
+            let node = self.node.take().expect("virtual node present");
+            let (_, _, _, _, _, storage) = node.into_parts();
+            self.resets += 1;
+            self.build(ResetReason::Software, storage);
+            self.boot(tx);
+        }
+    }
+
+    fn boot(&mut self, tx: &mut impl FnMut(&[u8])) {
+        self.booted = true;
+        let now = self.clock.now_ns();
+        self.node_mut().send_hello(tx);
+        self.next_hello_ns = now + 1_000 * NS_PER_MS;
+        self.next_frame_ns = now + u64::from(self.node().frame_period_ms()) * NS_PER_MS;
+    }
+
+    /// Run everything due up to virtual time `t_ns` (frames, hellos, the
+    /// boot-time calibration); the clock ends at `t_ns` or later.
+    pub fn advance_to(&mut self, t_ns: u64, tx: &mut impl FnMut(&[u8])) {
+        if !self.booted {
+            self.boot(tx);
+        }
+        loop {
+            let due = self.next_due_ns();
+            if due > t_ns {
+                break;
+            }
+            self.clock.advance_to_ns(due);
+            if !self.node().is_streaming() && self.next_hello_ns <= due {
+                self.node_mut().send_hello(tx);
+                self.next_hello_ns = due + 1_000 * NS_PER_MS;
+            }
+            if self.next_frame_ns <= due {
+                self.run_one_frame(tx);
+            }
+        }
+        self.clock.advance_to_ns(t_ns);
+    }
+
+    fn run_one_frame(&mut self, tx: &mut impl FnMut(&[u8])) {
+        let start = self.clock.now_ns();
+        if let Some(at) = self.opts.calibrate_at_s {
+            let at_ns = (at * 1e9) as u64;
+            if start >= at_ns && self.truth().cover == crate::virtual_hw::Cover::Dry {
+                self.opts.calibrate_at_s = None;
+                self.press_button(tx);
+            } else if start >= at_ns {
+                self.opts.calibrate_at_s = None;
+            }
+        }
+        let now_ms = self.clock.now_ms();
+        self.node_mut().run_frame(now_ms, tx);
+        self.frames += 1;
+        let period = u64::from(self.node().frame_period_ms().max(1)) * NS_PER_MS;
+        // Frames start on a fixed grid (as the board's ticker does).
+        self.next_frame_ns = self.next_frame_ns.max(start) + period;
+        if self.next_frame_ns <= self.clock.now_ns() {
+            self.next_frame_ns = self.clock.now_ns() + period;
+        }
+    }
+
+    /// Run until virtual time `t_s`.
+    pub fn run_until_s(&mut self, t_s: f64, tx: &mut impl FnMut(&[u8])) {
+        self.advance_to((t_s * 1e9) as u64, tx);
+    }
+
+    /// Run exactly one more frame (jumping the clock to it).
+    pub fn step_frame(&mut self, tx: &mut impl FnMut(&[u8])) {
+        if !self.booted {
+            self.boot(tx);
+        }
+        let t = self.next_frame_ns;
+        self.advance_to(t, tx);
+    }
+}
+
+/// How to serve a virtual node on a pseudo-terminal.
+#[derive(Debug, Clone)]
+pub struct ServeOptions {
+    /// Virtual seconds per real second.
+    pub speed: f64,
+    /// Stop after this much real time.
+    pub duration: Option<Duration>,
+    /// Also make this path a symlink to the pty (stable name across restarts).
+    pub link: Option<PathBuf>,
+}
+
+/// A pseudo-terminal: the node writes to the master, clients open `path`.
+pub struct Pty {
+    master: serialport::TTYPort,
+    // Held open so the master never sees a hang-up while no client is there.
+    _slave: serialport::TTYPort,
+    path: PathBuf,
+}
+
+impl Pty {
+    /// Open a pty pair (raw mode).
+    pub fn open() -> anyhow::Result<Pty> {
+        use anyhow::Context;
+        use serialport::SerialPort;
+        let (mut master, slave) =
+            serialport::TTYPort::pair().context("cannot create a pseudo-terminal")?;
+        let path = PathBuf::from(slave.name().context("the pty has no name")?);
+        master.set_timeout(Duration::ZERO)?;
+        Ok(Pty {
+            master,
+            _slave: slave,
+            path,
+        })
+    }
+
+    /// The client side's path (/dev/pts/N).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// Bytes the node wrote that no reader took (pty buffer full).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ServeStats {
+    /// Frames sent.
+    pub frames_sent: u64,
+    /// Frames dropped (pty buffer full: nobody reading).
+    pub frames_dropped: u64,
+    /// Bytes received from clients.
+    pub bytes_received: u64,
+}
+
+fn write_frame(master: &mut serialport::TTYPort, bytes: &[u8], stats: &mut ServeStats) {
+    // Like a UART with nobody listening: what does not fit is lost.
+    let mut off = 0;
+    while off < bytes.len() {
+        match master.write(&bytes[off..]) {
+            Ok(0) => break,
+            Ok(n) => off += n,
+            Err(_) => break,
+        }
+    }
+    if off == bytes.len() {
+        stats.frames_sent += 1;
+    } else {
+        stats.frames_dropped += 1;
+    }
+}
+
+/// Serve `node` on `pty` until `stop` is set or the duration ends. Virtual
+/// time runs `speed` times faster than real time.
+pub fn serve(
+    node: &mut VirtualNode,
+    pty: &mut Pty,
+    opts: &ServeOptions,
+    stop: &AtomicBool,
+) -> anyhow::Result<ServeStats> {
+    let mut stats = ServeStats::default();
+    let start = Instant::now();
+    let t0 = node.clock().now_ns();
+    let speed = if opts.speed.is_finite() && opts.speed > 0.0 {
+        opts.speed
+    } else {
+        1.0
+    };
+    let mut buf = [0u8; 1024];
+    while !stop.load(Ordering::Relaxed) {
+        let elapsed = start.elapsed();
+        if opts.duration.is_some_and(|d| elapsed >= d) {
+            break;
+        }
+        let target = t0 + (elapsed.as_secs_f64() * speed * 1e9) as u64;
+        let master = &mut pty.master;
+        // Host → node.
+        loop {
+            match master.read(&mut buf) {
+                Ok(0) => break,
+                Ok(n) => {
+                    stats.bytes_received += n as u64;
+                    let mut tx = |b: &[u8]| write_frame(master, b, &mut stats);
+                    node.handle_rx(&buf[..n], &mut tx);
+                }
+                Err(_) => break,
+            }
+        }
+        let master = &mut pty.master;
+        let mut tx = |b: &[u8]| write_frame(master, b, &mut stats);
+        node.advance_to(target, &mut tx);
+        // Sleep until the next frame is due in real time (≤ 5 ms, so
+        // commands are answered promptly).
+        let due = node.next_due_ns().saturating_sub(t0) as f64 / speed / 1e9;
+        let wait = (due - start.elapsed().as_secs_f64()).clamp(0.0, 0.005);
+        std::thread::sleep(Duration::from_secs_f64(wait.max(0.0005)));
+    }
+    Ok(stats)
+}
+
+/// Replace `link` by a symlink to `target` (removed by [`LinkGuard`]'s drop).
+pub fn make_link(link: &Path, target: &Path) -> anyhow::Result<LinkGuard> {
+    use anyhow::Context;
+    if let Ok(meta) = std::fs::symlink_metadata(link) {
+        if meta.file_type().is_symlink() {
+            std::fs::remove_file(link)?;
+        } else {
+            anyhow::bail!(
+                "{} exists and is not a symlink; choose another --link path",
+                link.display()
+            );
+        }
+    }
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(target, link)
+        .with_context(|| format!("cannot create the link {}", link.display()))?;
+    Ok(LinkGuard {
+        link: link.to_path_buf(),
+        target: target.to_path_buf(),
+    })
+}
+
+/// Removes the symlink on drop (if it still points to our pty).
+pub struct LinkGuard {
+    link: PathBuf,
+    target: PathBuf,
+}
+
+impl Drop for LinkGuard {
+    fn drop(&mut self) {
+        if std::fs::read_link(&self.link).is_ok_and(|t| t == self.target) {
+            let _ = std::fs::remove_file(&self.link);
+        }
+    }
+}
