@@ -18,6 +18,8 @@ use fois_protocol::{DeviceFrame, FrameDecoder, HostFrame, encode_to_vec};
 pub struct Scene {
     /// Photocurrent the LED causes on each channel, nA.
     pub signal_na: [f64; 2],
+    /// Change of the LED photocurrent per second, nA/s (a film coming and going).
+    pub signal_ramp_na_per_s: [f64; 2],
     /// Ambient DC photocurrent, nA.
     pub ambient_na: [f64; 2],
     /// Ambient flicker amplitude, nA (sinusoid).
@@ -42,6 +44,7 @@ impl Default for Scene {
     fn default() -> Self {
         Scene {
             signal_na: [0.0; 2],
+            signal_ramp_na_per_s: [0.0; 2],
             ambient_na: [0.0; 2],
             flicker_na: [0.0; 2],
             flicker_hz: 100.0,
@@ -80,7 +83,9 @@ impl World {
 pub struct SimAdc(pub World);
 
 fn to_code(volts: f64, vdda_mv: f64) -> u16 {
-    (volts / (vdda_mv / 1000.0) * 4095.0).round().clamp(0.0, 4095.0) as u16
+    (volts / (vdda_mv / 1000.0) * 4095.0)
+        .round()
+        .clamp(0.0, 4095.0) as u16
 }
 
 impl PhotoAdc for SimAdc {
@@ -89,10 +94,15 @@ impl PhotoAdc for SimAdc {
         let s = w.scene.borrow();
         let t = w.t_ns.get() as f64 * 1e-9;
         let mut out = [0u16; 2];
+        #[allow(clippy::needless_range_loop)]
         for ch in 0..2 {
             let flicker = s.flicker_na[ch]
                 * (2.0 * std::f64::consts::PI * s.flicker_hz * t + s.flicker_phase).sin();
-            let led = if w.led.get() { s.signal_na[ch] } else { 0.0 };
+            let led = if w.led.get() {
+                s.signal_na[ch] + s.signal_ramp_na_per_s[ch] * t
+            } else {
+                0.0
+            };
             let i_na = (s.ambient_na[ch] + flicker + led).max(0.0);
             out[ch] = to_code(i_na * 1e-9 * s.load_ohm[ch], s.vdda_mv);
         }
@@ -115,8 +125,8 @@ impl PhotoAdc for SimAdc {
     fn read_internal_temp(&mut self) -> u16 {
         let s = self.0.scene.borrow();
         let c = FactoryCal::TYPICAL;
-        let code33 = f64::from(c.ts_cal1)
-            + (s.temp_c - 30.0) * f64::from(c.ts_cal2 - c.ts_cal1) / 80.0;
+        let code33 =
+            f64::from(c.ts_cal1) + (s.temp_c - 30.0) * f64::from(c.ts_cal2 - c.ts_cal1) / 80.0;
         (code33 * 3300.0 / s.vdda_mv).round() as u16
     }
 }
@@ -187,7 +197,12 @@ pub fn step(node: &mut SimNode, w: &World) -> Vec<DeviceFrame> {
 }
 
 /// Send one command; return the frames answered.
-pub fn command(node: &mut SimNode, w: &World, id: u16, cmd: fois_protocol::Command) -> Vec<DeviceFrame> {
+pub fn command(
+    node: &mut SimNode,
+    w: &World,
+    id: u16,
+    cmd: fois_protocol::Command,
+) -> Vec<DeviceFrame> {
     let mut bytes = Vec::new();
     let wire = encode_to_vec(&HostFrame { id, cmd });
     node.handle_rx(&wire, w.now_ms(), &mut |b| bytes.extend_from_slice(b));

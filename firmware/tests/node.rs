@@ -1,0 +1,575 @@
+//! The node as the host sees it: frames out, commands in, outputs, storage.
+
+mod common;
+
+use common::*;
+use fois_firmware::MemStorage;
+use fois_firmware::dispatch::BUTTON_ID;
+use fois_protocol::*;
+
+fn measurement(fs: &[DeviceFrame]) -> Measurement {
+    fs.iter()
+        .find_map(|f| match &f.msg {
+            DeviceMsg::Measurement(m) => Some(m.clone()),
+            _ => None,
+        })
+        .expect("a measurement")
+}
+
+fn events(fs: &[DeviceFrame]) -> Vec<Event> {
+    fs.iter()
+        .filter_map(|f| match &f.msg {
+            DeviceMsg::Event(e) => Some(e.clone()),
+            _ => None,
+        })
+        .collect()
+}
+
+fn only(fs: Vec<DeviceFrame>) -> DeviceMsg {
+    assert_eq!(fs.len(), 1, "{fs:?}");
+    fs.into_iter().next().map(|f| f.msg).unwrap()
+}
+
+fn ack(fs: Vec<DeviceFrame>, id: u16) -> AckResult {
+    match only(fs) {
+        DeviceMsg::Ack(a) => {
+            assert_eq!(a.id, id);
+            a.result
+        }
+        other => panic!("expected an ack, got {other:?}"),
+    }
+}
+
+fn error(fs: Vec<DeviceFrame>) -> ErrorReply {
+    match only(fs) {
+        DeviceMsg::Error(e) => e,
+        other => panic!("expected an error, got {other:?}"),
+    }
+}
+
+#[test]
+fn boots_with_defaults_and_says_hello() {
+    let (mut node, w) = node();
+    assert_eq!(node.config(), &Config::default());
+    assert!(node.is_streaming(), "stream_on_boot");
+    assert_eq!(node.frame_period_ms(), 100);
+    let h = node.hello();
+    assert_eq!(h.protocol_version, PROTOCOL_VERSION);
+    assert_eq!(h.board_name(), "sim");
+    assert_eq!(h.firmware_version, [0, 1, 0]);
+    let mut bytes = Vec::new();
+    node.send_hello(&mut |b| bytes.extend_from_slice(b));
+    let fs = frames(&bytes);
+    assert_eq!(fs[0].seq, 0);
+    assert_eq!(fs[0].msg, DeviceMsg::Hello(h));
+    // First frame: no baseline yet, no fault.
+    let fs = step(&mut node, &w);
+    assert_eq!(fs[0].seq, 1, "sequence numbers count every frame");
+    let m = measurement(&fs);
+    assert_eq!(m.flags, flags::NO_BASELINE);
+    assert_eq!(m.state, DetectorState::Dry);
+    assert_eq!(m.vdda_mv, 3_300);
+    assert!(events(&fs).is_empty());
+    assert!(!w.led.get(), "the LED is left off between frames");
+}
+
+#[test]
+fn currents_temperature_and_ambient() {
+    let (mut node, w) = node();
+    w.set(|s| {
+        s.signal_na = [12_000.0, 4_000.0];
+        s.ambient_na = [30_000.0, 5_000.0];
+        s.temp_c = -5.0;
+    });
+    let m = measurement(&step(&mut node, &w));
+    // One ADC step is 80.6 nA at 3.3 V / 10 kΩ; the 8-cycle mean is within one.
+    assert!((m.i1_na - 12_000).abs() <= 81, "{m:?}");
+    assert!((m.i2_na - 4_000).abs() <= 81, "{m:?}");
+    assert!((m.ambient1_na as i64 - 30_000).abs() <= 81, "{m:?}");
+    assert!((m.ambient2_na as i64 - 5_000).abs() <= 81, "{m:?}");
+    assert!((m.temperature_centi_c + 500).abs() <= 10, "{m:?}");
+    // 8 LED pulses per frame, K = cycles_per_frame.
+    assert_eq!(w.led_toggles.get(), 8);
+    // A 3.0 V supply is measured through VREFINT and the currents stay right.
+    w.set(|s| s.vdda_mv = 3_000.0);
+    let m = measurement(&step(&mut node, &w));
+    assert!((2_995..=3_005).contains(&m.vdda_mv), "{m:?}");
+    assert!((m.i1_na - 12_000).abs() <= 90, "{m:?}");
+    assert_eq!(m.flags & flags::VDDA_OUT_OF_RANGE, 0);
+}
+
+#[test]
+fn saturation_flags_the_frame_and_the_rule_ignores_it() {
+    let (mut node, w) = node();
+    // Full sun on channel 1: 340 µA × 10 kΩ = 3.4 V > full scale.
+    w.set(|s| {
+        s.ambient_na = [340_000.0, 0.0];
+        s.signal_na = [20_000.0, 0.0];
+        s.temp_c = -10.0;
+    });
+    for _ in 0..3 * node.config().onset_frames {
+        let fs = step(&mut node, &w);
+        let m = measurement(&fs);
+        assert!(!m.is_valid());
+        assert_eq!(m.flags & flags::INVALID_MASK, flags::SATURATED_CH1);
+        assert_eq!(m.state, DetectorState::Dry);
+        assert!(events(&fs).is_empty());
+    }
+    // Just under the saturation code (98 % of full scale) is valid.
+    w.set(|s| s.ambient_na = [300_000.0, 0.0]);
+    w.set(|s| s.signal_na = [1_000.0, 0.0]);
+    assert!(measurement(&step(&mut node, &w)).is_valid());
+}
+
+#[test]
+fn ntc_faults_fall_back_to_the_internal_sensor() {
+    let (mut node, w) = node();
+    w.set(|s| s.temp_c = -3.0);
+    let fs = step(&mut node, &w);
+    assert!(events(&fs).is_empty());
+    w.set(|s| s.ntc_code = Some(4095));
+    let fs = step(&mut node, &w);
+    let m = measurement(&fs);
+    assert_eq!(
+        m.flags & (flags::NTC_OPEN | flags::NTC_SHORT),
+        flags::NTC_OPEN
+    );
+    // Internal sensor: 2.5 mV/°C ≈ 0.3 codes/°C... within 2 °C here.
+    assert!((m.temperature_centi_c + 300).abs() <= 200, "{m:?}");
+    let ev = events(&fs);
+    assert_eq!(ev.len(), 1);
+    assert_eq!(ev[0].kind, EventKind::FaultRaised(flags::NTC_OPEN));
+    // Still open: no new event.
+    assert!(events(&step(&mut node, &w)).is_empty());
+    w.set(|s| s.ntc_code = Some(0));
+    let ev = events(&step(&mut node, &w));
+    assert_eq!(
+        ev.iter().map(|e| e.kind).collect::<Vec<_>>(),
+        vec![
+            EventKind::FaultRaised(flags::NTC_SHORT),
+            EventKind::FaultCleared(flags::NTC_OPEN)
+        ]
+    );
+    w.set(|s| s.ntc_code = None);
+    let ev = events(&step(&mut node, &w));
+    assert_eq!(ev[0].kind, EventKind::FaultCleared(flags::NTC_SHORT));
+}
+
+#[test]
+fn icing_drives_alarm_and_ld2_and_sends_events() {
+    let (mut node, w) = node();
+    let n = node.config().onset_frames;
+    w.set(|s| s.temp_c = -4.0);
+    step(&mut node, &w);
+    // Rime at ~0.2 mm: I1 ≈ 2.5 µA (thesis: > 25 µA below 2 mm).
+    w.set(|s| s.signal_na = [2_500.0, 800.0]);
+    for i in 1..n {
+        let fs = step(&mut node, &w);
+        assert!(events(&fs).is_empty(), "frame {i}");
+        assert!(!w.alarm.get() && !w.indicator.get());
+    }
+    let fs = step(&mut node, &w);
+    let ev = events(&fs);
+    assert_eq!(ev.len(), 1);
+    let e = &ev[0];
+    assert_eq!(e.kind, EventKind::IceOnset);
+    assert_eq!(e.frames, n);
+    assert!((e.rise1_na - 2_500).abs() <= 81, "{e:?}");
+    assert!((e.temperature_centi_c + 400).abs() <= 10, "{e:?}");
+    let m = measurement(&fs);
+    assert_eq!(m.state, DetectorState::Ice);
+    assert_ne!(m.flags & flags::ALARM, 0);
+    assert!(w.alarm.get() && w.indicator.get());
+    assert_eq!(node.state(), DetectorState::Ice);
+
+    // The host acknowledges: flag set, output stays on while iced.
+    assert_eq!(
+        ack(command(&mut node, &w, 7, Command::AckAlarm), 7),
+        AckResult::AlarmAcknowledged
+    );
+    let m = measurement(&step(&mut node, &w));
+    assert_ne!(m.flags & flags::ALARM_ACKED, 0);
+    assert!(w.alarm.get());
+    // Dark calibration is refused on an iced face.
+    assert_eq!(
+        error(command(&mut node, &w, 8, Command::CalibrateDark)).code,
+        ErrorCode::CalibrationFailed
+    );
+
+    // The ice sheds: M frames later the alarm clears.
+    w.set(|s| s.signal_na = [0.0, 0.0]);
+    let m_frames = node.config().clear_frames;
+    let mut cleared_at = None;
+    for i in 1..=m_frames {
+        let ev = events(&step(&mut node, &w));
+        if !ev.is_empty() {
+            assert_eq!(ev[0].kind, EventKind::IceCleared);
+            assert_eq!(ev[0].frames, m_frames);
+            cleared_at = Some(i);
+        }
+    }
+    assert_eq!(cleared_at, Some(m_frames));
+    assert!(!w.alarm.get() && !w.indicator.get());
+}
+
+#[test]
+fn water_above_the_freezing_limit_is_wet_not_ice() {
+    let (mut node, w) = node();
+    w.set(|s| {
+        s.temp_c = 4.0;
+        s.signal_na = [12_000.0, 3_000.0]; // reads like glazed ice (thesis §5.2.3)
+    });
+    let n = node.config().onset_frames;
+    let mut kinds = Vec::new();
+    for _ in 0..3 * n {
+        kinds.extend(events(&step(&mut node, &w)).into_iter().map(|e| e.kind));
+    }
+    assert_eq!(kinds, vec![EventKind::WetOnset]);
+    assert!(!w.alarm.get());
+    // The water freezes.
+    w.set(|s| s.temp_c = -1.0);
+    for _ in 0..n {
+        kinds.extend(events(&step(&mut node, &w)).into_iter().map(|e| e.kind));
+    }
+    assert_eq!(kinds, vec![EventKind::WetOnset, EventKind::IceOnset]);
+    assert!(w.alarm.get());
+}
+
+#[test]
+fn dark_calibration_by_command_and_button_persists() {
+    let storage;
+    {
+        let (mut node, w) = node_with(MemStorage::new());
+        // A face with a small steady offset (e.g. cross-talk): 600 nA.
+        w.set(|s| s.signal_na = [600.0, 200.0]);
+        let AckResult::DarkCalibrated(b) =
+            ack(command(&mut node, &w, 3, Command::CalibrateDark), 3)
+        else {
+            panic!()
+        };
+        assert!(
+            (b.i1_na - 600).abs() <= 81 && (b.i2_na - 200).abs() <= 81,
+            "{b:?}"
+        );
+        assert_eq!(node.baseline(), Some(b));
+        let m = measurement(&step(&mut node, &w));
+        assert_eq!(m.flags & flags::NO_BASELINE, 0);
+        // Button while dry = dark calibration, reported with BUTTON_ID.
+        w.set(|s| s.signal_na = [700.0, 200.0]);
+        let mut bytes = Vec::new();
+        node.button_pressed(w.now_ms(), &mut |b| bytes.extend_from_slice(b));
+        let AckResult::DarkCalibrated(b2) = ack(frames(&bytes), BUTTON_ID) else {
+            panic!()
+        };
+        assert!((b2.i1_na - 700).abs() <= 81);
+        let (_, _, _, _, _, s) = node.into_parts();
+        storage = s;
+    }
+    assert!(storage.writes >= 2);
+    // A new boot reads it back.
+    let (node, _w) = node_with(storage);
+    assert!(node.baseline().is_some_and(|b| (b.i1_na - 700).abs() <= 81));
+}
+
+#[test]
+fn dark_calibration_refuses_saturated_or_unsteady_light() {
+    let (mut node, w) = node();
+    w.set(|s| s.ambient_na = [400_000.0, 0.0]);
+    assert_eq!(
+        error(command(&mut node, &w, 1, Command::CalibrateDark)).code,
+        ErrorCode::CalibrationFailed
+    );
+    // A film coming and going: I1 changes by 200 µA/s, so the four
+    // calibration frames (~15 ms) disagree by more than onset/2 = 500 nA.
+    w.set(|s| {
+        s.ambient_na = [20_000.0, 0.0];
+        s.signal_ramp_na_per_s = [200_000.0, 0.0];
+    });
+    assert_eq!(
+        error(command(&mut node, &w, 2, Command::CalibrateDark)).code,
+        ErrorCode::CalibrationFailed
+    );
+    assert_eq!(node.baseline(), None);
+}
+
+#[test]
+fn button_while_iced_acknowledges() {
+    let (mut node, w) = node();
+    w.set(|s| {
+        s.temp_c = -8.0;
+        s.signal_na = [25_000.0, 8_000.0];
+    });
+    for _ in 0..node.config().onset_frames {
+        step(&mut node, &w);
+    }
+    assert_eq!(node.state(), DetectorState::Ice);
+    let mut bytes = Vec::new();
+    node.button_pressed(w.now_ms(), &mut |b| bytes.extend_from_slice(b));
+    assert_eq!(ack(frames(&bytes), BUTTON_ID), AckResult::AlarmAcknowledged);
+    assert_eq!(node.baseline(), None, "no calibration while iced");
+    let m = measurement(&step(&mut node, &w));
+    assert_ne!(m.flags & flags::ALARM_ACKED, 0);
+}
+
+#[test]
+fn every_command_is_answered() {
+    let (mut node, w) = node();
+    assert_eq!(
+        ack(command(&mut node, &w, 1, Command::GetInfo), 1),
+        AckResult::Info(node.hello())
+    );
+    assert_eq!(
+        ack(command(&mut node, &w, 2, Command::GetConfig), 2),
+        AckResult::Config(Config::default())
+    );
+    assert_eq!(
+        ack(command(&mut node, &w, 3, Command::StopStream), 3),
+        AckResult::Stopped
+    );
+    assert!(!node.is_streaming());
+    // Not streaming: frames still run the rule but send nothing.
+    assert!(step(&mut node, &w).is_empty());
+    assert_eq!(
+        ack(
+            command(
+                &mut node,
+                &w,
+                4,
+                Command::StartStream {
+                    frame_period_ms: Some(1_000)
+                }
+            ),
+            4
+        ),
+        AckResult::Streaming {
+            frame_period_ms: 1_000
+        }
+    );
+    assert_eq!(node.frame_period_ms(), 1_000);
+    assert_eq!(
+        error(command(
+            &mut node,
+            &w,
+            5,
+            Command::StartStream {
+                frame_period_ms: Some(5)
+            }
+        )),
+        ErrorReply {
+            id: Some(5),
+            code: ErrorCode::InvalidRate
+        }
+    );
+    assert_eq!(
+        node.frame_period_ms(),
+        1_000,
+        "a refused rate changes nothing"
+    );
+    assert_eq!(
+        ack(
+            command(
+                &mut node,
+                &w,
+                6,
+                Command::StartStream {
+                    frame_period_ms: None
+                }
+            ),
+            6
+        ),
+        AckResult::Streaming {
+            frame_period_ms: 100
+        }
+    );
+    assert_eq!(
+        ack(command(&mut node, &w, 9, Command::Reset), 9),
+        AckResult::Resetting
+    );
+    assert!(node.take_reset_request());
+    assert!(!node.take_reset_request(), "once");
+}
+
+#[test]
+fn set_config_validates_applies_and_persists() {
+    let (mut node, w) = node();
+    let c = Config {
+        onset_rise_na: 2_000,
+        frame_period_ms: 200,
+        ..Config::default()
+    };
+    assert_eq!(
+        ack(command(&mut node, &w, 1, Command::SetConfig(c.clone())), 1),
+        AckResult::Config(c.clone())
+    );
+    assert_eq!(node.config(), &c);
+    assert_eq!(node.frame_period_ms(), 200);
+    // One field wrong → refused with the protocol's reason, nothing changes.
+    let mut bad = c.clone();
+    bad.clear_rise_na = bad.onset_rise_na;
+    assert_eq!(
+        error(command(&mut node, &w, 2, Command::SetConfig(bad))),
+        ErrorReply {
+            id: Some(2),
+            code: ErrorCode::InvalidConfig(ConfigError::ClearNotBelowOnset)
+        }
+    );
+    let mut bad = c.clone();
+    bad.settle_us = 19;
+    assert_eq!(
+        error(command(&mut node, &w, 3, Command::SetConfig(bad))).code,
+        ErrorCode::InvalidConfig(ConfigError::BelowMin(ConfigField::SettleUs))
+    );
+    assert_eq!(node.config(), &c);
+    let (_, _, _, _, _, storage) = node.into_parts();
+    assert_eq!(storage.writes, 1, "refused configs are not written");
+    let (node, _) = node_with(storage);
+    assert_eq!(node.config(), &c);
+}
+
+#[test]
+fn storage_failure_is_reported_and_the_change_holds() {
+    let mut storage = MemStorage::new();
+    storage.fail_writes = true;
+    let (mut node, w) = node_with(storage);
+    let c = Config {
+        onset_frames: 10,
+        ..Config::default()
+    };
+    assert_eq!(
+        error(command(&mut node, &w, 1, Command::SetConfig(c.clone()))),
+        ErrorReply {
+            id: Some(1),
+            code: ErrorCode::StorageFailed
+        }
+    );
+    assert_eq!(node.config(), &c, "holds until the next reset");
+    let fs = step(&mut node, &w);
+    assert_ne!(measurement(&fs).flags & flags::STORAGE_FAILED, 0);
+    assert_eq!(
+        events(&fs)[0].kind,
+        EventKind::FaultRaised(flags::STORAGE_FAILED)
+    );
+}
+
+#[test]
+fn corrupt_or_old_storage_means_defaults_and_a_fault() {
+    for bytes in [
+        &b"FOIS\x01\x00\x05\x00garbage-crc"[..],
+        &b"\x00\x00\x00"[..],
+        &[0x46, 0x4F, 0x49, 0x53, 0, 0, 0, 0, 1, 2, 3, 4][..],
+    ] {
+        let (mut node, w) = node_with(MemStorage::with_bytes(bytes));
+        assert_eq!(node.config(), &Config::default());
+        let fs = step(&mut node, &w);
+        let m = measurement(&fs);
+        assert_ne!(m.flags & flags::CONFIG_DEFAULTED, 0);
+        assert_eq!(
+            events(&fs)[0].kind,
+            EventKind::FaultRaised(flags::CONFIG_DEFAULTED)
+        );
+        // A good SetConfig repairs it and clears the fault.
+        command(&mut node, &w, 1, Command::SetConfig(Config::default()));
+        let fs = step(&mut node, &w);
+        assert_eq!(measurement(&fs).flags & flags::CONFIG_DEFAULTED, 0);
+        assert_eq!(
+            events(&fs)[0].kind,
+            EventKind::FaultCleared(flags::CONFIG_DEFAULTED)
+        );
+    }
+}
+
+#[test]
+fn garbled_unknown_and_oversized_frames_get_errors_and_measurement_goes_on() {
+    let (mut node, w) = node();
+    let mut bytes = Vec::new();
+    let mut tx = |b: &[u8]| bytes.extend_from_slice(b);
+    // Garbage, a good command split byte by byte, a CRC-failing copy, an oversized run.
+    node.handle_rx(&[0x13, 0x37, 0x00], 0, &mut tx);
+    let good = encode_to_vec(&HostFrame {
+        id: 42,
+        cmd: Command::GetConfig,
+    });
+    for b in &good {
+        node.handle_rx(std::slice::from_ref(b), 0, &mut tx);
+    }
+    let mut flipped = good.clone();
+    flipped[3] ^= 0x10;
+    node.handle_rx(&flipped, 0, &mut tx);
+    node.handle_rx(&[0x55; 2 * MAX_FRAME], 0, &mut tx);
+    node.handle_rx(&[0x00], 0, &mut tx);
+    // A frame with a valid CRC but command number 8 (none such in this version).
+    node.handle_rx(&encode_to_vec(&(1u16, 8u8)), 0, &mut tx);
+    let got: Vec<DeviceMsg> = frames(&bytes).into_iter().map(|f| f.msg).collect();
+    assert_eq!(got.len(), 5, "{got:?}");
+    assert_eq!(
+        got[0],
+        DeviceMsg::Error(ErrorReply {
+            id: None,
+            code: ErrorCode::Garbled
+        })
+    );
+    assert!(matches!(&got[1], DeviceMsg::Ack(Ack { id: 42, .. })));
+    assert_eq!(
+        got[2],
+        DeviceMsg::Error(ErrorReply {
+            id: None,
+            code: ErrorCode::Garbled
+        })
+    );
+    assert_eq!(
+        got[3],
+        DeviceMsg::Error(ErrorReply {
+            id: None,
+            code: ErrorCode::Oversized
+        })
+    );
+    assert_eq!(
+        got[4],
+        DeviceMsg::Error(ErrorReply {
+            id: None,
+            code: ErrorCode::UnknownCommand
+        })
+    );
+    assert!(measurement(&step(&mut node, &w)).is_valid());
+}
+
+#[test]
+fn sequence_numbers_are_contiguous_across_kinds() {
+    let (mut node, w) = node();
+    let mut bytes = Vec::new();
+    node.send_hello(&mut |b| bytes.extend_from_slice(b));
+    for _ in 0..3 {
+        node.run_frame(w.now_ms(), &mut |b| bytes.extend_from_slice(b));
+        let wire = encode_to_vec(&HostFrame {
+            id: 1,
+            cmd: Command::GetInfo,
+        });
+        node.handle_rx(&wire, 0, &mut |b| bytes.extend_from_slice(b));
+    }
+    let seqs: Vec<u32> = frames(&bytes).iter().map(|f| f.seq).collect();
+    assert_eq!(seqs, (0..7).collect::<Vec<_>>());
+    assert_eq!(node.next_seq(), 7);
+}
+
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(64))]
+        /// Random bytes in random chunks never panic, every reply is a valid
+        /// frame, and the node keeps measuring.
+        #[test]
+        fn random_input_never_breaks_the_node(chunks in proptest::collection::vec(proptest::collection::vec(any::<u8>(), 0..300), 0..8)) {
+            let (mut node, w) = node();
+            let mut bytes = Vec::new();
+            for c in &chunks {
+                node.handle_rx(c, 0, &mut |b| bytes.extend_from_slice(b));
+                node.run_frame(w.now_ms(), &mut |b| bytes.extend_from_slice(b));
+            }
+            let fs = frames(&bytes);
+            let ms = fs.iter().filter(|f| matches!(f.msg, DeviceMsg::Measurement(_))).count();
+            prop_assert!(ms == chunks.len() || !node.is_streaming());
+        }
+    }
+}
