@@ -10,3 +10,4 @@ pub mod sim_cmd;
 pub mod timefmt;
 pub mod virtual_hw;
 pub mod virtual_node;
+pub mod vnode_cmd;

@@ -5,7 +5,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use clap::{Args, Parser, Subcommand};
-use fois_host::{commands, exit, monitor};
+use fois_host::{commands, exit, monitor, vnode_cmd};
 
 /// Monitor, log and configure a FOIS ice-sensor node; run a virtual node; run
 /// the thesis ray tracer.
@@ -77,6 +77,32 @@ enum Cmd {
     CalibrateDark(CmdArgs),
     /// Acknowledge the ice alarm (the output stays on while ice remains).
     Ack(CmdArgs),
+    /// Run the firmware's own logic on simulated hardware (ray-traced ice
+    /// accretion, analog front end, ambient light) and serve it on a
+    /// pseudo-terminal. Prints the pty path on the first line of stdout; talk
+    /// to it with `foisctl monitor --port PATH` or any serial tool. Defaults:
+    /// rime at 2 mm/h after 30 s dry, -5 °C, sensor b, real time.
+    VirtualNode {
+        #[command(flatten)]
+        scene: vnode_cmd::SceneArgs,
+        /// Also create this symlink to the pty: a stable name across restarts
+        /// (e.g. /tmp/fois-node), so a monitor reconnects after a restart.
+        #[arg(long, value_name = "PATH")]
+        link: Option<PathBuf>,
+    },
+    /// A virtual node and the monitor in one process: watch rime accrete and
+    /// trip the alarm. Defaults: 60 s dry, then rime at 3 mm/h, -5 °C, speed
+    /// x20, ends after 40 s (alarm after about 15 s).
+    Demo {
+        #[command(flatten)]
+        scene: vnode_cmd::SceneArgs,
+        /// Also log to this CSV file.
+        #[arg(long, value_name = "FILE")]
+        log: Option<PathBuf>,
+        /// Print a plain status line each second instead of a redrawn one.
+        #[arg(long)]
+        plain: bool,
+    },
     /// Ray-trace simulator of the sensor (thesis chapters 3 and 5).
     Sim(fois_host::sim_cmd::SimArgs),
 }
@@ -136,6 +162,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     .unwrap_or_default()
             );
             Ok(())
+        }
+        Cmd::VirtualNode { scene, link } => {
+            install_ctrlc();
+            vnode_cmd::run_virtual_node(&scene, link, &STOP)
+        }
+        Cmd::Demo { scene, log, plain } => {
+            install_ctrlc();
+            vnode_cmd::run_demo(&scene, log, plain, &STOP).map(|_| ())
         }
         Cmd::Config { cmd } => match cmd {
             ConfigCmd::Get(a) => commands::config_get(&a.target()).map(|_| ()),

@@ -99,6 +99,7 @@ mod tests {
         let clock = VirtualClock::new();
         let mut led = VirtualPin::new();
         let mut adc = SimAdc::new(clock.clone(), led.clone(), env, 3);
+        adc.frontend.load_ohm = [22_000.0; 2];
         // 10 µA × 22 kΩ = 0.22 V → 273; 5 µA → 137 (rounded 136.5).
         assert_eq!(adc.read_photo(), [273, 137]);
         led.set_high().unwrap();

@@ -187,7 +187,7 @@ fn clamp_mm(d: f64) -> f64 {
 
 impl Timeline {
     /// A timeline; an empty list means one endless dry segment. Negative or
-    /// non-finite durations count as 0.
+    /// NaN durations count as 0; `f64::INFINITY` is allowed.
     pub fn new(mut segments: Vec<Segment>) -> Self {
         if segments.is_empty() {
             segments.push(Segment::new(0.0, Cover::Dry));
@@ -196,7 +196,7 @@ impl Timeline {
         let mut start_mm = Vec::with_capacity(segments.len());
         let (mut t, mut d) = (0.0, 0.0);
         for s in &mut segments {
-            if !(s.duration_s.is_finite() && s.duration_s > 0.0) {
+            if s.duration_s.is_nan() || s.duration_s < 0.0 {
                 s.duration_s = 0.0;
             }
             let d0 = match (s.cover, s.start_thickness_mm) {
