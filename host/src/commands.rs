@@ -84,7 +84,8 @@ pub fn apply(base: &Config, sets: &[Assignment]) -> Result<Config, Exit> {
         c.set_from_str(&a.key, &a.value)
             .map_err(|e| refused(&format!("{}={}", a.key, a.value), e))?;
     }
-    c.validate().map_err(|e| refused("the resulting config", e))?;
+    c.validate()
+        .map_err(|e| refused("the resulting config", e))?;
     Ok(c)
 }
 
@@ -141,7 +142,11 @@ pub fn config_get(t: &Target) -> anyhow::Result<Config> {
         }
         other => {
             expect_ack(other)?;
-            Err(Exit::new(exit::FAILURE, "the node answered GetConfig with something else").into())
+            Err(Exit::new(
+                exit::FAILURE,
+                "the node answered GetConfig with something else",
+            )
+            .into())
         }
     }
 }

@@ -154,12 +154,10 @@ pub fn open_port(path: &str, baud: u32) -> Result<Box<dyn serialport::SerialPort
     let shared = resolved.starts_with("/dev/pts");
     #[cfg(unix)]
     {
-        let mut port = builder
-            .open_native()
-            .map_err(|e| LinkError::Open {
-                port: path.to_string(),
-                reason: e.to_string(),
-            })?;
+        let mut port = builder.open_native().map_err(|e| LinkError::Open {
+            port: path.to_string(),
+            reason: e.to_string(),
+        })?;
         if shared {
             let _ = port.set_exclusive(false);
         }
@@ -467,7 +465,10 @@ mod tests {
         let err = link.handshake(Duration::from_millis(200)).unwrap_err();
         assert_eq!(err.exit_code(), exit::INCOMPATIBLE);
         let text = err.to_string();
-        assert!(text.contains(&format!("version {}", PROTOCOL_VERSION + 1)), "{text}");
+        assert!(
+            text.contains(&format!("version {}", PROTOCOL_VERSION + 1)),
+            "{text}"
+        );
         assert_eq!(link.stats().rejected(), 1);
         // The request went out as a HostFrame GetInfo after a 0x00.
         let mut dec = FrameDecoder::<{ fois_protocol::MAX_FRAME }>::new();

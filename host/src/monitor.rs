@@ -283,10 +283,8 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
             Err(e) if !connected_once => return Err(e.into()),
             Err(e) => {
                 if !waiting_said {
-                    s.view.say(&format!(
-                        "  waiting for {} to come back ({e})",
-                        opts.port
-                    ));
+                    s.view
+                        .say(&format!("  waiting for {} to come back ({e})", opts.port));
                     waiting_said = true;
                 }
                 s.tick()?;
@@ -315,7 +313,11 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
         let text = hello_text(&hello);
         s.view.say(&format!(
             "{} {} ({text})",
-            if connected_once { "reconnected to" } else { "connected to" },
+            if connected_once {
+                "reconnected to"
+            } else {
+                "connected to"
+            },
             opts.port
         ));
         s.row(Row::note("link_up", format!("port={} {text}", opts.port)))?;
@@ -341,9 +343,8 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
         tracker = link.seq.clone();
         if let Some(e) = lost {
             s.sum.disconnects += 1;
-            s.view.say(&format!(
-                "! {e}; waiting for it to return (Ctrl-C to quit)"
-            ));
+            s.view
+                .say(&format!("! {e}; waiting for it to return (Ctrl-C to quit)"));
             s.row(Row::note("link_lost", e.to_string()))?;
             if let Some(log) = &mut s.log {
                 log.flush()?;

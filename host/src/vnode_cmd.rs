@@ -143,16 +143,34 @@ impl SceneArgs {
                 Err(crate::exit::Exit::new(crate::exit::USAGE, what.to_string()).into())
             }
         };
-        check(rate.is_finite() && rate.abs() <= 1000.0, "--rate-mm-per-h must be within ±1000")?;
-        check(temp.is_finite() && (-60.0..=80.0).contains(&temp), "--temp-c must be within -60..=80 °C")?;
+        check(
+            rate.is_finite() && rate.abs() <= 1000.0,
+            "--rate-mm-per-h must be within ±1000",
+        )?;
+        check(
+            temp.is_finite() && (-60.0..=80.0).contains(&temp),
+            "--temp-c must be within -60..=80 °C",
+        )?;
         check(dry_s.is_finite() && dry_s >= 0.0, "--dry-s must be >= 0")?;
-        check(speed.is_finite() && speed > 0.0 && speed <= 10_000.0, "--speed must be in (0, 10000]")?;
+        check(
+            speed.is_finite() && speed > 0.0 && speed <= 10_000.0,
+            "--speed must be in (0, 10000]",
+        )?;
         let led = self.led_factor.unwrap_or(1.0);
-        check(led.is_finite() && (0.0..=10.0).contains(&led), "--led-factor must be within 0..=10")?;
+        check(
+            led.is_finite() && (0.0..=10.0).contains(&led),
+            "--led-factor must be within 0..=10",
+        )?;
         let noise = self.noise_lsb.unwrap_or(1.0);
-        check(noise.is_finite() && (0.0..=500.0).contains(&noise), "--noise-lsb must be within 0..=500")?;
+        check(
+            noise.is_finite() && (0.0..=500.0).contains(&noise),
+            "--noise-lsb must be within 0..=500",
+        )?;
         let flicker = self.flicker.unwrap_or(0.0);
-        check(flicker.is_finite() && flicker >= 0.0, "--flicker must be >= 0")?;
+        check(
+            flicker.is_finite() && flicker >= 0.0,
+            "--flicker must be >= 0",
+        )?;
         let duration = self.duration.or(d.duration);
         if let Some(x) = duration {
             check(x.is_finite() && x >= 0.0, "--duration must be >= 0")?;

@@ -422,7 +422,10 @@ mod tests {
         );
         let s = 1_000_000_000u64;
         let t = env.truth(50 * s);
-        assert_eq!((t.cover, t.thickness_mm, t.led_signal_ua), (Cover::Dry, 0.0, [0.5, 0.0]));
+        assert_eq!(
+            (t.cover, t.thickness_mm, t.led_signal_ua),
+            (Cover::Dry, 0.0, [0.5, 0.0])
+        );
         let t = env.truth((100 + 1800) * s);
         assert!((t.thickness_mm - 1.0).abs() < 1e-9);
         assert!((t.led_signal_ua[0] - 2.5).abs() < 1e-9);

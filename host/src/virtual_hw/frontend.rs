@@ -120,7 +120,10 @@ mod tests {
     fn codes_follow_ohms_law_and_saturate() {
         let mut fe = FrontEnd::new(1);
         let c = fois_protocol::Config::default();
-        assert_eq!(fe.load_ohm, [f64::from(c.load_r1_ohm), f64::from(c.load_r2_ohm)]);
+        assert_eq!(
+            fe.load_ohm,
+            [f64::from(c.load_r1_ohm), f64::from(c.load_r2_ohm)]
+        );
         fe.load_ohm = [22_000.0; 2];
         // 30 µA × 22 kΩ = 0.66 V → 0.66/3.3 × 4095 = 819.
         assert_eq!(fe.photo_codes([30.0, 0.0], 0.0), [819, 0]);

@@ -1,0 +1,372 @@
+//! End to end over pseudo-terminals: `foisctl virtual-node` ↔ `foisctl
+//! monitor` / commands as separate processes, and an in-process lossy link.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use fois_host::csvlog::{HEADER, LogTable};
+
+const BIN: &str = env!("CARGO_BIN_EXE_foisctl");
+
+/// A running `foisctl virtual-node`, killed on drop.
+struct NodeProc {
+    child: Child,
+    path: String,
+}
+
+impl NodeProc {
+    fn start(extra: &[&str]) -> NodeProc {
+        let mut child = Command::new(BIN)
+            .arg("virtual-node")
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("spawn virtual-node");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
+        let path = line.trim().to_string();
+        assert!(path.starts_with("/dev/pts/"), "first line: {line:?}");
+        NodeProc { child, path }
+    }
+
+    fn kill9(&mut self) {
+        let _ = self.child.kill(); // SIGKILL
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for NodeProc {
+    fn drop(&mut self) {
+        self.kill9();
+    }
+}
+
+fn foisctl(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(BIN).args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn kinds(t: &LogTable) -> Vec<String> {
+    let k = t.col("kind").unwrap();
+    t.rows.iter().map(|r| r[k].clone()).collect()
+}
+
+#[test]
+fn commands_round_trip_and_monitor_logs_measurements() {
+    // Dry for 1000 s of virtual time: calibration works, no alarm.
+    let node = NodeProc::start(&["--speed", "20", "--dry-s", "1000", "--seed", "3"]);
+    let p = node.path.as_str();
+
+    let (code, out, err) = foisctl(&["config", "get", "--port", p]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains("frame_period_ms") && out.contains("100"),
+        "{out}"
+    );
+
+    let value = |out: &str, key: &str| -> String {
+        let line = out.lines().find(|l| l.starts_with(key)).unwrap();
+        line.split_whitespace().nth(1).unwrap().to_string()
+    };
+    let before = value(&out, "onset_frames");
+    assert_eq!(
+        before,
+        fois_protocol::Config::default().onset_frames.to_string()
+    );
+    let (code, out, err) = foisctl(&[
+        "config",
+        "set",
+        "--port",
+        p,
+        "onset_frames=12",
+        "clear_frames=40",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(
+        out.contains(&format!("onset_frames: {before} -> 12")),
+        "{out}"
+    );
+    let (_, out, _) = foisctl(&["config", "get", "--port", p]);
+    assert_eq!(value(&out, "onset_frames"), "12");
+    assert_eq!(value(&out, "clear_frames"), "40");
+
+    // Refused on the host (range, cross-field, syntax): exit 7, nothing sent.
+    for bad in [
+        "settle_us=1",
+        "clear_rise_na=999999",
+        "nokey=3",
+        "onset_frames",
+    ] {
+        let (code, _, err) = foisctl(&["config", "set", "--port", p, bad]);
+        assert_eq!(code, 7, "{bad}: {err}");
+        assert!(
+            err.contains("refused on the host") || err.contains("KEY=VALUE"),
+            "{err}"
+        );
+    }
+
+    let (code, out, err) = foisctl(&["calibrate-dark", "--port", p]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("DarkCalibrated"), "{out}");
+    let (code, out, err) = foisctl(&["ack", "--port", p]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("AlarmAcknowledged"), "{out}");
+
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log.csv");
+    let l = log.to_str().unwrap();
+    let (code, out, err) = foisctl(&[
+        "monitor",
+        "--port",
+        p,
+        "--log",
+        l,
+        "--duration",
+        "1.5",
+        "--plain",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("monitor:"), "{out}");
+    let text = std::fs::read_to_string(&log).unwrap();
+    assert_eq!(text.lines().next(), Some(HEADER));
+    let t = LogTable::read(&log).unwrap();
+    let ks = kinds(&t);
+    assert_eq!(ks[0], "link_up");
+    let (seq, i1, temp) = (
+        t.col("seq").unwrap(),
+        t.col("i1_ua").unwrap(),
+        t.col("temperature_c").unwrap(),
+    );
+    let meas: Vec<&Vec<String>> = t.rows.iter().filter(|r| r[2] == "measurement").collect();
+    // 1.5 s at ×20 and 10 Hz ≈ 300 frames.
+    assert!(meas.len() > 150, "{} measurements", meas.len());
+    // Measurements and answers share one sequence: no hole in it.
+    let seqs: Vec<u32> = t.rows.iter().filter_map(|r| r[seq].parse().ok()).collect();
+    assert!(seqs.windows(2).all(|w| w[1] == w[0] + 1), "consecutive");
+    for r in &meas {
+        let i: f64 = r[i1].parse().unwrap();
+        assert!(i.abs() < 0.5, "dry face reads ~0 µA, got {i}");
+        let c: f64 = r[temp].parse().unwrap();
+        assert!((c + 5.0).abs() < 0.1, "air -5 °C, got {c}");
+    }
+    // A second run appends to the same file, header once.
+    let (code, _, _) = foisctl(&[
+        "monitor",
+        "--port",
+        p,
+        "--log",
+        l,
+        "--duration",
+        "0.5",
+        "--plain",
+    ]);
+    assert_eq!(code, 0);
+    let text = std::fs::read_to_string(&log).unwrap();
+    assert_eq!(text.matches("host_time_utc").count(), 1);
+    assert_eq!(text.matches(",link_up,").count(), 2);
+}
+
+#[test]
+fn bad_port_and_bad_input_give_clear_errors() {
+    let (code, _, err) = foisctl(&["monitor", "--port", "/dev/does-not-exist"]);
+    assert_eq!(code, 3, "{err}");
+    assert!(
+        err.contains("cannot open serial port /dev/does-not-exist"),
+        "{err}"
+    );
+    let (code, _, err) = foisctl(&["config", "get", "--port", "/dev/does-not-exist"]);
+    assert_eq!(code, 3, "{err}");
+    let (code, _, err) = foisctl(&["virtual-node", "--ice", "slush"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("slush"), "{err}");
+    assert!(!err.contains("panicked"));
+}
+
+#[test]
+fn node_killed_and_restarted_monitor_reconnects_and_logs_the_gap() {
+    let dir = tempfile::tempdir().unwrap();
+    let link = dir.path().join("node");
+    let ls = link.to_str().unwrap();
+    let log = dir.path().join("log.csv");
+    let mut node = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--link", ls]);
+    let mon = Command::new(BIN)
+        .args([
+            "monitor",
+            "--port",
+            ls,
+            "--log",
+            log.to_str().unwrap(),
+            "--duration",
+            "4",
+            "--plain",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(1200));
+    node.kill9();
+    std::thread::sleep(Duration::from_millis(600));
+    let _node2 = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--link", ls]);
+    let out = mon.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("disappeared"), "{stdout}");
+    assert!(stdout.contains("reconnected"), "{stdout}");
+    let t = LogTable::read(&log).unwrap();
+    let ks = kinds(&t);
+    let lost = ks
+        .iter()
+        .position(|k| k == "link_lost")
+        .expect("link_lost row");
+    let up2 = ks.iter().rposition(|k| k == "link_up").unwrap();
+    assert!(up2 > lost, "{ks:?}");
+    assert!(
+        ks[lost..].iter().any(|k| k == "node_restart"),
+        "restart recorded"
+    );
+    assert!(ks[..lost].iter().filter(|k| *k == "measurement").count() > 20);
+    assert!(ks[up2..].iter().filter(|k| *k == "measurement").count() > 20);
+    // The host clock shows the gap: > 0.5 s between the rows around it.
+    let ms = t.col("host_unix_ms").unwrap();
+    let before: u64 = t.rows[lost - 1][ms].parse().unwrap();
+    let after: u64 = t.rows[up2 + 1][ms].parse().unwrap();
+    assert!(after - before >= 500, "gap {} ms", after - before);
+}
+
+#[test]
+fn logger_killed_with_sigkill_keeps_all_but_the_last_second() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log.csv");
+    let node = NodeProc::start(&["--speed", "10", "--dry-s", "1000"]);
+    let mut mon = Command::new(BIN)
+        .args([
+            "monitor",
+            "--port",
+            &node.path,
+            "--log",
+            log.to_str().unwrap(),
+            "--plain",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(2500));
+    let killed_at = fois_host::timefmt::unix_ms_now();
+    mon.kill().unwrap(); // SIGKILL: no flush, no destructor
+    mon.wait().unwrap();
+    let t = LogTable::read(&log).unwrap();
+    let ms = t.col("host_unix_ms").unwrap();
+    let last: u64 = t
+        .rows
+        .iter()
+        .map(|r| r[ms].parse::<u64>().unwrap())
+        .max()
+        .unwrap();
+    assert!(
+        killed_at - last <= 1000,
+        "lost {} ms of rows",
+        killed_at - last
+    );
+    // Every frame older than that is there: the sequence has no hole.
+    let seq = t.col("seq").unwrap();
+    // Every frame (measurements and answers) has a sequence number.
+    let seqs: Vec<u32> = t.rows.iter().filter_map(|r| r[seq].parse().ok()).collect();
+    assert!(seqs.len() > 100);
+    let holes: Vec<&[u32]> = seqs.windows(2).filter(|w| w[1] != w[0] + 1).collect();
+    assert!(holes.is_empty(), "{holes:?}");
+    drop(node);
+}
+
+/// In process: a virtual node behind a pty whose "wire" drops frames 100..110
+/// and injects garbage; the monitor counts both and logs a gap row.
+#[test]
+fn lossy_wire_gap_and_garbage_are_counted_not_fatal() {
+    use fois_host::monitor::{MonitorOptions, run};
+    use fois_host::virtual_hw::{Cover, Environment, Segment, Timeline};
+    use fois_host::virtual_node::{NodeOptions, VirtualNode};
+    use serialport::SerialPort;
+    use std::io::{Read, Write};
+
+    let (mut master, slave) = serialport::TTYPort::pair().unwrap();
+    master.set_timeout(Duration::from_millis(1)).unwrap();
+    let path = slave.name().unwrap();
+    let tl = Timeline::constant(Segment::new(0.0, Cover::Dry).noise(0.5));
+    let env = Arc::new(Environment::with_curves(tl, [], [0.0, 0.0]));
+    let stop = Arc::new(AtomicBool::new(false));
+    let s2 = stop.clone();
+    let wire = std::thread::spawn(move || {
+        let mut node = VirtualNode::new(env, NodeOptions::default());
+        let mut buf = [0u8; 256];
+        let mut sent = 0u32;
+        let start = Instant::now();
+        while !s2.load(Ordering::Relaxed) && start.elapsed() < Duration::from_secs(10) {
+            let mut out: Vec<Vec<u8>> = Vec::new();
+            if let Ok(n) = master.read(&mut buf) {
+                node.handle_rx(&buf[..n], &mut |b: &[u8]| out.push(b.to_vec()));
+            }
+            if node.node().is_streaming() {
+                node.step_frame(&mut |b: &[u8]| out.push(b.to_vec()));
+            } else {
+                node.advance_to(node.clock().now_ns() + 10_000_000, &mut |b: &[u8]| {
+                    out.push(b.to_vec())
+                });
+            }
+            for f in out {
+                let seq = node.node().next_seq();
+                let _ = seq;
+                sent += 1;
+                if (100..110).contains(&sent) {
+                    continue; // lost on the wire
+                }
+                if sent == 150 {
+                    // Garbage: random bytes, a corrupted frame, an oversized run.
+                    let _ = master.write_all(&[0x13, 0x37, 0xff, 0x00]);
+                    let mut bad = f.clone();
+                    bad[3] ^= 0x55;
+                    let _ = master.write_all(&bad);
+                    let _ = master.write_all(&[0x42; 600]);
+                    let _ = master.write_all(&[0x00]);
+                }
+                let _ = master.write_all(&f);
+            }
+            std::thread::sleep(Duration::from_micros(500));
+        }
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let log: PathBuf = dir.path().join("log.csv");
+    let mut opts = MonitorOptions::new(path);
+    opts.log = Some(log.clone());
+    opts.quiet = true;
+    opts.duration = Some(Duration::from_millis(1500));
+    let never = AtomicBool::new(false);
+    let sum = run(&opts, &never).unwrap();
+    stop.store(true, Ordering::Relaxed);
+    wire.join().unwrap();
+    drop(slave);
+    assert_eq!(sum.lost, 10, "{sum:?}");
+    assert_eq!(sum.rejected, 3, "{sum:?}");
+    assert!(sum.measurements > 200, "{sum:?}");
+    let t = LogTable::read(Path::new(&log)).unwrap();
+    let gaps: Vec<&Vec<String>> = t.rows.iter().filter(|r| r[2] == "gap").collect();
+    assert_eq!(gaps.len(), 1);
+    assert_eq!(gaps[0][t.col("frames_lost").unwrap()], "10");
+    assert_eq!(t.rows.iter().filter(|r| r[2] == "rejected").count(), 3);
+}
