@@ -296,6 +296,12 @@ fn uniform_open0(rng: &mut Pcg32) -> f64 {
     1.0 - uniform(rng)
 }
 
+/// Uniform in [0, 1) with 32 random bits (one PCG output): enough for angles and positions.
+#[inline]
+fn uniform32(rng: &mut Pcg32) -> f64 {
+    rng.next_u32() as f64 * (1.0 / 4_294_967_296.0)
+}
+
 /// Standard normal by Box–Muller.
 fn std_normal(rng: &mut Pcg32) -> f64 {
     let u1 = uniform_open0(rng);
@@ -317,6 +323,9 @@ pub(crate) fn mix64(mut z: u64) -> u64 {
 pub(crate) fn accretion_key(seed: u64, run: u64) -> u64 {
     mix64(mix64(seed) ^ run.wrapping_mul(0xD6E8_FEB8_6659_FD93))
 }
+
+/// Above this P_B the bubbles are drawn layer by layer, below it by geometric gaps.
+const BERNOULLI_ABOVE: f64 = 0.02;
 
 /// Stream ids: 0 = accretion (slopes); 2 + 2r = bubbles of ray r; 3 + 2r = diffuse of ray r.
 const STREAM_ACCRETION: u64 = 0;
@@ -443,6 +452,9 @@ impl SensorModel {
             0.0
         };
         let diffuse = p.diffuse_max_rad > 0.0;
+        let bernoulli = p.p_bubble > BERNOULLI_ABOVE;
+        // P(next_u32 < p_thr) = P_B.
+        let p_thr = (p.p_bubble * 4_294_967_296.0).min(u32::MAX as f64) as u32;
         let sensor_a = cfg.sensor == SensorKind::A;
         let first_wet = self.thick.iter().position(|&d| d > 0.0).unwrap_or(nt);
 
@@ -461,18 +473,30 @@ impl SensorModel {
             let slope_xy = DVec2::new(v.x, v.y) / v.z;
             let mut bub = Pcg32::new(key, 2 + 2 * r as u64);
             let mut dif = Pcg32::new(key, 3 + 2 * r as u64);
-            let mut next_layer: u32 = if p.p_bubble > 0.0 {
-                geometric_gap(&mut bub, ln_q)
-            } else {
+            // Dense bubbles (rime): one Bernoulli draw per layer; sparse bubbles (glazed):
+            // geometric gaps between bubbles. Both give P_B per layer, independently.
+            let mut next_layer: u32 = if p.p_bubble <= 0.0 {
                 u32::MAX
+            } else if bernoulli {
+                0
+            } else {
+                geometric_gap(&mut bub, ln_q)
             };
             let mut fwd = ray.flux_in_w;
             // Specular reflection is fixed per accretion when there is no diffuse angle.
             let fixed = reflect_setup(v, normal, n_med);
             let fixed_couple = fixed.map(|(_, rd)| self.couple(rd));
+            // Without diffuse angles the path up and back is (d + a)·k_path: its absorption
+            // factor changes by the same ratio at every step, so no exp() per step.
+            let k_path = fixed.map_or(0.0, |(_, rd)| (1.0 + v.z / -rd.z) / den);
+            let d_first = self.thick.get(first_wet).copied().unwrap_or(0.0);
+            let mut att_run = (-alpha * k_path * (d_first + a)).exp();
+            let att_step = (-alpha * k_path * cfg.step_mm).exp();
 
             for i in first_wet..nt {
                 let d = self.thick[i];
+                let att_fixed = att_run;
+                att_run *= att_step;
                 let h0 = d + a;
                 if h0 <= 0.0 {
                     if sensor_a {
@@ -492,8 +516,12 @@ impl SensorModel {
                     if z_top > h_b {
                         break;
                     }
+                    if bernoulli && bub.next_u32() >= p_thr {
+                        next_layer += 1;
+                        continue;
+                    }
                     // Scattered part: 5 % deflected toward the face (Fig. 3.11).
-                    let cos_b = uniform_open0(&mut bub); // isotropic over the lower hemisphere
+                    let cos_b = 1.0 - uniform32(&mut bub); // isotropic over the lower hemisphere
                     let (c_phi, s_phi) = unit_circle(&mut bub);
                     let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
                     let reach = z_b / cos_b;
@@ -506,7 +534,11 @@ impl SensorModel {
                             fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
                     }
                     fwd *= FORWARD_FRACTION;
-                    let gap = geometric_gap(&mut bub, ln_q);
+                    let gap = if bernoulli {
+                        0
+                    } else {
+                        geometric_gap(&mut bub, ln_q)
+                    };
                     next_layer = next_layer.saturating_add(1).saturating_add(gap);
                     if next_layer >= u32::MAX / 2 {
                         next_layer = u32::MAX;
@@ -542,7 +574,12 @@ impl SensorModel {
                 let land = ray.p0 + DVec2::new(v.x, v.y) * t_up + DVec2::new(rd.x, rd.y) * t_down;
                 let k = bundle_index(geo.region(land.x, land.y));
                 if k < 2 {
-                    refl[i][k] += fwd * rfl * cpl * (-alpha * (t_up + t_down)).exp();
+                    let att = if diffuse {
+                        (-alpha * (t_up + t_down)).exp()
+                    } else {
+                        att_fixed
+                    };
+                    refl[i][k] += fwd * rfl * cpl * att;
                 }
             }
         }
@@ -592,8 +629,8 @@ fn reflect_setup(v: DVec3, nrm: DVec3, n_med: f64) -> Option<(f64, DVec3)> {
 #[inline]
 fn unit_circle(rng: &mut Pcg32) -> (f64, f64) {
     loop {
-        let a = 2.0 * uniform(rng) - 1.0;
-        let b = 2.0 * uniform(rng) - 1.0;
+        let a = 2.0 * uniform32(rng) - 1.0;
+        let b = 2.0 * uniform32(rng) - 1.0;
         let q = a * a + b * b;
         if q > 1e-12 && q <= 1.0 {
             let s = q.sqrt().recip();

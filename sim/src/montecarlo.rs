@@ -228,7 +228,15 @@ pub fn crlb(points: &[McPoint], half_width_mm: f64) -> Vec<CrlbPoint> {
             let sigma = [[s11[i], s12[i]], [s12[i], s22[i]]];
             let dsig = [[d11[i].1, d12[i].1], [d12[i].1, d22[i].1]];
             let dmu = [m1[i].1, m2[i].1];
-            let (full, mean_only) = fisher(dmu, sigma, dsig);
+            // Where the raw covariance is singular (the dry face: every run reads the same),
+            // the Gaussian model does not hold: report NaN rather than a smoothed number.
+            let raw = points[i].cov_ua2;
+            let raw_det = raw[0][0] * raw[1][1] - raw[0][1] * raw[1][0];
+            let (full, mean_only) = if raw_det > 0.0 && raw[0][0] > 0.0 {
+                fisher(dmu, sigma, dsig)
+            } else {
+                (f64::NAN, f64::NAN)
+            };
             CrlbPoint {
                 thickness_mm: x[i],
                 mu_ua: [m1[i].0, m2[i].0],
@@ -300,4 +308,59 @@ pub fn fit_quality(points: &[McPoint], fit: &[CrlbPoint], runs: usize) -> FitQua
         rms_residual_ua: [(r[0] / n).sqrt(), (r[1] / n).sqrt()],
         rms_std_error_ua: [(e[0] / n).sqrt(), (e[1] / n).sqrt()],
     }
+}
+
+/// Least-squares fit of one global polynomial of `degree` (x scaled to [−1, 1]); returns the
+/// fitted values. Kept to show (README, tests) why the thesis's global polynomial follows the
+/// sharp peak and dip of the mean curves badly.
+pub fn global_polynomial_fit(x: &[f64], y: &[f64], degree: usize) -> Vec<f64> {
+    let n = degree + 1;
+    let (lo, hi) = x
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), &v| (a.min(v), b.max(v)));
+    let span = (hi - lo).max(1e-12);
+    let u = |v: f64| 2.0 * (v - lo) / span - 1.0;
+    let mut a = vec![vec![0.0f64; n + 1]; n];
+    for (&xi, &yi) in x.iter().zip(y) {
+        let t = u(xi);
+        let pw: Vec<f64> = (0..n)
+            .scan(1.0, |p, _| {
+                let r = *p;
+                *p *= t;
+                Some(r)
+            })
+            .collect();
+        for r in 0..n {
+            for c in 0..n {
+                a[r][c] += pw[r] * pw[c];
+            }
+            a[r][n] += pw[r] * yi;
+        }
+    }
+    // Gaussian elimination with partial pivoting.
+    for col in 0..n {
+        let piv = (col..n)
+            .max_by(|&i, &j| a[i][col].abs().total_cmp(&a[j][col].abs()))
+            .unwrap_or(col);
+        a.swap(col, piv);
+        let d = a[col][col];
+        if d.abs() < 1e-300 {
+            return vec![f64::NAN; x.len()];
+        }
+        for r in 0..n {
+            if r != col {
+                let f = a[r][col] / d;
+                for c in col..=n {
+                    a[r][c] -= f * a[col][c];
+                }
+            }
+        }
+    }
+    let coef: Vec<f64> = (0..n).map(|r| a[r][n] / a[r][r]).collect();
+    x.iter()
+        .map(|&xi| {
+            let t = u(xi);
+            coef.iter().rev().fold(0.0, |acc, &c| acc * t + c)
+        })
+        .collect()
 }

@@ -45,8 +45,8 @@ fn refract_obeys_snell_and_returns_none_beyond_critical() {
 #[test]
 fn refract_works_out_of_plane() {
     let n = DVec3::new(0.0, 0.0, -1.0);
-    let d = DVec3::new(0.3, 0.4, 0.0).normalize() * (20.0 * DEG).sin()
-        + DVec3::Z * (20.0 * DEG).cos();
+    let d =
+        DVec3::new(0.3, 0.4, 0.0).normalize() * (20.0 * DEG).sin() + DVec3::Z * (20.0 * DEG).cos();
     let t = refract(d, n, N_FIBRE, N_ICE).unwrap();
     // Tangential component scaled by n_i/n_t, azimuth kept.
     assert!((t.x / t.y - 0.75).abs() < 1e-12);
@@ -67,7 +67,12 @@ fn reflect_mirrors_about_the_normal() {
 
 #[test]
 fn fresnel_normal_incidence_closed_form() {
-    for (a, b) in [(N_FIBRE, 1.0), (N_ICE, 1.0), (1.0, N_FIBRE), (N_ICE, N_FIBRE)] {
+    for (a, b) in [
+        (N_FIBRE, 1.0),
+        (N_ICE, 1.0),
+        (1.0, N_FIBRE),
+        (N_ICE, N_FIBRE),
+    ] {
         let want = ((a - b) / (a + b)).powi(2);
         assert!((fr_dielectric(1.0, a, b) - want).abs() < 1e-14);
     }
@@ -95,7 +100,12 @@ fn fresnel_matches_thesis_numbers() {
 #[test]
 fn reflectance_plus_transmittance_is_one() {
     // R from eqs. 3.8, 3.9, 3.12 and T from eqs. 3.10, 3.11 independently: R + T = 1 (3.13).
-    for (a, b) in [(N_FIBRE, N_AIR), (N_ICE, N_AIR), (N_ICE, N_FIBRE), (N_FIBRE, N_ICE)] {
+    for (a, b) in [
+        (N_FIBRE, N_AIR),
+        (N_ICE, N_AIR),
+        (N_ICE, N_FIBRE),
+        (N_FIBRE, N_ICE),
+    ] {
         for k in 0..90 {
             let c = (k as f64 * DEG).cos();
             let r = fr_dielectric(c, a, b);
@@ -113,7 +123,10 @@ fn amplitude_coefficients_closed_form() {
     let (rs, ts, rp, tp) = fresnel_amplitudes(1.0, N_FIBRE, 1.0).unwrap();
     assert!((rs - (N_FIBRE - 1.0) / (N_FIBRE + 1.0)).abs() < 1e-14);
     assert!((ts - 2.0 * N_FIBRE / (N_FIBRE + 1.0)).abs() < 1e-14);
-    assert!((rp + rs).abs() < 1e-14, "sign convention of 3.6: r∥ = −r⊥ at 0°");
+    assert!(
+        (rp + rs).abs() < 1e-14,
+        "sign convention of 3.6: r∥ = −r⊥ at 0°"
+    );
     assert!((tp - ts).abs() < 1e-14);
     let brewster = (1.0f64 / N_FIBRE).atan();
     let (_, _, rp, _) = fresnel_amplitudes(brewster.cos(), N_FIBRE, 1.0).unwrap();
