@@ -347,11 +347,12 @@ pub fn global_polynomial_fit(x: &[f64], y: &[f64], degree: usize) -> Vec<f64> {
         if d.abs() < 1e-300 {
             return vec![f64::NAN; x.len()];
         }
-        for r in 0..n {
+        let pivot_row = a[col].clone();
+        for (r, row) in a.iter_mut().enumerate() {
             if r != col {
-                let f = a[r][col] / d;
-                for c in col..=n {
-                    a[r][c] -= f * a[col][c];
+                let f = row[col] / d;
+                for (x, p) in row.iter_mut().zip(&pivot_row).skip(col) {
+                    *x -= f * p;
                 }
             }
         }
