@@ -1,11 +1,14 @@
 //! `foisctl` as a library: every subcommand lives in its own module so the
 //! hardware-in-loop suite and the benchmarks can drive the same code.
 
+pub mod bench;
 pub mod commands;
+pub mod compare;
 pub mod csvlog;
 pub mod exit;
 pub mod link;
 pub mod monitor;
+pub mod plot;
 pub mod sim_cmd;
 pub mod timefmt;
 pub mod virtual_hw;

@@ -103,6 +103,66 @@ enum Cmd {
         #[arg(long)]
         plain: bool,
     },
+    /// Put logged currents beside the simulator's Monte Carlo band mu(d) +/-
+    /// k*sigma(d); prints the RMS deviation and the fraction of samples
+    /// inside the band. The thickness of each sample comes from a log column
+    /// (--thickness-col) or a constant rate (--rate-mm-per-h).
+    Compare {
+        /// The log: a `foisctl monitor` CSV, or any CSV with i1_ua, i2_ua and
+        /// the thickness (or uptime_ms) column.
+        #[arg(long, value_name = "FILE")]
+        log: PathBuf,
+        /// The medium to simulate.
+        #[arg(long, value_name = "rime|glazed|water|flat", value_parser = parse_ice)]
+        ice: fois_sim::IceKind,
+        /// Column holding the reference thickness, mm (e.g. a laser distance sensor).
+        #[arg(
+            long,
+            value_name = "NAME",
+            conflicts_with = "rate_mm_per_h",
+            required_unless_present = "rate_mm_per_h"
+        )]
+        thickness_col: Option<String>,
+        /// Constant accretion rate, mm/h: d = rate x (uptime - start).
+        #[arg(long, value_name = "MM_PER_H")]
+        rate_mm_per_h: Option<f64>,
+        /// With --rate-mm-per-h: node uptime at which accretion started, s
+        /// (default: the first measurement in the log).
+        #[arg(long, value_name = "SECONDS", requires = "rate_mm_per_h")]
+        start_s: Option<f64>,
+        /// Monte Carlo accretions.
+        #[arg(long, default_value_t = 100, value_name = "N")]
+        runs: u64,
+        /// Seed of the Monte Carlo.
+        #[arg(long, default_value_t = 1, value_name = "N")]
+        seed: u64,
+        /// Band half-width, in sigma.
+        #[arg(long, default_value_t = 1.0, value_name = "K")]
+        k_sigma: f64,
+        /// Sensor construction: a or b.
+        #[arg(long, default_value = "b", value_name = "a|b", value_parser = parse_sensor)]
+        sensor: fois_sim::SensorKind,
+        /// Also draw the comparison (PNG).
+        #[arg(long, value_name = "FILE.png")]
+        plot: Option<PathBuf>,
+    },
+    /// Draw I1 and I2 of a log over host time, alarm periods shaded, link
+    /// breaks marked (PNG).
+    Plot {
+        /// A `foisctl monitor` CSV log.
+        #[arg(long, value_name = "FILE")]
+        log: PathBuf,
+        /// The PNG to write.
+        #[arg(long, value_name = "FILE.png")]
+        out: PathBuf,
+    },
+    /// Decoder throughput: encode a stream of measurement frames and decode
+    /// it, print frames/s and MB/s.
+    BenchDecode {
+        /// Frames in the stream.
+        #[arg(long, default_value_t = 1_000_000, value_name = "N")]
+        frames: u32,
+    },
     /// Ray-trace simulator of the sensor (thesis chapters 3 and 5).
     Sim(fois_host::sim_cmd::SimArgs),
 }
@@ -120,6 +180,25 @@ enum ConfigCmd {
         #[arg(value_name = "KEY=VALUE", required = true)]
         pairs: Vec<String>,
     },
+}
+
+fn parse_ice(s: &str) -> Result<fois_sim::IceKind, String> {
+    use fois_sim::IceKind;
+    match s.trim().to_ascii_lowercase().as_str() {
+        "rime" => Ok(IceKind::Rime),
+        "glazed" => Ok(IceKind::Glazed),
+        "water" => Ok(IceKind::Water),
+        "flat" => Ok(IceKind::Flat),
+        _ => Err(format!("`{s}` is not one of rime, glazed, water, flat")),
+    }
+}
+
+fn parse_sensor(s: &str) -> Result<fois_sim::SensorKind, String> {
+    match s.trim().to_ascii_lowercase().as_str() {
+        "a" => Ok(fois_sim::SensorKind::A),
+        "b" => Ok(fois_sim::SensorKind::B),
+        _ => Err(format!("`{s}` is not a or b")),
+    }
 }
 
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -170,6 +249,61 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Cmd::Demo { scene, log, plain } => {
             install_ctrlc();
             vnode_cmd::run_demo(&scene, log, plain, &STOP).map(|_| ())
+        }
+        Cmd::Compare {
+            log,
+            ice,
+            thickness_col,
+            rate_mm_per_h,
+            start_s,
+            runs,
+            seed,
+            k_sigma,
+            sensor,
+            plot,
+        } => {
+            use fois_host::compare::{self, CompareOptions, ThicknessSource};
+            let thickness = match (thickness_col, rate_mm_per_h) {
+                (Some(c), _) => ThicknessSource::Column(c),
+                (None, Some(r)) => ThicknessSource::Rate {
+                    mm_per_h: r,
+                    start_s,
+                },
+                (None, None) => anyhow::bail!("give --thickness-col or --rate-mm-per-h"),
+            };
+            let opts = CompareOptions {
+                log,
+                ice,
+                sensor,
+                thickness,
+                runs,
+                seed,
+                k_sigma,
+                plot,
+            };
+            let c = compare::run(&opts)?;
+            print!("{}", compare::report(&c));
+            if let Some(p) = &opts.plot {
+                println!("figure: {}", p.display());
+            }
+            Ok(())
+        }
+        Cmd::Plot { log, out } => {
+            let n = fois_host::plot::plot_log(&log, &out)?;
+            println!("{n} measurements drawn to {}", out.display());
+            Ok(())
+        }
+        Cmd::BenchDecode { frames } => {
+            let r = fois_host::bench::decode_throughput(frames);
+            println!(
+                "decoded {} frames ({} bytes) in {:.3} s: {:.0} frames/s, {:.1} MB/s",
+                r.frames,
+                r.bytes,
+                r.seconds,
+                r.frames_per_s(),
+                r.bytes as f64 / r.seconds / 1e6
+            );
+            Ok(())
         }
         Cmd::Config { cmd } => match cmd {
             ConfigCmd::Get(a) => commands::config_get(&a.target()).map(|_| ()),

@@ -1,0 +1,357 @@
+//! `foisctl plot` (currents over time, alarm periods shaded) and the figure
+//! of `foisctl compare`.
+
+use std::path::Path;
+
+use anyhow::{Context, bail};
+use plotters::prelude::*;
+
+use crate::compare::{Comparison, band_at};
+use crate::csvlog::LogTable;
+
+const SIZE: (u32, u32) = (1200, 700);
+
+/// One logged measurement for the time plot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimePoint {
+    /// Host time since the first row, s.
+    pub t_s: f64,
+    /// I1, I2, µA.
+    pub i_ua: [f64; 2],
+    /// Alarm output on.
+    pub alarm: bool,
+}
+
+/// What a log holds for the time plot: points, and the breaks (link lost,
+/// gaps, restarts) as times.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TimeSeries {
+    /// Valid measurements.
+    pub points: Vec<TimePoint>,
+    /// Times of `gap`, `link_lost` and `node_restart` rows, s.
+    pub breaks_s: Vec<f64>,
+}
+
+/// Extract the time series from a foisctl log.
+pub fn time_series(t: &LogTable, path: &Path) -> anyhow::Result<TimeSeries> {
+    let need = |name: &str| {
+        t.col(name).with_context(|| {
+            format!(
+                "log {} has no column `{name}`: is it a foisctl log?",
+                path.display()
+            )
+        })
+    };
+    let (ms, kind, i1, i2, alarm) = (
+        need("host_unix_ms")?,
+        need("kind")?,
+        need("i1_ua")?,
+        need("i2_ua")?,
+        need("alarm")?,
+    );
+    let valid = t.col("valid");
+    let num = |s: &str| s.trim().parse::<f64>().ok().filter(|x| x.is_finite());
+    let t0 = t.rows.iter().find_map(|r| num(&r[ms])).unwrap_or(0.0);
+    let mut out = TimeSeries::default();
+    for r in &t.rows {
+        let Some(tm) = num(&r[ms]) else { continue };
+        let t_s = (tm - t0) / 1000.0;
+        match r[kind].as_str() {
+            "measurement" => {
+                if valid.is_some_and(|v| r[v].trim() == "0") {
+                    continue;
+                }
+                if let (Some(a), Some(b)) = (num(&r[i1]), num(&r[i2])) {
+                    out.points.push(TimePoint {
+                        t_s,
+                        i_ua: [a, b],
+                        alarm: r[alarm].trim() == "1",
+                    });
+                }
+            }
+            "gap" | "link_lost" | "node_restart" => out.breaks_s.push(t_s),
+            _ => {}
+        }
+    }
+    Ok(out)
+}
+
+/// Alarm periods (start, end) in s: runs of measurements with the alarm on.
+pub fn alarm_periods(points: &[TimePoint]) -> Vec<(f64, f64)> {
+    let mut out = Vec::new();
+    let mut start: Option<f64> = None;
+    let mut last = 0.0;
+    for p in points {
+        match (p.alarm, start) {
+            (true, None) => start = Some(p.t_s),
+            (false, Some(s)) => {
+                out.push((s, p.t_s));
+                start = None;
+            }
+            _ => {}
+        }
+        last = p.t_s;
+    }
+    if let Some(s) = start {
+        out.push((s, last));
+    }
+    out
+}
+
+fn draw_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
+    anyhow::anyhow!("drawing failed: {e:?}")
+}
+
+/// `foisctl plot`: I1 and I2 over host time, alarm periods shaded, breaks
+/// in the link as grey lines.
+pub fn plot_log(log: &Path, out: &Path) -> anyhow::Result<usize> {
+    let table = LogTable::read(log)?;
+    let ts = time_series(&table, log)?;
+    if ts.points.is_empty() {
+        bail!("log {} holds no valid measurement to plot", log.display());
+    }
+    let span = ts.points.last().map_or(1.0, |p| p.t_s).max(1e-3);
+    let (unit, div) = if span > 7200.0 {
+        ("h", 3600.0)
+    } else if span > 300.0 {
+        ("min", 60.0)
+    } else {
+        ("s", 1.0)
+    };
+    let x_max = span / div;
+    let (mut y_min, mut y_max) = (0.0f64, 1.0f64);
+    for p in &ts.points {
+        for v in p.i_ua {
+            y_min = y_min.min(v);
+            y_max = y_max.max(v);
+        }
+    }
+    let pad = 0.05 * (y_max - y_min);
+    let (y_lo, y_hi) = (y_min - pad, y_max + pad);
+    let root = BitMapBackend::new(out, SIZE).into_drawing_area();
+    root.fill(&WHITE).map_err(draw_err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "FOIS log {}",
+                log.file_name()
+                    .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+            ),
+            ("sans-serif", 22),
+        )
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(0.0..x_max.max(1e-6), y_lo..y_hi)
+        .map_err(draw_err)?;
+    chart
+        .configure_mesh()
+        .x_desc(format!("host time since the first row ({unit})"))
+        .y_desc("net photocurrent (µA)")
+        .label_style(("sans-serif", 15))
+        .draw()
+        .map_err(draw_err)?;
+    let periods = alarm_periods(&ts.points);
+    chart
+        .draw_series(periods.iter().map(|&(a, b)| {
+            Rectangle::new(
+                [(a / div, y_lo), (b / div, y_hi)],
+                RGBColor(255, 170, 170).mix(0.5).filled(),
+            )
+        }))
+        .map_err(draw_err)?
+        .label("alarm on")
+        .legend(|(x, y)| {
+            Rectangle::new(
+                [(x, y - 6), (x + 20, y + 6)],
+                RGBColor(255, 170, 170).filled(),
+            )
+        });
+    if !ts.breaks_s.is_empty() {
+        chart
+            .draw_series(ts.breaks_s.iter().map(|&t| {
+                PathElement::new(
+                    vec![(t / div, y_lo), (t / div, y_hi)],
+                    BLACK.mix(0.35).stroke_width(1),
+                )
+            }))
+            .map_err(draw_err)?
+            .label("gap / link lost / restart")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.35)));
+    }
+    let colors = [BLUE, RGBColor(0, 140, 0)];
+    for (c, name) in ["I1", "I2"].iter().enumerate() {
+        let color = colors[c];
+        // Break the line at gaps longer than 5 s so lost time is visible.
+        let mut segs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
+        let mut prev: Option<f64> = None;
+        for p in &ts.points {
+            if prev.is_some_and(|q| p.t_s - q > 5.0) {
+                segs.push(Vec::new());
+            }
+            prev = Some(p.t_s);
+            if let Some(s) = segs.last_mut() {
+                s.push((p.t_s / div, p.i_ua[c]));
+            }
+        }
+        for (k, s) in segs.into_iter().enumerate() {
+            let a = chart
+                .draw_series(LineSeries::new(s, color.stroke_width(2)))
+                .map_err(draw_err)?;
+            if k == 0 {
+                a.label(*name).legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3))
+                });
+            }
+        }
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(draw_err)?;
+    root.present().map_err(draw_err)?;
+    Ok(ts.points.len())
+}
+
+/// The figure of `foisctl compare`: per channel, the band μ ± kσ, μ, and
+/// the logged samples against thickness.
+pub fn plot_comparison(c: &Comparison, ice: &str, out: &Path) -> anyhow::Result<()> {
+    let root = BitMapBackend::new(out, SIZE).into_drawing_area();
+    root.fill(&WHITE).map_err(draw_err)?;
+    let panels = root.split_evenly((1, 2));
+    let d_max = c
+        .samples
+        .iter()
+        .map(|s| s.thickness_mm)
+        .fold(0.5, f64::max)
+        .min(15.0);
+    for (ch, area) in panels.iter().enumerate() {
+        let grid: Vec<f64> = c
+            .band
+            .iter()
+            .map(|p| p.thickness_mm)
+            .filter(|&d| d <= d_max + 0.1 + 1e-9)
+            .collect();
+        let lo: Vec<(f64, f64)> = grid
+            .iter()
+            .map(|&d| (d, band_at(&c.band, d)))
+            .map(|(d, (m, s))| (d, m[ch] - c.k_sigma * s[ch]))
+            .collect();
+        let hi: Vec<(f64, f64)> = grid
+            .iter()
+            .map(|&d| (d, band_at(&c.band, d)))
+            .map(|(d, (m, s))| (d, m[ch] + c.k_sigma * s[ch]))
+            .collect();
+        let mu: Vec<(f64, f64)> = grid
+            .iter()
+            .map(|&d| (d, band_at(&c.band, d).0[ch]))
+            .collect();
+        let mut y_min = 0.0f64;
+        let mut y_max = 1.0f64;
+        for &(_, y) in lo.iter().chain(hi.iter()) {
+            y_min = y_min.min(y);
+            y_max = y_max.max(y);
+        }
+        for s in &c.samples {
+            y_min = y_min.min(s.i_ua[ch]);
+            y_max = y_max.max(s.i_ua[ch]);
+        }
+        let pad = 0.05 * (y_max - y_min);
+        let mut chart = ChartBuilder::on(area)
+            .caption(
+                format!(
+                    "I{} vs simulated {ice}: RMS {:.2} µA, {:.0} % inside",
+                    ch + 1,
+                    c.channels[ch].rms_ua,
+                    100.0 * c.channels[ch].inside
+                ),
+                ("sans-serif", 18),
+            )
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..d_max, (y_min - pad)..(y_max + pad))
+            .map_err(draw_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("ice thickness d (mm)")
+            .y_desc(format!("I{} (µA)", ch + 1))
+            .label_style(("sans-serif", 14))
+            .draw()
+            .map_err(draw_err)?;
+        let mut poly = lo.clone();
+        poly.extend(hi.iter().rev());
+        chart
+            .draw_series(std::iter::once(Polygon::new(
+                poly,
+                RGBColor(255, 200, 120).mix(0.6).filled(),
+            )))
+            .map_err(draw_err)?
+            .label(format!("μ ± {}σ (Monte Carlo)", c.k_sigma))
+            .legend(|(x, y)| {
+                Rectangle::new(
+                    [(x, y - 6), (x + 20, y + 6)],
+                    RGBColor(255, 200, 120).filled(),
+                )
+            });
+        chart
+            .draw_series(LineSeries::new(mu, RGBColor(200, 90, 0).stroke_width(2)))
+            .map_err(draw_err)?
+            .label("μ(d)")
+            .legend(|(x, y)| {
+                PathElement::new(
+                    vec![(x, y), (x + 20, y)],
+                    RGBColor(200, 90, 0).stroke_width(3),
+                )
+            });
+        // At most ~4000 dots.
+        let step = (c.samples.len() / 4000).max(1);
+        chart
+            .draw_series(
+                c.samples
+                    .iter()
+                    .step_by(step)
+                    .map(|s| Circle::new((s.thickness_mm, s.i_ua[ch]), 2, BLUE.mix(0.5).filled())),
+            )
+            .map_err(draw_err)?
+            .label("logged")
+            .legend(|(x, y)| Circle::new((x + 10, y), 3, BLUE.filled()));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 14))
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(draw_err)?;
+    }
+    root.present().map_err(draw_err)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn alarm_periods_are_runs_of_alarm_rows() {
+        let p = |t: f64, a: bool| TimePoint {
+            t_s: t,
+            i_ua: [0.0; 2],
+            alarm: a,
+        };
+        let pts = [
+            p(0.0, false),
+            p(1.0, true),
+            p(2.0, true),
+            p(3.0, false),
+            p(4.0, true),
+            p(5.0, true),
+        ];
+        assert_eq!(alarm_periods(&pts), vec![(1.0, 3.0), (4.0, 5.0)]);
+    }
+}
