@@ -1,0 +1,634 @@
+//! The firmware's hardware-free logic (`fois_firmware`, no embassy) on an
+//! emulated Cortex-M4F: QEMU `mps2-an386`, semihosting for output and the
+//! exit code, `-icount shift=0` for exact, repeatable instruction counts.
+//!
+//! 1. Tests: NTC/VREFINT maths on the real FPU, the persisted record, the ice
+//!    rule, and the whole `Node` on a simulated board (currents, ambient
+//!    flicker, ice onset → alarm pin + event, commands in, garbage in).
+//! 2. A measurement loop that counts the instructions of one output frame:
+//!    SysTick runs from the core clock and QEMU drives it from the virtual
+//!    clock, which under `-icount shift=0` advances exactly 1 ns per guest
+//!    instruction. The instructions per SysTick tick are first measured on a
+//!    loop of known length (2 instructions per iteration), then the node runs
+//!    F and 2F frames and the difference divided by F is one frame's cost
+//!    (start-up costs cancel).
+#![no_std]
+#![no_main]
+
+use core::cell::Cell;
+use core::convert::Infallible;
+use core::sync::atomic::{AtomicU32, Ordering};
+
+use cortex_m::peripheral::SYST;
+use cortex_m::peripheral::syst::SystClkSource;
+use cortex_m_rt::{entry, exception};
+use cortex_m_semihosting::{debug, hprintln};
+use embedded_hal::delay::DelayNs;
+use embedded_hal::digital::{ErrorType, OutputPin};
+use fois_firmware::hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc};
+use fois_firmware::node::Node;
+use fois_firmware::rule::{Rule, RuleInput};
+use fois_firmware::{ntc, persist, vref};
+use fois_protocol::{
+    Ack, AckResult, Command, Config, DetectorState, DeviceFrame, DeviceMsg, ErrorCode, ErrorReply,
+    EventKind, FrameDecoder, HostFrame, MAX_FRAME, encode, flags,
+};
+
+// ---------------------------------------------------------------- timing --
+
+static WRAPS: AtomicU32 = AtomicU32::new(0);
+const RELOAD: u32 = 0x00FF_FFFF;
+
+#[exception]
+fn SysTick() {
+    WRAPS.fetch_add(1, Ordering::Relaxed);
+}
+
+/// SysTick ticks since start (24-bit counter + wrap count).
+fn ticks() -> u64 {
+    loop {
+        let w1 = WRAPS.load(Ordering::Relaxed);
+        let cur = SYST::get_current();
+        let w2 = WRAPS.load(Ordering::Relaxed);
+        if w1 == w2 {
+            return u64::from(w1) * u64::from(RELOAD + 1) + u64::from(RELOAD - cur);
+        }
+    }
+}
+
+/// Exactly `2 * n` instructions (subs + bne per iteration).
+#[inline(never)]
+fn known_loop(n: u32) {
+    // SAFETY: a register-only countdown loop.
+    unsafe {
+        core::arch::asm!(
+            "2:",
+            "subs {0}, {0}, #1",
+            "bne 2b",
+            inout(reg) n => _,
+            options(nomem, nostack),
+        );
+    }
+}
+
+// ------------------------------------------------------- simulated board --
+
+const NA_PER_LSB: f32 = 3.3e9 / (4095.0 * 10_000.0); // 80.6 nA at 3.3 V, 10 kΩ
+
+struct World {
+    t_ns: Cell<u64>,
+    led: Cell<bool>,
+    alarm: Cell<bool>,
+    ind: Cell<bool>,
+    signal_na: Cell<[f32; 2]>,
+    ambient_na: Cell<[f32; 2]>,
+    flicker_na: Cell<f32>,
+    flicker_phase: Cell<f32>,
+    ntc_code: Cell<u16>,
+}
+
+impl World {
+    const fn new() -> Self {
+        World {
+            t_ns: Cell::new(0),
+            led: Cell::new(false),
+            alarm: Cell::new(false),
+            ind: Cell::new(false),
+            signal_na: Cell::new([0.0; 2]),
+            ambient_na: Cell::new([0.0; 2]),
+            flicker_na: Cell::new(0.0),
+            flicker_phase: Cell::new(0.0),
+            ntc_code: Cell::new(2738), // 10 °C
+        }
+    }
+}
+
+/// sin for the flicker model (range-reduced odd polynomial, |err| < 1e-5).
+fn sin(x: f32) -> f32 {
+    const TAU: f32 = core::f32::consts::TAU;
+    const PI: f32 = core::f32::consts::PI;
+    let mut x = x - ((x / TAU) as i64 as f32) * TAU; // x ≥ 0 here
+    if x > PI {
+        x -= TAU;
+    }
+    // Fold into [-π/2, π/2].
+    if x > PI / 2.0 {
+        x = PI - x;
+    } else if x < -PI / 2.0 {
+        x = -PI - x;
+    }
+    let x2 = x * x;
+    x * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0))))
+}
+
+struct SimAdc<'a>(&'a World);
+
+impl PhotoAdc for SimAdc<'_> {
+    fn read_photo(&mut self) -> [u16; 2] {
+        let w = self.0;
+        let t = w.t_ns.get() as f32 * 1e-9;
+        let fl = w.flicker_na.get()
+            * sin(2.0 * core::f32::consts::PI * 100.0 * t + w.flicker_phase.get());
+        let (s, a) = (w.signal_na.get(), w.ambient_na.get());
+        let mut out = [0u16; 2];
+        for ((o, s), a) in out.iter_mut().zip(s).zip(a) {
+            let i = a + fl + if w.led.get() { s } else { 0.0 };
+            let code = i / NA_PER_LSB + 0.5;
+            *o = if code < 0.0 {
+                0
+            } else if code > 4095.0 {
+                4095
+            } else {
+                code as u16
+            };
+        }
+        w.t_ns.set(w.t_ns.get() + 15_000);
+        out
+    }
+    fn read_ntc(&mut self) -> u16 {
+        self.0.ntc_code.get()
+    }
+    fn read_vrefint(&mut self) -> u16 {
+        FactoryCal::TYPICAL.vrefint_cal
+    }
+    fn read_internal_temp(&mut self) -> u16 {
+        FactoryCal::TYPICAL.ts_cal1
+    }
+}
+
+struct Pin<'a>(&'a Cell<bool>);
+impl ErrorType for Pin<'_> {
+    type Error = Infallible;
+}
+impl OutputPin for Pin<'_> {
+    fn set_low(&mut self) -> Result<(), Infallible> {
+        self.0.set(false);
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Infallible> {
+        self.0.set(true);
+        Ok(())
+    }
+}
+
+struct Delay<'a>(&'a Cell<u64>);
+impl DelayNs for Delay<'_> {
+    fn delay_ns(&mut self, ns: u32) {
+        self.0.set(self.0.get() + u64::from(ns));
+    }
+}
+
+type SimNode<'a> = Node<SimAdc<'a>, Pin<'a>, Pin<'a>, Pin<'a>, Delay<'a>, MemStorage>;
+
+fn sim_node<'a>(w: &'a World, storage: MemStorage) -> SimNode<'a> {
+    Node::new(
+        SimAdc(w),
+        Pin(&w.led),
+        Pin(&w.alarm),
+        Pin(&w.ind),
+        Delay(&w.t_ns),
+        storage,
+        BoardInfo::simulated("qemu"),
+    )
+}
+
+/// Collects what a node sends and decodes it.
+struct Sink {
+    dec: FrameDecoder<MAX_FRAME>,
+    frames: [Option<DeviceFrame>; 8],
+    n: usize,
+    bad: u32,
+}
+
+impl Sink {
+    fn new() -> Self {
+        Sink {
+            dec: FrameDecoder::new(),
+            frames: Default::default(),
+            n: 0,
+            bad: 0,
+        }
+    }
+    fn push(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            match self.dec.push::<DeviceFrame>(b) {
+                Some(Ok(f)) => {
+                    if let Some(slot) = self.frames.get_mut(self.n) {
+                        *slot = Some(f);
+                    }
+                    self.n += 1;
+                }
+                Some(Err(_)) => self.bad += 1,
+                None => {}
+            }
+        }
+    }
+    fn take(&mut self) -> impl Iterator<Item = DeviceMsg> + '_ {
+        self.n = 0;
+        self.frames
+            .iter_mut()
+            .filter_map(|f| f.take().map(|f| f.msg))
+    }
+}
+
+/// One frame; the clock then moves to the end of the 100 ms period.
+fn step(node: &mut SimNode<'_>, w: &World, sink: &mut Sink) {
+    let start = w.t_ns.get();
+    node.run_frame(start / 1_000_000, &mut |b| sink.push(b));
+    w.t_ns.set(start + 100_000_000);
+}
+
+fn measurement(sink: &mut Sink) -> Option<fois_protocol::Measurement> {
+    sink.take().find_map(|m| match m {
+        DeviceMsg::Measurement(m) => Some(m),
+        _ => None,
+    })
+}
+
+// ------------------------------------------------------------------ tests --
+
+type TestResult = Result<(), &'static str>;
+type Test = (&'static str, fn() -> TestResult);
+
+macro_rules! check {
+    ($cond:expr, $($fmt:tt)+) => {
+        if !$cond {
+            hprintln!("    check failed: {}", stringify!($cond));
+            hprintln!($($fmt)+);
+            return Err(stringify!($cond));
+        }
+    };
+}
+
+fn t_ntc_and_vref() -> TestResult {
+    let cases: [(u16, i16); 4] = [(3337, -500), (3156, 0), (2997, 400), (2738, 1_000)];
+    for (code, want) in cases {
+        let ntc::NtcReading::Ok(t) = ntc::temperature(code) else {
+            return Err("NTC read as a fault");
+        };
+        check!(
+            (t - want).abs() <= 8,
+            "    code {} -> {} (want {})",
+            code,
+            t,
+            want
+        );
+    }
+    check!(ntc::temperature(4095) == ntc::NtcReading::Open, "    open");
+    check!(ntc::temperature(0) == ntc::NtcReading::Short, "    short");
+    let cal = FactoryCal::TYPICAL;
+    check!(vref::vdda_mv(&cal, cal.vrefint_cal) == 3_300, "    vdda");
+    let v = vref::vdda_mv(&cal, 1652);
+    check!((2_995..=3_005).contains(&v), "    vdda at 3.0 V: {}", v);
+    Ok(())
+}
+
+fn t_persist() -> TestResult {
+    let rec = persist::Record {
+        config: Config {
+            onset_rise_na: 1_500,
+            ..Config::default()
+        },
+        baseline: Some(fois_protocol::Baseline {
+            i1_na: 12,
+            i2_na: -3,
+        }),
+    };
+    let mut buf = [0u8; persist::MAX_RECORD];
+    let n = persist::encode(&rec, &mut buf);
+    check!(
+        persist::decode(buf.get(..n).unwrap_or(&[])) == Ok(rec.clone()),
+        "    round trip"
+    );
+    for i in 0..n {
+        let mut b = buf;
+        b[i] ^= 0x04;
+        check!(
+            persist::decode(&b[..n]).is_err(),
+            "    flip in byte {} accepted",
+            i
+        );
+    }
+    check!(
+        persist::decode(&[0xFF; 32]) == Err(persist::LoadError::Empty),
+        "    erased"
+    );
+    Ok(())
+}
+
+fn t_rule() -> TestResult {
+    let c = Config::default();
+    let cold = RuleInput {
+        rise1_na: c.onset_rise_na as i32 + 1,
+        temperature_centi_c: c.freeze_limit_centi_c,
+        valid: true,
+    };
+    let mut r = Rule::new();
+    for _ in 1..c.onset_frames {
+        check!(r.step(&c, cold).is_none(), "    fired early");
+    }
+    let t = r.step(&c, cold);
+    check!(
+        t.map(|t| t.kind) == Some(EventKind::IceOnset),
+        "    no onset at N"
+    );
+    // One field wrong: 0.01 °C warmer → wet.
+    let mut r = Rule::new();
+    let warm = RuleInput {
+        temperature_centi_c: c.freeze_limit_centi_c + 1,
+        ..cold
+    };
+    let mut kinds = [None; 2];
+    for _ in 0..c.onset_frames {
+        if let Some(t) = r.step(&c, warm) {
+            kinds[0] = Some(t.kind);
+        }
+    }
+    check!(
+        kinds[0] == Some(EventKind::WetOnset),
+        "    warm film not wet"
+    );
+    Ok(())
+}
+
+fn t_node_currents_and_commands() -> TestResult {
+    let w = World::new();
+    let mut node = sim_node(&w, MemStorage::new());
+    let mut sink = Sink::new();
+    w.signal_na.set([12_000.0, 4_000.0]);
+    w.ambient_na.set([30_000.0, 5_000.0]);
+    step(&mut node, &w, &mut sink);
+    let Some(m) = measurement(&mut sink) else {
+        return Err("no measurement");
+    };
+    check!((m.i1_na - 12_000).abs() <= 81, "    i1 {}", m.i1_na);
+    check!((m.i2_na - 4_000).abs() <= 81, "    i2 {}", m.i2_na);
+    check!(
+        (m.ambient1_na as i32 - 30_000).abs() <= 81,
+        "    amb1 {}",
+        m.ambient1_na
+    );
+    check!(
+        (m.temperature_centi_c - 1_000).abs() <= 8,
+        "    temp {}",
+        m.temperature_centi_c
+    );
+    check!(m.flags == flags::NO_BASELINE, "    flags {:#x}", m.flags);
+
+    // A command, split in two chunks, is answered.
+    let mut wire = [0u8; MAX_FRAME];
+    let n = encode(
+        &HostFrame {
+            id: 5,
+            cmd: Command::GetConfig,
+        },
+        &mut wire,
+    )
+    .unwrap_or(0);
+    let (a, b) = wire.split_at(n / 2);
+    node.handle_rx(a, 0, &mut |x| sink.push(x));
+    node.handle_rx(b.get(..n - n / 2).unwrap_or(&[]), 0, &mut |x| sink.push(x));
+    let got = sink.take().next();
+    check!(
+        got == Some(DeviceMsg::Ack(Ack {
+            id: 5,
+            result: AckResult::Config(Config::default())
+        })),
+        "    {:?}",
+        got
+    );
+    // Garbage is answered with an error and the measurement goes on.
+    node.handle_rx(&[0x42, 0x42, 0x00], 0, &mut |x| sink.push(x));
+    let got = sink.take().next();
+    check!(
+        got == Some(DeviceMsg::Error(ErrorReply {
+            id: None,
+            code: ErrorCode::Garbled
+        })),
+        "    {:?}",
+        got
+    );
+    step(&mut node, &w, &mut sink);
+    check!(measurement(&mut sink).is_some(), "    measuring stopped");
+    check!(sink.bad == 0, "    the node sent a bad frame");
+    Ok(())
+}
+
+fn t_node_ice_onset_drives_the_alarm() -> TestResult {
+    let w = World::new();
+    let mut node = sim_node(&w, MemStorage::new());
+    let mut sink = Sink::new();
+    w.ntc_code.set(3194); // -1 °C
+    w.signal_na.set([2_500.0, 800.0]);
+    let n = node.config().onset_frames;
+    for i in 1..=n {
+        step(&mut node, &w, &mut sink);
+        let mut onset = false;
+        for msg in sink.take() {
+            if let DeviceMsg::Event(e) = msg {
+                onset = e.kind == EventKind::IceOnset && e.frames == n;
+            }
+        }
+        check!(onset == (i == n), "    frame {}: onset {}", i, onset);
+    }
+    check!(node.state() == DetectorState::Ice, "    state");
+    check!(w.alarm.get() && w.ind.get(), "    alarm pins");
+    Ok(())
+}
+
+fn t_flicker_bound() -> TestResult {
+    // 50 µA DC + 25 µA at 100 Hz: |ΔI| ≤ A·(2πfΔ)²/2 + 1 LSB = 309 nA.
+    let w = World::new();
+    let mut node = sim_node(&w, MemStorage::new());
+    let mut sink = Sink::new();
+    w.signal_na.set([5_000.0, 1_500.0]);
+    step(&mut node, &w, &mut sink);
+    let Some(dark) = measurement(&mut sink) else {
+        return Err("no measurement");
+    };
+    let mut worst = 0i32;
+    for k in 0..16 {
+        let w = World::new();
+        let mut node = sim_node(&w, MemStorage::new());
+        w.signal_na.set([5_000.0, 1_500.0]);
+        w.ambient_na.set([50_000.0, 50_000.0]);
+        w.flicker_na.set(25_000.0);
+        w.flicker_phase
+            .set(k as f32 * core::f32::consts::TAU / 16.0);
+        for _ in 0..2 {
+            step(&mut node, &w, &mut sink);
+            let Some(m) = measurement(&mut sink) else {
+                return Err("no measurement");
+            };
+            worst = worst
+                .max((m.i1_na - dark.i1_na).abs())
+                .max((m.i2_na - dark.i2_na).abs());
+        }
+    }
+    hprintln!(
+        "    flicker 25 uA at 100 Hz: worst |dI| = {} nA (bound 309 nA)",
+        worst
+    );
+    check!(worst <= 309, "    worst {}", worst);
+    Ok(())
+}
+
+// -------------------------------------------------------------- benchmark --
+
+struct BenchAdc<'a> {
+    led: &'a Cell<bool>,
+    lcg: u32,
+}
+
+impl PhotoAdc for BenchAdc<'_> {
+    fn read_photo(&mut self) -> [u16; 2] {
+        self.lcg = self.lcg.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        let noise = (self.lcg >> 29) as u16; // 0..7 codes
+        let on = if self.led.get() { 150 } else { 0 };
+        [400 + on + noise, 200 + on / 3 + noise]
+    }
+    fn read_ntc(&mut self) -> u16 {
+        3194
+    }
+    fn read_vrefint(&mut self) -> u16 {
+        FactoryCal::TYPICAL.vrefint_cal
+    }
+    fn read_internal_temp(&mut self) -> u16 {
+        FactoryCal::TYPICAL.ts_cal1
+    }
+}
+
+struct NoDelay;
+impl DelayNs for NoDelay {
+    fn delay_ns(&mut self, _ns: u32) {}
+}
+
+/// Ticks for `frames` frames of a streaming node with the default config.
+fn bench<P: FnMut(&[u8])>(
+    node: &mut Node<BenchAdc<'_>, Pin<'_>, Pin<'_>, Pin<'_>, NoDelay, MemStorage>,
+    frames: u32,
+    tx: &mut P,
+) -> u64 {
+    let t0 = ticks();
+    for i in 0..frames {
+        node.run_frame(u64::from(i) * 100, tx);
+    }
+    ticks() - t0
+}
+
+#[entry]
+fn main() -> ! {
+    let mut cp = match cortex_m::Peripherals::take() {
+        Some(cp) => cp,
+        None => fail("core peripherals taken"),
+    };
+    cp.SYST.set_clock_source(SystClkSource::Core);
+    cp.SYST.set_reload(RELOAD);
+    cp.SYST.clear_current();
+    cp.SYST.enable_interrupt();
+    cp.SYST.enable_counter();
+
+    let tests: [Test; 6] = [
+        ("ntc_and_vref", t_ntc_and_vref),
+        ("persist", t_persist),
+        ("rule", t_rule),
+        ("node_currents_and_commands", t_node_currents_and_commands),
+        (
+            "node_ice_onset_drives_the_alarm",
+            t_node_ice_onset_drives_the_alarm,
+        ),
+        ("flicker_bound", t_flicker_bound),
+    ];
+    hprintln!("running {} tests on the emulated Cortex-M4F", tests.len());
+    let mut failed = 0;
+    for (name, f) in tests {
+        match f() {
+            Ok(()) => hprintln!("test {} ... ok", name),
+            Err(e) => {
+                hprintln!("test {} ... FAILED ({})", name, e);
+                failed += 1;
+            }
+        }
+    }
+    hprintln!(
+        "test result: {}. {} passed; {} failed",
+        if failed == 0 { "ok" } else { "FAILED" },
+        tests.len() - failed,
+        failed
+    );
+
+    // Instructions per SysTick tick, from a loop of known length.
+    const LOOP: u32 = 2_000_000;
+    let t0 = ticks();
+    known_loop(LOOP);
+    let t_loop = ticks() - t0;
+    let t0 = ticks();
+    known_loop(2 * LOOP);
+    let t_loop2 = ticks() - t0;
+    let loop_ticks = t_loop2.saturating_sub(t_loop).max(1); // 2·LOOP instructions
+    let insn_per_tick = (2 * LOOP) as f32 / loop_ticks as f32;
+    hprintln!(
+        "SysTick calibration: {} instructions in {} ticks = {} instructions per tick",
+        2 * LOOP,
+        loop_ticks,
+        insn_per_tick
+    );
+
+    // The measurement loop: default config (K = 8), streaming, frames encoded.
+    let led = Cell::new(false);
+    let (alarm, ind) = (Cell::new(false), Cell::new(false));
+    let mut node = Node::new(
+        BenchAdc { led: &led, lcg: 1 },
+        Pin(&led),
+        Pin(&alarm),
+        Pin(&ind),
+        NoDelay,
+        MemStorage::new(),
+        BoardInfo::simulated("qemu"),
+    );
+    let mut bytes = 0usize;
+    let mut tx = |b: &[u8]| bytes += b.len();
+    bench(&mut node, 10, &mut tx); // warm-up
+    const F: u32 = 200;
+    let t_f = bench(&mut node, F, &mut tx);
+    let t_2f = bench(&mut node, 2 * F, &mut tx);
+    let frame_ticks = t_2f.saturating_sub(t_f) as f32 / F as f32;
+    let per_frame = (frame_ticks * insn_per_tick + 0.5) as u32;
+    hprintln!(
+        "measurement loop: K = {} cycles/frame, {} and {} frames, {} bytes sent",
+        node.config().cycles_per_frame,
+        F,
+        2 * F,
+        bytes
+    );
+    hprintln!("instructions per frame: {}", per_frame);
+    // At 16 MHz (the board's HSI clock, ~1 instruction/cycle) that is this
+    // many µs of CPU per frame, beside the 17 settle waits.
+    hprintln!("  (about {} us of CPU per frame at 16 MHz)", per_frame / 16);
+
+    if failed == 0 && per_frame > 0 {
+        debug::exit(debug::EXIT_SUCCESS);
+    } else {
+        debug::exit(debug::EXIT_FAILURE);
+    }
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
+
+fn fail(msg: &str) -> ! {
+    hprintln!("error: {}", msg);
+    debug::exit(debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    hprintln!("panic: {}", info);
+    debug::exit(debug::EXIT_FAILURE);
+    loop {
+        cortex_m::asm::bkpt();
+    }
+}
