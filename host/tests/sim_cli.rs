@@ -1,0 +1,281 @@
+//! `foisctl sim ...` end to end: the real binary on small runs.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn foisctl(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_foisctl"))
+        .args(args)
+        .output()
+        .expect("run foisctl")
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("fois_sim_cli_{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn rows(path: &PathBuf) -> (String, Vec<Vec<f64>>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().to_owned();
+    let data = lines
+        .map(|l| l.split(',').map(|v| v.parse::<f64>().unwrap()).collect())
+        .collect();
+    (header, data)
+}
+
+#[test]
+fn curve_writes_the_issue_header_and_values() {
+    let out = tmp("curve.csv");
+    let png = tmp("curve.png");
+    let o = foisctl(&[
+        "sim",
+        "curve",
+        "--ice",
+        "rime",
+        "--runs",
+        "2",
+        "--max-mm",
+        "3",
+        "--step-mm",
+        "0.5",
+        "--seed",
+        "4",
+        "--out",
+        out.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (h, d) = rows(&out);
+    assert_eq!(
+        h,
+        "run,thickness_mm,i1_ua,i2_ua,i1_refl_ua,i1_scat_ua,i2_refl_ua,i2_scat_ua"
+    );
+    assert_eq!(d.len(), 2 * 7);
+    assert_eq!(d[0][0], 0.0);
+    assert_eq!(d[7][0], 1.0);
+    assert_eq!(d[6][1], 3.0);
+    // Sensor B: dry face reads 0; rime at 3 mm gives tens of µA on I1.
+    assert_eq!(d[0][2], 0.0);
+    assert!(d[6][2] > 10.0 && d[6][2] < 40.0, "{:?}", d[6]);
+    for r in &d {
+        assert!((r[2] - r[4] - r[5]).abs() < 2e-6 && (r[3] - r[6] - r[7]).abs() < 2e-6);
+    }
+    let png_bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&png_bytes[1..4], b"PNG");
+    // Same seed → same file.
+    let out2 = tmp("curve2.csv");
+    let o = foisctl(&[
+        "sim",
+        "curve",
+        "--ice",
+        "rime",
+        "--runs",
+        "2",
+        "--max-mm",
+        "3",
+        "--step-mm",
+        "0.5",
+        "--seed",
+        "4",
+        "--threads",
+        "1",
+        "--out",
+        out2.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&out2).unwrap());
+}
+
+#[test]
+fn sensor_a_shows_the_dry_offset() {
+    let out = tmp("a.csv");
+    let o = foisctl(&[
+        "sim",
+        "curve",
+        "--ice",
+        "glazed",
+        "--sensor",
+        "a",
+        "--max-mm",
+        "1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    let (_, d) = rows(&out);
+    assert!((d[0][2] - 13.0).abs() < 1.0, "{:?}", d[0]);
+}
+
+#[test]
+fn analytic_montecarlo_and_crlb_write_their_headers() {
+    let a = tmp("an.csv");
+    let o = foisctl(&[
+        "sim",
+        "analytic",
+        "--geometry",
+        "thesis-ch3",
+        "--out",
+        a.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (h, d) = rows(&a);
+    assert_eq!(h, "thickness_mm,i1_ua,i2_ua");
+    assert_eq!(d.len(), 151);
+    assert!(d.iter().any(|r| r[1] > 5.0));
+
+    let m = tmp("mc.csv");
+    let o = foisctl(&[
+        "sim",
+        "montecarlo",
+        "--ice",
+        "rime",
+        "--runs",
+        "20",
+        "--max-mm",
+        "5",
+        "--out",
+        m.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (h, d) = rows(&m);
+    assert_eq!(
+        h,
+        "thickness_mm,mean_i1_ua,mean_i2_ua,var_i1,var_i2,cov_i1_i2"
+    );
+    assert_eq!(d.len(), 51);
+    for r in &d[1..] {
+        assert!(r[3] >= 0.0 && r[4] >= 0.0 && r[5] * r[5] <= r[3] * r[4] * (1.0 + 1e-9) + 1e-12);
+    }
+
+    let c = tmp("crlb.csv");
+    let o = foisctl(&[
+        "sim",
+        "crlb",
+        "--ice",
+        "rime",
+        "--runs",
+        "20",
+        "--max-mm",
+        "5",
+        "--out",
+        c.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let text = std::fs::read_to_string(&c).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "thickness_mm,crlb_std_mm,crlb_no_dsigma_std_mm"
+    );
+    let vals: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_owned).collect())
+        .collect();
+    assert_eq!(vals.len(), 51);
+    assert_eq!(vals[0][1], "NaN"); // dry face: Σ singular
+    let v: f64 = vals[40][1].parse().unwrap();
+    assert!(v > 0.0 && v < 5.0, "{v}");
+}
+
+#[test]
+fn bad_input_exits_with_an_error_not_a_panic() {
+    let out = tmp("bad.csv");
+    let o = out.to_str().unwrap();
+    for args in [
+        vec![
+            "sim",
+            "curve",
+            "--ice",
+            "rime",
+            "--step-mm",
+            "0",
+            "--out",
+            o,
+        ],
+        vec![
+            "sim",
+            "curve",
+            "--ice",
+            "rime",
+            "--step-mm",
+            "-0.1",
+            "--out",
+            o,
+        ],
+        vec!["sim", "curve", "--ice", "rime", "--runs", "-3", "--out", o],
+        vec!["sim", "curve", "--ice", "rime", "--runs", "0", "--out", o],
+        vec!["sim", "curve", "--ice", "snow", "--out", o],
+        vec![
+            "sim", "curve", "--ice", "rime", "--max-mm", "nan", "--out", o,
+        ],
+        vec![
+            "sim",
+            "curve",
+            "--ice",
+            "rime",
+            "--out",
+            "/nonexistent/dir/x.csv",
+        ],
+        vec!["sim", "montecarlo", "--runs", "1", "--out", o],
+        vec![
+            "sim",
+            "crlb",
+            "--runs",
+            "10",
+            "--fit-half-width-mm",
+            "0",
+            "--out",
+            o,
+        ],
+        vec!["sim", "analytic", "--ice", "rime", "--out", o],
+        vec![
+            "sim",
+            "curve",
+            "--ice",
+            "rime",
+            "--threads",
+            "0",
+            "--out",
+            o,
+        ],
+    ] {
+        let r = foisctl(&args);
+        assert!(!r.status.success(), "{args:?} should fail");
+        let err = String::from_utf8_lossy(&r.stderr);
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(!err.trim().is_empty(), "{args:?}: no message");
+    }
+}
+
+#[test]
+fn help_explains_units_and_defaults() {
+    let o = foisctl(&["sim", "curve", "--help"]);
+    assert!(o.status.success());
+    let h = String::from_utf8_lossy(&o.stdout);
+    for want in [
+        "--step-mm",
+        "mm",
+        "default: 0.1",
+        "--geometry",
+        "thesis-ch5",
+        "--seed",
+        "run,thickness_mm",
+    ] {
+        assert!(h.contains(want), "missing {want:?} in\n{h}");
+    }
+    let o = foisctl(&["sim", "--help"]);
+    let h = String::from_utf8_lossy(&o.stdout);
+    for sub in [
+        "curve",
+        "analytic",
+        "montecarlo",
+        "crlb",
+        "bench",
+        "gallery",
+    ] {
+        assert!(h.contains(sub), "{sub}");
+    }
+}
