@@ -19,7 +19,7 @@ export RUSTFLAGS="-C link-arg=-Tlink.x"
 export CARGO_TARGET_THUMBV7EM_NONE_EABIHF_LINKER=rust-lld
 export CARGO_TARGET_DIR="${FOIS_QEMU_TARGET_DIR:-${CARGO_TARGET_DIR:-$here/target}}"
 
-cargo build --release --target thumbv7em-none-eabihf --locked
+cargo build --release --target thumbv7em-none-eabihf
 elf="$CARGO_TARGET_DIR/thumbv7em-none-eabihf/release/fois-qemu-test"
 
 set +e
