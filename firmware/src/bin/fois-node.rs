@@ -49,7 +49,8 @@ mod app {
     static TX: Pipe<ThreadModeRawMutex, 1024> = Pipe::new();
 
     /// Independent watchdog timeout: longer than a flash sector erase (≤ 2 s)
-    /// plus a frame, short enough to recover a hung node quickly.
+    /// plus the longest frame (K = 64 × 2 × 5 ms = 0.65 s), short enough to
+    /// recover a hung node quickly.
     const WATCHDOG_US: u32 = 4_000_000;
     const HELLO_EVERY_MS: u64 = 1_000;
 
@@ -127,25 +128,44 @@ mod app {
         }
     }
 
-    /// The measurement loop: one frame per frame period, on a fixed grid.
+    /// The measurement loop: one frame per frame period on a fixed grid,
+    /// `Hello` at boot and every second while not streaming, the watchdog fed
+    /// at least every `MAX_SLEEP` (frame periods go up to 10 min).
     async fn measure(mut wdg: IndependentWatchdog<'static, peripherals::IWDG>) -> ! {
-        let mut next = Instant::now();
-        let mut last_hello: Option<u64> = None;
+        const MAX_SLEEP: Duration = Duration::from_millis(500);
+        let hello_every = Duration::from_millis(HELLO_EVERY_MS);
+        let mut next_frame = Instant::now();
+        let mut next_hello = Instant::now();
+        let mut booted = false;
         loop {
-            let (period_ms, reset) = {
+            let (wake, reset) = {
                 let mut guard = NODE.lock().await;
                 let Some(node) = guard.as_mut() else {
                     defmt::panic!("node missing")
                 };
-                let now = now_ms();
+                let now = Instant::now();
                 // Issue 2: Hello at boot and every second until streaming starts.
-                let hello_due = last_hello.is_none_or(|t| now.saturating_sub(t) >= HELLO_EVERY_MS);
-                if hello_due && (!node.is_streaming() || last_hello.is_none()) {
+                if now >= next_hello && (!booted || !node.is_streaming()) {
                     node.send_hello(&mut queue);
-                    last_hello = Some(now);
+                    next_hello = now + hello_every;
                 }
-                node.run_frame(now, &mut queue);
-                (node.frame_period_ms(), node.take_reset_request())
+                booted = true;
+                let period = Duration::from_millis(u64::from(node.frame_period_ms()));
+                if now >= next_frame {
+                    node.run_frame(now.as_millis(), &mut queue);
+                    next_frame += period;
+                    if next_frame < now {
+                        // Overran (flash erase, long calibration): restart the grid.
+                        next_frame = now + period;
+                    }
+                }
+                // A shorter period (StartStream) takes effect at once.
+                next_frame = next_frame.min(now + period);
+                let mut wake = next_frame.min(now + MAX_SLEEP);
+                if !node.is_streaming() {
+                    wake = wake.min(next_hello);
+                }
+                (wake, node.take_reset_request())
             };
             wdg.pet();
             if reset {
@@ -153,13 +173,7 @@ mod app {
                 Timer::after_millis(100).await;
                 cortex_m::peripheral::SCB::sys_reset();
             }
-            next += Duration::from_millis(u64::from(period_ms));
-            let now = Instant::now();
-            if next < now {
-                // Overran (flash erase, long calibration): restart the grid.
-                next = now;
-            }
-            Timer::at(next).await;
+            Timer::at(wake).await;
         }
     }
 
