@@ -279,3 +279,95 @@ fn extreme_inputs_do_not_panic() {
     let mut r = Rule::new();
     feed(&mut r, &c, frame(i32::MAX, i16::MAX), 70_000);
 }
+
+mod property {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn input() -> impl Strategy<Value = RuleInput> {
+        let c = cfg();
+        let on = c.onset_rise_na as i32;
+        let cl = c.clear_rise_na as i32;
+        let fr = c.freeze_limit_centi_c;
+        let th = c.thaw_limit_centi_c;
+        (
+            prop_oneof![
+                Just(cl - 1),
+                Just(cl),
+                Just(on),
+                Just(on + 1),
+                -5_000..50_000i32
+            ],
+            prop_oneof![
+                Just(fr),
+                Just(fr + 1),
+                Just(th),
+                Just(th + 1),
+                -3_000..3_000i16
+            ],
+            prop::bool::weighted(0.95),
+        )
+            .prop_map(|(rise1_na, temperature_centi_c, valid)| RuleInput {
+                rise1_na,
+                temperature_centi_c,
+                valid,
+            })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(256))]
+        /// Whatever the frames, every transition is backed by exactly the
+        /// evidence the rule documents (on the valid frames before it).
+        #[test]
+        fn every_transition_has_its_evidence(
+            frames in proptest::collection::vec(input(), 0..400),
+            n in 1u16..6,
+            m in 1u16..12,
+        ) {
+            let c = Config { onset_frames: n, clear_frames: m, ..cfg() };
+            let film = |f: &RuleInput| i64::from(f.rise1_na) > i64::from(c.onset_rise_na);
+            let gone = |f: &RuleInput| i64::from(f.rise1_na) < i64::from(c.clear_rise_na);
+            let cold = |f: &RuleInput| f.temperature_centi_c <= c.freeze_limit_centi_c;
+            let thaw = |f: &RuleInput| f.temperature_centi_c > c.thaw_limit_centi_c;
+            let mut r = Rule::new();
+            let mut valid: Vec<RuleInput> = Vec::new();
+            for f in frames {
+                let before = r.state();
+                let t = r.step(&c, f);
+                if !f.valid {
+                    prop_assert!(t.is_none());
+                    continue;
+                }
+                valid.push(f);
+                let last = |k: u16| valid.iter().rev().take(usize::from(k)).copied().collect::<Vec<_>>();
+                if let Some(t) = t {
+                    prop_assert_eq!(t.from, before);
+                    let back = last(t.frames);
+                    prop_assert_eq!(back.len(), usize::from(t.frames));
+                    match (t.kind, t.to) {
+                        (EventKind::IceOnset, DetectorState::Ice) => {
+                            prop_assert!(t.frames >= n);
+                            prop_assert!(back.iter().all(|f| film(f) && cold(f)));
+                        }
+                        (EventKind::WetOnset, DetectorState::Wet) => {
+                            prop_assert!(t.frames >= n && !cold(&f));
+                            prop_assert!(back.iter().all(|f| film(f)));
+                        }
+                        (EventKind::WetCleared, DetectorState::Dry) => {
+                            prop_assert!(t.frames >= m && back.iter().all(|f| gone(f)));
+                        }
+                        (EventKind::IceCleared, _) => {
+                            let by_gone = t.frames >= m && back.iter().all(|f| gone(f));
+                            let by_thaw = t.frames >= n && back.iter().all(|f| thaw(f));
+                            prop_assert!(by_gone || by_thaw);
+                        }
+                        other => prop_assert!(false, "unexpected {:?}", other),
+                    }
+                } else {
+                    prop_assert_eq!(r.state(), before);
+                }
+                prop_assert_eq!(r.alarm(), r.state() == DetectorState::Ice);
+            }
+        }
+    }
+}
