@@ -351,14 +351,14 @@ mod property {
                         }
                         (EventKind::WetOnset, DetectorState::Wet) => {
                             prop_assert!(t.frames >= n && !cold(&f));
-                            prop_assert!(back.iter().all(|f| film(f)));
+                            prop_assert!(back.iter().all(&film));
                         }
                         (EventKind::WetCleared, DetectorState::Dry) => {
-                            prop_assert!(t.frames >= m && back.iter().all(|f| gone(f)));
+                            prop_assert!(t.frames >= m && back.iter().all(&gone));
                         }
                         (EventKind::IceCleared, _) => {
-                            let by_gone = t.frames >= m && back.iter().all(|f| gone(f));
-                            let by_thaw = t.frames >= n && back.iter().all(|f| thaw(f));
+                            let by_gone = t.frames >= m && back.iter().all(&gone);
+                            let by_thaw = t.frames >= n && back.iter().all(&thaw);
                             prop_assert!(by_gone || by_thaw);
                         }
                         other => prop_assert!(false, "unexpected {:?}", other),
