@@ -429,6 +429,8 @@ impl SensorModel {
 
     /// Trace one accretion: one physical ice body grown from 0 to `max_mm`, deterministic
     /// in (seed, run). Cost O(rays × (thicknesses + bubbles)).
+    // The thickness index addresses several arrays at once (thicknesses, sums, bubble steps).
+    #[allow(clippy::needless_range_loop)]
     pub fn accretion(&self, seed: u64, run: u64) -> Curve {
         let cfg = &self.cfg;
         let p = cfg.params;
@@ -456,8 +458,15 @@ impl SensorModel {
         // P(next_u32 < p_thr) = P_B.
         let p_thr = (p.p_bubble * 4_294_967_296.0).min(u32::MAX as f64) as u32;
         let sensor_a = cfg.sensor == SensorKind::A;
+        // Bounding box of the face, for culling scattered rays.
+        let (x_lo, x_hi, y_hi) = (
+            -geo.radius_mm(),
+            geo.length_b_mm() + geo.radius_mm(),
+            geo.radius_mm(),
+        );
         let first_wet = self.thick.iter().position(|&d| d > 0.0).unwrap_or(nt);
 
+        let mut steps: Vec<(usize, f64)> = Vec::with_capacity(256);
         for (r, ray) in self.rays.iter().enumerate() {
             if sensor_a {
                 for l in leak.iter_mut().take(first_wet) {
@@ -482,48 +491,47 @@ impl SensorModel {
             } else {
                 geometric_gap(&mut bub, ln_q)
             };
+            // Pass 1, bubbles: layer j (z from jΔ to (j+1)Δ, bubble at its middle) is frozen
+            // in once the local surface above the bubble is at least (j+1)Δ high, i.e. from
+            // the mean thickness d_j = (j+1)Δ − off(z_b), where off is the plane's local
+            // offset at the bubble. d_j grows with j (the ray is steeper than the plane), so
+            // the forward flux at each thickness is a running product.
+            let off1 = tx * slope_xy.x + ty * slope_xy.y;
+            let inv_step = 1.0 / cfg.step_mm;
+            steps.clear();
             let mut fwd = ray.flux_in_w;
-            // Specular reflection is fixed per accretion when there is no diffuse angle.
-            let fixed = reflect_setup(v, normal, n_med);
-            let fixed_couple = fixed.map(|(_, rd)| self.couple(rd));
-            // Without diffuse angles the path up and back is (d + a)·k_path: its absorption
-            // factor changes by the same ratio at every step, so no exp() per step.
-            let k_path = fixed.map_or(0.0, |(_, rd)| (1.0 + v.z / -rd.z) / den);
-            let d_first = self.thick.get(first_wet).copied().unwrap_or(0.0);
-            let mut att_run = (-alpha * k_path * (d_first + a)).exp();
-            let att_step = (-alpha * k_path * cfg.step_mm).exp();
-
-            for i in first_wet..nt {
-                let d = self.thick[i];
-                let att_fixed = att_run;
-                att_run *= att_step;
-                let h0 = d + a;
-                if h0 <= 0.0 {
-                    if sensor_a {
-                        leak[i] += ray.refl_air_w;
-                    }
+            let mut i_cur = first_wet;
+            let mut i_f = first_wet as f64;
+            while next_layer != u32::MAX {
+                let z_top = (next_layer as f64 + 1.0) * BUBBLE_LAYER_MM;
+                let z_b = (next_layer as f64 + 0.5) * BUBBLE_LAYER_MM;
+                let q = (z_top - a - off1 * z_b) * inv_step - 1e-9;
+                // First output index at or above d_j: q grows with j, so step the index up
+                // (about one step per layer, no float-to-int conversion).
+                while i_f < q {
+                    i_f += 1.0;
+                    i_cur += 1;
+                }
+                let i = i_cur;
+                if i >= nt {
+                    break;
+                }
+                if bernoulli && bub.next_u32() >= p_thr {
+                    next_layer += 1;
                     continue;
                 }
-                if sensor_a {
-                    leak[i] += ray.refl_med_w;
-                }
-                // Bubbles frozen in below the new surface.
-                while next_layer != u32::MAX {
-                    let z_top = (next_layer as f64 + 1.0) * BUBBLE_LAYER_MM;
-                    let z_b = (next_layer as f64 + 0.5) * BUBBLE_LAYER_MM;
-                    let b = ray.p0 + slope_xy * z_b;
-                    let h_b = d + tx * (b.x - cx) + ty * b.y;
-                    if z_top > h_b {
-                        break;
-                    }
-                    if bernoulli && bub.next_u32() >= p_thr {
-                        next_layer += 1;
-                        continue;
-                    }
-                    // Scattered part: 5 % deflected toward the face (Fig. 3.11).
-                    let cos_b = 1.0 - uniform32(&mut bub); // isotropic over the lower hemisphere
+                let b = ray.p0 + slope_xy * z_b;
+                // Scattered part: 5 % deflected toward the face (Fig. 3.11).
+                let cos_b = 1.0 - uniform32(&mut bub); // isotropic over the lower hemisphere
+                let sin2_b = (1.0 - cos_b * cos_b).max(0.0);
+                // Horizontal travel z_b·tan θ_B; beyond the farthest point of the face the
+                // ray misses whatever its azimuth, so the azimuth is not drawn.
+                let far_x = (b.x - x_lo).abs().max((b.x - x_hi).abs());
+                let far_y = b.y.abs() + y_hi;
+                let travel2 = z_b * z_b * sin2_b / (cos_b * cos_b);
+                if travel2 <= far_x * far_x + far_y * far_y {
                     let (c_phi, s_phi) = unit_circle(&mut bub);
-                    let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
+                    let sin_b = sin2_b.sqrt();
                     let reach = z_b / cos_b;
                     let land = b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
                     let k = bundle_index(geo.region(land.x, land.y));
@@ -533,21 +541,45 @@ impl SensorModel {
                         scat_delta[i][k] +=
                             fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
                     }
-                    fwd *= FORWARD_FRACTION;
-                    let gap = if bernoulli {
-                        0
-                    } else {
-                        geometric_gap(&mut bub, ln_q)
-                    };
-                    next_layer = next_layer.saturating_add(1).saturating_add(gap);
-                    if next_layer >= u32::MAX / 2 {
-                        next_layer = u32::MAX;
-                    }
                 }
-                // Reflection at the ice/air surface.
-                let t_up = h0 / den;
-                let z_hit = v.z * t_up;
-                if diffuse {
+                fwd *= FORWARD_FRACTION;
+                steps.push((i, fwd));
+                let gap = if bernoulli {
+                    0
+                } else {
+                    geometric_gap(&mut bub, ln_q)
+                };
+                next_layer = next_layer.saturating_add(1).saturating_add(gap);
+                if next_layer >= u32::MAX / 2 {
+                    next_layer = u32::MAX;
+                }
+            }
+
+            // Pass 2, the surface at every thickness.
+            if sensor_a {
+                for (i, l) in leak.iter_mut().enumerate().skip(first_wet) {
+                    *l += if self.thick[i] + a <= 0.0 {
+                        ray.refl_air_w
+                    } else {
+                        ray.refl_med_w
+                    };
+                }
+            }
+            let mut fwd = ray.flux_in_w;
+            let mut next_step = 0;
+            if diffuse {
+                for i in first_wet..nt {
+                    while next_step < steps.len() && steps[next_step].0 <= i {
+                        fwd = steps[next_step].1;
+                        next_step += 1;
+                    }
+                    let h0 = self.thick[i] + a;
+                    if h0 <= 0.0 {
+                        continue;
+                    }
+                    // Reflection at the ice/air surface.
+                    let t_up = h0 / den;
+                    let z_hit = v.z * t_up;
                     let dr = p.diffuse_max_rad * (2.0 * uniform32(&mut dif) - 1.0);
                     // δ_R deflects the reflected ray by δ_R (eq. 3.22): micro-facet normal
                     // turned by δ_R/2 about the y axis.
@@ -574,16 +606,61 @@ impl SensorModel {
                         let att = (-alpha * (t_up + t_down)).exp();
                         refl[i][k] += fwd * rfl * self.couple(rd) * att;
                     }
-                } else if let (Some((rfl, rd)), Some(cpl)) = (fixed, fixed_couple) {
-                    if cpl <= 0.0 {
+                }
+            } else if let Some((rfl, rd)) = reflect_setup(v, normal, n_med) {
+                // Specular reflection, fixed per accretion: the landing point moves on a
+                // line, land(d) = p0 + w·(d + a), so only the thicknesses whose landing
+                // point lies in the face's bounding box are visited (the bundles are convex,
+                // their union too): cost per ray O(visited), not O(thicknesses).
+                let cpl = self.couple(rd);
+                if cpl <= 0.0 {
+                    continue;
+                }
+                let back = v.z / -rd.z;
+                let w = (DVec2::new(v.x, v.y) + DVec2::new(rd.x, rd.y) * back) / den;
+                let base = ray.p0 + w * a;
+                let (mut d_lo, mut d_hi) = (-a, f64::INFINITY); // h0 = d + a > 0
+                for (p0, w0, lo, hi) in [(base.x, w.x, 0.0, x_hi), (base.y, w.y, -y_hi, y_hi)] {
+                    if w0.abs() < 1e-12 {
+                        if p0 < lo || p0 > hi {
+                            d_hi = f64::NEG_INFINITY;
+                        }
+                    } else {
+                        let (u, t) = ((lo - p0) / w0, (hi - p0) / w0);
+                        d_lo = d_lo.max(u.min(t));
+                        d_hi = d_hi.min(u.max(t));
+                    }
+                }
+                if d_hi.is_nan() || d_lo.is_nan() || d_hi < d_lo {
+                    continue;
+                }
+                // One index of margin each side; the exact test is region() below.
+                let i_lo = ((d_lo * inv_step).max(0.0).min(nt as f64) as usize)
+                    .saturating_sub(1)
+                    .max(first_wet);
+                let i_hi = ((d_hi * inv_step).max(0.0).min(nt as f64) as usize + 2).min(nt);
+                if i_lo >= i_hi {
+                    continue;
+                }
+                // Up and back: path (d + a)·k_path, absorbed by the same ratio every step.
+                let k_path = (1.0 + back) / den;
+                let mut att = (-alpha * k_path * (self.thick[i_lo] + a)).exp();
+                let att_step = (-alpha * k_path * cfg.step_mm).exp();
+                for i in i_lo..i_hi {
+                    let att_i = att;
+                    att *= att_step;
+                    while next_step < steps.len() && steps[next_step].0 <= i {
+                        fwd = steps[next_step].1;
+                        next_step += 1;
+                    }
+                    let h0 = self.thick[i] + a;
+                    if h0 <= 0.0 {
                         continue;
                     }
-                    let t_down = z_hit / -rd.z;
-                    let land =
-                        ray.p0 + DVec2::new(v.x, v.y) * t_up + DVec2::new(rd.x, rd.y) * t_down;
+                    let land = ray.p0 + w * h0;
                     let k = bundle_index(geo.region(land.x, land.y));
                     if k < 2 {
-                        refl[i][k] += fwd * rfl * cpl * att_fixed;
+                        refl[i][k] += fwd * rfl * cpl * att_i;
                     }
                 }
             }
@@ -697,7 +774,10 @@ mod tests {
         let ln_q = (1.0 - p).ln();
         let mut rng = Pcg32::new(1, 1);
         let n = 20_000;
-        let mean = (0..n).map(|_| geometric_gap(&mut rng, ln_q) as f64).sum::<f64>() / n as f64;
+        let mean = (0..n)
+            .map(|_| geometric_gap(&mut rng, ln_q) as f64)
+            .sum::<f64>()
+            / n as f64;
         let want = (1.0 - p) / p; // 665.7
         assert!((mean - want).abs() < 0.03 * want, "{mean}");
     }
