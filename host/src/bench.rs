@@ -92,3 +92,129 @@ mod tests {
         assert!(r.frames_per_s() > 0.0);
     }
 }
+
+/// Result of [`long_run`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct LongRun {
+    /// Frames the virtual node produced.
+    pub frames: u64,
+    /// What the monitor saw.
+    pub summary: crate::monitor::MonitorSummary,
+    /// (frames so far, resident set size in bytes) every tenth of the run.
+    pub rss: Vec<(u64, u64)>,
+    /// Wall time, s.
+    pub seconds: f64,
+}
+
+impl LongRun {
+    /// RSS growth from the first tenth of the run to its largest value, bytes.
+    pub fn rss_growth(&self) -> i64 {
+        let first = self.rss.first().map_or(0, |x| x.1);
+        let max = self.rss.iter().map(|x| x.1).max().unwrap_or(first);
+        max as i64 - first as i64
+    }
+}
+
+/// The host pipeline for `frames` frames of the firmware node at its
+/// 10 Hz, in virtual time as fast as the machine goes: virtual node →
+/// pty → `monitor::run` (decoder, sequence tracking, CSV log to `log`).
+/// Samples this process's RSS every tenth of the run.
+pub fn long_run(frames: u64, log: &std::path::Path) -> anyhow::Result<LongRun> {
+    use std::io::{Read, Write};
+    use std::sync::Arc;
+    use std::sync::atomic::{AtomicBool, Ordering};
+    use std::time::Duration;
+
+    use crate::virtual_hw::{Cover, Environment, Segment, Timeline};
+    use crate::virtual_node::{NodeOptions, VirtualNode};
+    use fois_sim::{Curve, CurvePoint};
+    use serialport::SerialPort;
+
+    let (mut master, slave) = serialport::TTYPort::pair()?;
+    master.set_timeout(Duration::ZERO)?;
+    let path = slave
+        .name()
+        .ok_or_else(|| anyhow::anyhow!("pty without a name"))?;
+    // Dry for the first half of the run, then rime at 1 mm/h: the alarm
+    // trips on the way (for a day: 12 h dry, 12 h of rime).
+    let half_s = frames as f64 * 0.1 / 2.0;
+    let curve = Curve {
+        points: (0..=150)
+            .map(|i| {
+                let d = f64::from(i) * 0.1;
+                CurvePoint {
+                    thickness_mm: d,
+                    i1_ua: 30.0 * (1.0 - (-d).exp()),
+                    i2_ua: 10.0 * (1.0 - (-d / 3.0).exp()),
+                    ..CurvePoint::default()
+                }
+            })
+            .collect(),
+    };
+    let tl = Timeline::new(vec![
+        Segment::new(half_s, Cover::Dry),
+        Segment::new(f64::INFINITY, Cover::Rime).rate(1.0),
+    ]);
+    let env = Arc::new(Environment::with_curves(
+        tl,
+        [(Cover::Rime, curve)],
+        [0.0; 2],
+    ));
+    let stop = Arc::new(AtomicBool::new(false));
+    let feeder_stop = stop.clone();
+    let start = Instant::now();
+    let feeder = std::thread::spawn(move || -> Vec<(u64, u64)> {
+        let mut node = VirtualNode::new(env, NodeOptions::default());
+        let mut rss = Vec::new();
+        let mut buf = [0u8; 512];
+        let mut out: Vec<u8> = Vec::with_capacity(8192);
+        let tenth = (frames / 10).max(1);
+        // Blocking write: the reader (monitor) sets the pace.
+        let writer = |m: &mut serialport::TTYPort, bytes: &[u8]| {
+            let mut off = 0;
+            let t = Instant::now();
+            while off < bytes.len() && t.elapsed() < Duration::from_secs(10) {
+                match m.write(&bytes[off..]) {
+                    Ok(n) => off += n,
+                    Err(_) => std::thread::sleep(Duration::from_micros(200)),
+                }
+            }
+        };
+        while node.frames() < frames {
+            if let Ok(n) = master.read(&mut buf) {
+                node.handle_rx(&buf[..n], &mut |b: &[u8]| out.extend_from_slice(b));
+            }
+            // A batch of frames per read check.
+            for _ in 0..64 {
+                node.step_frame(&mut |b: &[u8]| out.extend_from_slice(b));
+                if node.frames() % tenth == 0 {
+                    rss.push((node.frames(), rss_bytes().unwrap_or(0)));
+                }
+                if node.frames() >= frames {
+                    break;
+                }
+            }
+            writer(&mut master, &out);
+            out.clear();
+        }
+        // Let the monitor drain the pty, then stop it.
+        std::thread::sleep(Duration::from_millis(500));
+        feeder_stop.store(true, Ordering::Relaxed);
+        rss
+    });
+    let mut opts = crate::monitor::MonitorOptions::new(path);
+    opts.quiet = true;
+    opts.log = Some(log.to_path_buf());
+    let summary = crate::monitor::run(&opts, &stop);
+    stop.store(true, Ordering::Relaxed);
+    let rss = feeder
+        .join()
+        .map_err(|_| anyhow::anyhow!("feeder thread panicked"))?;
+    drop(slave);
+    Ok(LongRun {
+        frames,
+        summary: summary?,
+        rss,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}

@@ -1,0 +1,47 @@
+//! A simulated day at 10 Hz (864 000 frames) through the host pipeline in
+//! virtual time: the monitor's memory must stay flat.
+
+use fois_host::bench::long_run;
+
+fn check(frames: u64) {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("day.csv");
+    let r = long_run(frames, &log).unwrap();
+    eprintln!(
+        "{} frames in {:.1} s; RSS samples (frames, bytes): {:?}; growth {} bytes; summary {:?}",
+        r.frames,
+        r.seconds,
+        r.rss,
+        r.rss_growth(),
+        r.summary
+    );
+    assert_eq!(r.summary.lost, 0);
+    assert_eq!(r.summary.rejected, 0);
+    assert!(r.summary.measurements >= frames - 10, "{:?}", r.summary);
+    assert!(
+        r.summary.ice_onsets >= 1,
+        "the rime half of the day trips the alarm"
+    );
+    assert_eq!(r.rss.len(), 10);
+    // Flat: at most 4 MiB more than after the first tenth (allocator noise).
+    assert!(
+        r.rss_growth() < 4 << 20,
+        "RSS grew by {} bytes",
+        r.rss_growth()
+    );
+}
+
+/// 2.4 simulated hours (86 400 frames): a few seconds even unoptimised.
+#[test]
+fn memory_stays_flat_over_a_tenth_of_a_day() {
+    check(86_400);
+}
+
+/// The full day, 864 000 frames. About 40 s of CPU in the dev profile, a
+/// few seconds optimised: `cargo test --release -p fois-host --test
+/// long_run -- --ignored --nocapture`.
+#[test]
+#[ignore = "long: run with --release --ignored (see host/README.md)"]
+fn memory_stays_flat_over_a_simulated_day() {
+    check(864_000);
+}
