@@ -150,8 +150,17 @@ fn draw(
         };
         if let Some(l) = &s.label {
             any_label = true;
+            let dashed = matches!(s.kind, Kind::Dashed);
             anno.label(l.clone()).legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(3))
+                let st = color.stroke_width(3);
+                let (a, b) = if dashed {
+                    ((0, 8), (12, 20))
+                } else {
+                    ((0, 10), (10, 20))
+                };
+                EmptyElement::at((x, y))
+                    + PathElement::new(vec![(a.0, 0), (a.1, 0)], st)
+                    + PathElement::new(vec![(b.0, 0), (b.1, 0)], st)
             });
         }
     }
