@@ -187,7 +187,7 @@ pub fn long_run(frames: u64, log: &std::path::Path) -> anyhow::Result<LongRun> {
             // A batch of frames per read check.
             for _ in 0..64 {
                 node.step_frame(&mut |b: &[u8]| out.extend_from_slice(b));
-                if node.frames() % tenth == 0 {
+                if node.frames().is_multiple_of(tenth) {
                     rss.push((node.frames(), rss_bytes().unwrap_or(0)));
                 }
                 if node.frames() >= frames {

@@ -166,7 +166,6 @@ struct Session<'a> {
     log: Option<CsvLog>,
     view: View,
     sum: MonitorSummary,
-    rejected_before: u64,
     stop: &'a AtomicBool,
 }
 
@@ -254,7 +253,6 @@ pub fn run(opts: &MonitorOptions, stop: &AtomicBool) -> anyhow::Result<MonitorSu
         log,
         view: View::new(opts.plain, opts.quiet),
         sum: MonitorSummary::default(),
-        rejected_before: 0,
         stop,
     };
     let result = run_session(opts, &mut s);
@@ -325,7 +323,6 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
         link.send(Command::StartStream {
             frame_period_ms: None,
         })?;
-        s.rejected_before = s.sum.rejected;
         let lost = loop {
             if done(s) {
                 break None;

@@ -280,8 +280,6 @@ pub struct ServeOptions {
     pub speed: f64,
     /// Stop after this much real time.
     pub duration: Option<Duration>,
-    /// Also make this path a symlink to the pty (stable name across restarts).
-    pub link: Option<PathBuf>,
 }
 
 /// A pseudo-terminal: the node writes to the master, clients open `path`.

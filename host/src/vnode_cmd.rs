@@ -259,7 +259,6 @@ pub fn run_virtual_node(
     let opts = ServeOptions {
         speed: scene.speed,
         duration: scene.duration,
-        link,
     };
     let stats = virtual_node::serve(&mut node, &mut pty, &opts, stop)?;
     eprintln!(
@@ -298,7 +297,6 @@ pub fn run_demo(
     let serve_opts = ServeOptions {
         speed: scene.speed,
         duration: None,
-        link: None,
     };
     let ns = node_stop.clone();
     let server = std::thread::spawn(move || {

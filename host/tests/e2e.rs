@@ -370,3 +370,143 @@ fn lossy_wire_gap_and_garbage_are_counted_not_fatal() {
     assert_eq!(gaps[0][t.col("frames_lost").unwrap()], "10");
     assert_eq!(t.rows.iter().filter(|r| r[2] == "rejected").count(), 3);
 }
+
+#[test]
+fn ctrl_c_stops_the_monitor_cleanly() {
+    let node = NodeProc::start(&["--speed", "10", "--dry-s", "1000"]);
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("log.csv");
+    let mon = Command::new(BIN)
+        .args([
+            "monitor",
+            "--port",
+            &node.path,
+            "--log",
+            log.to_str().unwrap(),
+            "--plain",
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(1000));
+    // SAFETY: plain kill(2) on our own child.
+    let rc = unsafe { libc::kill(mon.id() as libc::pid_t, libc::SIGINT) };
+    assert_eq!(rc, 0);
+    let out = mon.wait_with_output().unwrap();
+    assert_eq!(
+        out.status.code(),
+        Some(0),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let summary = stdout.lines().last().unwrap();
+    assert!(summary.starts_with("monitor: "), "{summary}");
+    // The summary's row count is what the file holds (closed cleanly).
+    let t = LogTable::read(&log).unwrap();
+    assert!(
+        summary.contains(&format!("{} rows appended", t.rows.len())),
+        "{summary} vs {}",
+        t.rows.len()
+    );
+}
+
+/// A log made in process from the virtual node (no pty): 10 s dry, then
+/// rime at 36 mm/h for 5 min of virtual time (0..3 mm).
+fn make_rime_log(path: &Path) -> usize {
+    use fois_host::csvlog::{CsvLog, Row};
+    use fois_host::virtual_hw::{Cover, Environment, Segment, Timeline};
+    use fois_host::virtual_node::{NodeOptions, VirtualNode};
+    use fois_protocol::{DeviceFrame, FrameDecoder};
+
+    let tl = Timeline::new(vec![
+        Segment::new(10.0, Cover::Dry),
+        Segment::new(f64::INFINITY, Cover::Rime).rate(36.0),
+    ]);
+    let env = Arc::new(Environment::new(tl, fois_sim::SensorKind::B, 1));
+    let mut node = VirtualNode::new(env, NodeOptions::default());
+    let mut bytes = Vec::new();
+    node.run_until_s(310.0, &mut |b: &[u8]| bytes.extend_from_slice(b));
+    let mut dec = FrameDecoder::<{ fois_protocol::MAX_FRAME }>::new();
+    let mut log = CsvLog::open(path).unwrap();
+    let mut n = 0;
+    dec.feed::<DeviceFrame>(&bytes, |r| {
+        let f = r.unwrap();
+        if matches!(f.msg, fois_protocol::DeviceMsg::Measurement(_)) {
+            n += 1;
+        }
+        log.write(&Row::device(f.seq, &f.msg)).unwrap();
+    });
+    log.close().unwrap();
+    assert!(node.alarm_on());
+    n
+}
+
+#[test]
+fn plot_and_compare_read_a_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("rime.csv");
+    let n = make_rime_log(&log);
+    assert!(n > 3000, "{n}");
+    let l = log.to_str().unwrap();
+    let png = dir.path().join("plot.png");
+    let (code, out, err) = foisctl(&["plot", "--log", l, "--out", png.to_str().unwrap()]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains(&format!("{n} measurements drawn")), "{out}");
+    let bytes = std::fs::read(&png).unwrap();
+    assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+
+    let cmp_png = dir.path().join("cmp.png");
+    let (code, out, err) = foisctl(&[
+        "compare",
+        "--log",
+        l,
+        "--ice",
+        "rime",
+        "--rate-mm-per-h",
+        "36",
+        "--start-s",
+        "10",
+        "--runs",
+        "20",
+        "--plot",
+        cmp_png.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    // Samples from 10 s on: 300 s × 10 Hz (± the edges).
+    let first = out.lines().next().unwrap();
+    let samples: usize = first.split_whitespace().next().unwrap().parse().unwrap();
+    assert!((2990..=3010).contains(&samples), "{first}");
+    assert!(first.contains("thickness 0.00..3.0"), "{first}");
+    for ch in ["I1", "I2"] {
+        let line = out.lines().find(|l| l.starts_with(ch)).unwrap();
+        let pct: f64 = line
+            .split("uA, ")
+            .nth(2)
+            .unwrap()
+            .split(' ')
+            .next()
+            .unwrap()
+            .parse()
+            .unwrap();
+        assert!((0.0..=100.0).contains(&pct), "{line}");
+    }
+    assert_eq!(&std::fs::read(&cmp_png).unwrap()[..4], b"\x89PNG");
+
+    // Clear errors: missing column, unreadable file.
+    let (code, _, err) = foisctl(&[
+        "compare",
+        "--log",
+        l,
+        "--ice",
+        "rime",
+        "--thickness-col",
+        "laser_mm",
+    ]);
+    assert_eq!(code, 1);
+    assert!(err.contains("no column `laser_mm`"), "{err}");
+    let (code, _, err) = foisctl(&["plot", "--log", "/nonexistent.csv", "--out", "/tmp/x.png"]);
+    assert_eq!(code, 1);
+    assert!(err.contains("cannot read log /nonexistent.csv"), "{err}");
+}
