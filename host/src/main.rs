@@ -92,7 +92,7 @@ enum Cmd {
     },
     /// A virtual node and the monitor in one process: watch rime accrete and
     /// trip the alarm. Defaults: 60 s dry, then rime at 3 mm/h, -5 °C, speed
-    /// x20, ends after 40 s (alarm after about 15 s).
+    /// x20, ends after 40 s (the alarm trips after about 5 s).
     Demo {
         #[command(flatten)]
         scene: vnode_cmd::SceneArgs,

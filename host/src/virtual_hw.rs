@@ -24,8 +24,10 @@ pub mod adc;
 pub mod clock;
 pub mod environment;
 pub mod frontend;
+pub mod scenario;
 
 pub use adc::SimAdc;
 pub use clock::{VirtualClock, VirtualDelay, VirtualPin};
 pub use environment::{Cover, Environment, Segment, Timeline, Truth};
 pub use frontend::FrontEnd;
+pub use scenario::Scenario;

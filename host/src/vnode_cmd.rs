@@ -17,40 +17,54 @@ use crate::virtual_node::{self, NodeOptions, Pty, ServeOptions, VirtualNode};
 /// The simulated conditions and the node's pace.
 #[derive(Debug, Clone, Args)]
 pub struct SceneArgs {
-    /// What forms on the face after the dry start: dry, flat, glazed, rime, water.
+    /// A scenario file (TOML timeline of segments: cover, rate, temperature,
+    /// light, LED drift, noise; format in host/README.md). Replaces the
+    /// scene flags below; --sensor and --seed override the file's.
+    #[arg(long, value_name = "FILE.toml", conflicts_with_all = ["ice", "rate_mm_per_h", "temp_c", "dry_s", "ambient", "flicker", "led_factor", "noise_lsb"])]
+    pub scenario: Option<PathBuf>,
+    /// What forms on the face after the dry start: dry, flat, glazed, rime,
+    /// water [default: rime].
     #[arg(long, value_name = "KIND", value_parser = parse_cover)]
     pub ice: Option<Cover>,
-    /// Accretion rate, mm/h of film thickness (clamped at 15 mm).
+    /// Accretion rate, mm/h of film thickness, clamped at 15 mm [default:
+    /// 2 for virtual-node, 3 for demo].
     #[arg(long, value_name = "MM_PER_H")]
     pub rate_mm_per_h: Option<f64>,
-    /// Air temperature, °C (NTC reading; above the freeze limit a film is water).
+    /// Air temperature, °C, as the NTC sees it; above the node's freeze
+    /// limit a film counts as water, not ice [default: -5].
     #[arg(long, value_name = "CELSIUS", allow_negative_numbers = true)]
     pub temp_c: Option<f64>,
-    /// Seconds of virtual time with a dry face before the film starts to form.
+    /// Virtual seconds of dry face before the film starts to form (the node
+    /// dark-calibrates at 1 s) [default: 30 for virtual-node, 60 for demo].
     #[arg(long, value_name = "SECONDS")]
     pub dry_s: Option<f64>,
-    /// Ambient (sun) DC photocurrent, µA: one value for both channels or `A1,A2`.
+    /// Ambient (sun) DC photocurrent, µA: one value for both channels or
+    /// `A1,A2` [default: 0].
     #[arg(long, value_name = "UA[,UA]", value_parser = parse_pair)]
     pub ambient: Option<[f64; 2]>,
-    /// Amplitude of the 100 Hz mains flicker of the ambient light, µA (both channels).
+    /// Amplitude of the 100 Hz mains flicker of the ambient light, µA, both
+    /// channels [default: 0].
     #[arg(long, value_name = "UA")]
     pub flicker: Option<f64>,
-    /// LED output relative to nominal (0.7 = 30 % weaker).
+    /// LED output relative to nominal, 0.7 = 30 % weaker [default: 1].
     #[arg(long, value_name = "FACTOR")]
     pub led_factor: Option<f64>,
-    /// ADC noise, rms LSB per conversion.
+    /// ADC noise, rms LSB per conversion [default: 1].
     #[arg(long, value_name = "LSB")]
     pub noise_lsb: Option<f64>,
-    /// Sensor construction: a (transparent separation, dry offset) or b (opaque).
+    /// Sensor construction: a (transparent separation, dry offset) or b
+    /// (opaque) [default: b].
     #[arg(long, value_name = "a|b", value_parser = parse_sensor)]
     pub sensor: Option<SensorKind>,
-    /// Seed of the ray-traced accretion and of the ADC noise.
+    /// Seed of the ray-traced accretion and of the ADC noise [default: 1].
     #[arg(long, value_name = "N")]
     pub seed: Option<u64>,
-    /// Virtual seconds per real second (10 = ten times faster than a board).
+    /// Virtual seconds per real second, 10 = ten times faster than a board
+    /// [default: 1 for virtual-node, 20 for demo].
     #[arg(long, value_name = "X")]
     pub speed: Option<f64>,
-    /// Stop after this many real seconds.
+    /// Stop after this many real seconds [default: never for virtual-node
+    /// (Ctrl-C), 40 for demo].
     #[arg(long, value_name = "SECONDS")]
     pub duration: Option<f64>,
 }
@@ -131,6 +145,20 @@ pub struct Scene {
 impl SceneArgs {
     /// Resolve against defaults; refuses nonsense values.
     pub fn resolve(&self, d: SceneDefaults) -> anyhow::Result<Scene> {
+        if let Some(path) = &self.scenario {
+            let sc = crate::virtual_hw::scenario::load(path)?;
+            let speed = self.speed.unwrap_or(d.speed);
+            if !(speed.is_finite() && speed > 0.0 && speed <= 10_000.0) {
+                anyhow::bail!("--speed must be in (0, 10000]");
+            }
+            return Ok(Scene {
+                timeline: sc.timeline,
+                sensor: self.sensor.unwrap_or(sc.sensor),
+                seed: self.seed.unwrap_or(sc.seed),
+                speed,
+                duration: self.duration.or(d.duration).map(Duration::from_secs_f64),
+            });
+        }
         let ice = self.ice.unwrap_or(d.ice);
         let rate = self.rate_mm_per_h.unwrap_or(d.rate_mm_per_h);
         let temp = self.temp_c.unwrap_or(d.temp_c);
@@ -199,6 +227,18 @@ impl SceneArgs {
 
 fn describe(scene: &Scene) -> String {
     let segs = scene.timeline.segments();
+    if segs.len() > 2 || (segs.len() == 2 && segs[0].cover != Cover::Dry) {
+        let parts: Vec<String> = segs
+            .iter()
+            .map(|s| format!("{} {:.0} s", s.cover.name(), s.duration_s))
+            .collect();
+        return format!(
+            "scenario: {}; sensor {:?}, speed ×{}",
+            parts.join(" → "),
+            scene.sensor,
+            scene.speed
+        );
+    }
     let last = segs.last().expect("a timeline has a segment");
     let dry = if segs.len() > 1 {
         format!("dry face for {:.0} s, then ", segs[0].duration_s)

@@ -510,3 +510,50 @@ fn plot_and_compare_read_a_log() {
     assert_eq!(code, 1);
     assert!(err.contains("cannot read log /nonexistent.csv"), "{err}");
 }
+
+#[test]
+fn demo_runs_a_scenario_file_water_then_freezing() {
+    let file = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/scenarios/water-then-freeze.toml"
+    );
+    let dir = tempfile::tempdir().unwrap();
+    let log = dir.path().join("demo.csv");
+    let (code, out, err) = foisctl(&[
+        "demo",
+        "--scenario",
+        file,
+        "--speed",
+        "400",
+        "--duration",
+        "4",
+        "--plain",
+        "--log",
+        log.to_str().unwrap(),
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let wet = out.find("event WetOnset").expect("water at +5 °C is wet");
+    let ice = out.find("event IceOnset").expect("then it freezes");
+    assert!(wet < ice);
+    assert!(out.contains("alarm output ON"), "{out}");
+    // Wet and ice events in the log, with the temperature of the moment.
+    let t = LogTable::read(&log).unwrap();
+    let (detail, temp) = (t.col("detail").unwrap(), t.col("temperature_c").unwrap());
+    let ice_row = t
+        .rows
+        .iter()
+        .find(|r| r[detail].starts_with("IceOnset"))
+        .unwrap();
+    let c: f64 = ice_row[temp].parse().unwrap();
+    let freeze = f64::from(fois_protocol::Config::default().freeze_limit_centi_c) / 100.0;
+    assert!(
+        c <= freeze && c > freeze - 0.5,
+        "froze at {c} °C, limit {freeze}"
+    );
+
+    let bad = dir.path().join("bad.toml");
+    std::fs::write(&bad, "[[segment]]\nduration_s = 5\ncover = \"slush\"\n").unwrap();
+    let (code, _, err) = foisctl(&["virtual-node", "--scenario", bad.to_str().unwrap()]);
+    assert_eq!(code, 1);
+    assert!(err.contains("slush") && err.contains("segment 1"), "{err}");
+}

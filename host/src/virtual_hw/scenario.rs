@@ -1,0 +1,193 @@
+//! Scenario files: a timeline (and optionally sensor and seed) as TOML, so
+//! conditions like "water at +5 °C, then the same water freezing as the air
+//! drops below zero" are data. Unknown keys are refused (typos do not pass
+//! silently).
+//!
+//! ```toml
+//! sensor = "b"          # a | b (optional, default b)
+//! seed = 7              # optional, default 1
+//!
+//! [[segment]]
+//! duration_s = 600      # virtual seconds ("inf" allowed for the last)
+//! cover = "water"       # dry | flat | glazed | rime | water
+//! rate_mm_per_h = 2.0   # accretion rate (default 0)
+//! air_temp_c = 5.0      # (default -5)
+//!
+//! [[segment]]
+//! duration_s = 1800
+//! cover = "glazed"      # the same film, now ice: thickness carries on
+//! rate_mm_per_h = 1.0
+//! air_temp_c = 5.0
+//! air_temp_end_c = -5.0 # linear ramp over the segment
+//! ambient_ua = [20.0, 10.0]   # sun, per channel
+//! flicker_ua = [3.0, 3.0]     # 100 Hz amplitude
+//! flicker_hz = 100.0
+//! led_factor = 1.0
+//! led_factor_end = 0.7        # LED output -30 % over the segment
+//! adc_noise_lsb = 1.0
+//! thickness_mm = 2.0          # set the thickness at the start (optional)
+//! ```
+
+use serde::Deserialize;
+
+use super::environment::{Cover, Segment, Timeline};
+use fois_sim::SensorKind;
+
+/// A parsed scenario.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Scenario {
+    /// The timeline.
+    pub timeline: Timeline,
+    /// Sensor construction (default B).
+    pub sensor: SensorKind,
+    /// Seed (default 1).
+    pub seed: u64,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    sensor: Option<String>,
+    seed: Option<u64>,
+    segment: Vec<Seg>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Seg {
+    duration_s: Duration,
+    cover: String,
+    rate_mm_per_h: Option<f64>,
+    air_temp_c: Option<f64>,
+    air_temp_end_c: Option<f64>,
+    ambient_ua: Option<[f64; 2]>,
+    flicker_ua: Option<[f64; 2]>,
+    flicker_hz: Option<f64>,
+    led_factor: Option<f64>,
+    led_factor_end: Option<f64>,
+    adc_noise_lsb: Option<f64>,
+    thickness_mm: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(untagged)]
+enum Duration {
+    Seconds(f64),
+    Text(String),
+}
+
+/// Parse a scenario from TOML text.
+pub fn parse(text: &str) -> Result<Scenario, String> {
+    let f: File = toml::from_str(text).map_err(|e| e.to_string())?;
+    if f.segment.is_empty() {
+        return Err("a scenario needs at least one [[segment]]".into());
+    }
+    let sensor = match f.sensor.as_deref().map(str::to_ascii_lowercase).as_deref() {
+        None | Some("b") => SensorKind::B,
+        Some("a") => SensorKind::A,
+        Some(other) => return Err(format!("sensor = \"{other}\": expected \"a\" or \"b\"")),
+    };
+    let n = f.segment.len();
+    let mut segs = Vec::with_capacity(n);
+    for (i, s) in f.segment.into_iter().enumerate() {
+        let at = |what: &str| format!("segment {}: {what}", i + 1);
+        let duration_s = match s.duration_s {
+            Duration::Seconds(x) if x.is_finite() && x >= 0.0 => x,
+            Duration::Text(t) if t == "inf" && i + 1 == n => f64::INFINITY,
+            _ => {
+                return Err(at(
+                    "duration_s must be >= 0 seconds (\"inf\" only for the last segment)",
+                ));
+            }
+        };
+        let cover = Cover::parse(&s.cover).ok_or_else(|| {
+            at(&format!(
+                "cover = \"{}\": expected dry, flat, glazed, rime or water",
+                s.cover
+            ))
+        })?;
+        let finite =
+            |v: Option<f64>, name: &str, lo: f64, hi: f64| -> Result<Option<f64>, String> {
+                match v {
+                    Some(x) if !(x.is_finite() && (lo..=hi).contains(&x)) => {
+                        Err(at(&format!("{name} = {x} is outside {lo}..={hi}")))
+                    }
+                    other => Ok(other),
+                }
+            };
+        let pair = |v: Option<[f64; 2]>, name: &str| -> Result<Option<[f64; 2]>, String> {
+            match v {
+                Some([a, b]) if !(a.is_finite() && b.is_finite() && a >= 0.0 && b >= 0.0) => {
+                    Err(at(&format!("{name} must be two non-negative µA values")))
+                }
+                other => Ok(other),
+            }
+        };
+        let mut seg = Segment::new(duration_s, cover);
+        seg.rate_mm_per_h =
+            finite(s.rate_mm_per_h, "rate_mm_per_h", -1000.0, 1000.0)?.unwrap_or(0.0);
+        seg.air_temp_c = finite(s.air_temp_c, "air_temp_c", -60.0, 80.0)?.unwrap_or(seg.air_temp_c);
+        seg.air_temp_end_c = finite(s.air_temp_end_c, "air_temp_end_c", -60.0, 80.0)?;
+        seg.ambient_ua = pair(s.ambient_ua, "ambient_ua")?.unwrap_or([0.0; 2]);
+        seg.flicker_ua = pair(s.flicker_ua, "flicker_ua")?.unwrap_or([0.0; 2]);
+        seg.flicker_hz = finite(s.flicker_hz, "flicker_hz", 0.0, 10_000.0)?.unwrap_or(100.0);
+        seg.led_factor = finite(s.led_factor, "led_factor", 0.0, 10.0)?.unwrap_or(1.0);
+        seg.led_factor_end = finite(s.led_factor_end, "led_factor_end", 0.0, 10.0)?;
+        seg.adc_noise_lsb = finite(s.adc_noise_lsb, "adc_noise_lsb", 0.0, 500.0)?.unwrap_or(1.0);
+        seg.start_thickness_mm = finite(s.thickness_mm, "thickness_mm", 0.0, 15.0)?;
+        segs.push(seg);
+    }
+    Ok(Scenario {
+        timeline: Timeline::new(segs),
+        sensor,
+        seed: f.seed.unwrap_or(1),
+    })
+}
+
+/// Read and parse a scenario file.
+pub fn load(path: &std::path::Path) -> anyhow::Result<Scenario> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| anyhow::anyhow!("cannot read scenario {}: {e}", path.display()))?;
+    parse(&text).map_err(|e| anyhow::anyhow!("scenario {}: {e}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_documented_example_parses() {
+        let text = include_str!("scenario.rs")
+            .lines()
+            .filter_map(|l| l.strip_prefix("//! "))
+            .skip_while(|l| !l.starts_with("sensor"))
+            .take_while(|l| !l.starts_with("```"))
+            .collect::<Vec<_>>()
+            .join("\n");
+        let s = parse(&text).unwrap();
+        assert_eq!((s.sensor, s.seed), (SensorKind::B, 7));
+        let segs = s.timeline.segments();
+        assert_eq!(segs.len(), 2);
+        assert_eq!(segs[0].cover, Cover::Water);
+        assert_eq!(segs[1].air_temp_end_c, Some(-5.0));
+        assert_eq!(segs[1].led_factor_end, Some(0.7));
+        assert_eq!(segs[1].ambient_ua, [20.0, 10.0]);
+        assert_eq!(segs[1].start_thickness_mm, Some(2.0));
+    }
+
+    #[test]
+    fn mistakes_are_refused_with_the_reason() {
+        let e = parse("[[segment]]\nduration_s = 1\ncover = \"slush\"\n").unwrap_err();
+        assert!(e.contains("segment 1") && e.contains("slush"), "{e}");
+        let e = parse("[[segment]]\nduration_s = 1\ncover = \"dry\"\ntemp = 3\n").unwrap_err();
+        assert!(e.contains("unknown field"), "{e}");
+        let e = parse("[[segment]]\nduration_s = \"inf\"\ncover = \"dry\"\n[[segment]]\nduration_s = 1\ncover = \"dry\"\n").unwrap_err();
+        assert!(e.contains("inf"), "{e}");
+        let e =
+            parse("[[segment]]\nduration_s = 1\ncover = \"rime\"\nair_temp_c = 300\n").unwrap_err();
+        assert!(e.contains("air_temp_c"), "{e}");
+        let ok = parse("[[segment]]\nduration_s = \"inf\"\ncover = \"rime\"\nrate_mm_per_h = 3\n")
+            .unwrap();
+        assert_eq!(ok.timeline.segments()[0].duration_s, f64::INFINITY);
+    }
+}
