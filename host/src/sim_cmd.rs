@@ -505,7 +505,15 @@ pub fn plot_analytic(path: &Path, cfg: &SimConfig) -> Result<()> {
             .map(|p| (p.thickness_mm, if k == 0 { p.i1_ua } else { p.i2_ua }))
             .collect::<Vec<_>>()
     };
+    // The tracer without spread first, wide and light, so the analytic dashes run inside it.
     let s = vec![
+        Series::new(
+            Some("tracer, no fibre spread"),
+            RGB_GREY,
+            Kind::Line(6),
+            pts(&tracer0, 0),
+        ),
+        Series::new(None, RGB_GREY, Kind::Line(6), pts(&tracer0, 1)),
         Series::new(Some("I1 ray tracer"), C_I1, Kind::Line(2), pts(&tracer, 0)),
         Series::new(
             Some("I2 ray tracer"),
@@ -525,13 +533,6 @@ pub fn plot_analytic(path: &Path, cfg: &SimConfig) -> Result<()> {
             Kind::Dashed,
             a.iter().map(|x| (x.0, x.2)).collect(),
         ),
-        Series::new(
-            Some("I1, I2 tracer, no spread"),
-            RGB_GREY,
-            Kind::Line(1),
-            pts(&tracer0, 0),
-        ),
-        Series::new(None, RGB_GREY, Kind::Line(1), pts(&tracer0, 1)),
     ];
     let title = format!(
         "{} ice, {}: ray tracer vs analytic",
@@ -541,7 +542,7 @@ pub fn plot_analytic(path: &Path, cfg: &SimConfig) -> Result<()> {
     plot::plot(path, &title, "current (µA)", &s, &[])
 }
 
-const RGB_GREY: plotters::style::RGBColor = plotters::style::RGBColor(120, 120, 120);
+const RGB_GREY: plotters::style::RGBColor = plotters::style::RGBColor(190, 190, 190);
 
 fn check_mc_runs(runs: u64) -> Result<()> {
     if runs < 2 {
@@ -554,6 +555,10 @@ fn check_mc_runs(runs: u64) -> Result<()> {
 pub fn run_mc(cfg: &SimConfig, runs: u64, seed: u64, threads: Option<usize>) -> Result<MonteCarlo> {
     let pb = bar(runs, "monte carlo");
     let pool = pool(threads)?;
+    eprintln!(
+        "monte carlo: {runs} accretions on {} threads",
+        pool.current_num_threads()
+    );
     let inc = || pb.inc(1);
     let mc = pool.install(|| monte_carlo(cfg, runs, seed, &inc));
     pb.finish_and_clear();
