@@ -120,3 +120,15 @@ pub fn theta_max(na: f64, n_outer: f64) -> f64 {
 pub fn theta_max_fibre(theta_max: f64, n_outer: f64, n_fibre: f64) -> f64 {
     (n_outer / n_fibre * theta_max.sin()).asin()
 }
+
+/// Micro-facet normal for a diffuse deflection (thesis eq. 3.22, θ_S = θ_Ice + δ): turning the
+/// surface normal by δ/2 about the y axis turns a ray reflected in the x–z plane by δ.
+#[inline]
+pub fn facet_normal(normal: DVec3, deflection_rad: f64) -> DVec3 {
+    let (s, c) = (0.5 * deflection_rad).sin_cos();
+    DVec3::new(
+        normal.x * c + normal.z * s,
+        normal.y,
+        -normal.x * s + normal.z * c,
+    )
+}

@@ -583,6 +583,7 @@ impl SensorModel {
                     let dr = p.diffuse_max_rad * (2.0 * uniform32(&mut dif) - 1.0);
                     // δ_R deflects the reflected ray by δ_R (eq. 3.22): micro-facet normal
                     // turned by δ_R/2 about the y axis.
+                    // Same as `laws::facet_normal(normal, dr)`, without the libm call.
                     let (sh, ch) = small_sin_cos(0.5 * dr);
                     let nrm = DVec3::new(
                         normal.x * ch + normal.z * sh,

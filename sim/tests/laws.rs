@@ -157,3 +157,68 @@ fn fibre_acceptance_angles() {
     let na = (N_FIBRE * N_FIBRE - N_CLAD * N_CLAD).sqrt();
     assert!((na - NA).abs() < 0.02);
 }
+
+#[test]
+fn facet_normal_deflects_the_reflected_ray_by_delta() {
+    // Eq. 3.22: θ_S = θ_Ice + δ for a ray in the x–z plane.
+    let v = dir_at(37.1);
+    let up = DVec3::Z;
+    let r0 = reflect(v, up);
+    for delta_deg in [-30.0, -10.0, 5.0, 30.0] {
+        let r = reflect(v, facet_normal(up, delta_deg * DEG));
+        let ang = r.x.atan2(-r.z) - r0.x.atan2(-r0.z);
+        assert!(
+            (ang.abs() - (delta_deg * DEG).abs()).abs() < 1e-12,
+            "{delta_deg}"
+        );
+        assert!((r.length() - 1.0).abs() < 1e-12 && r.y == 0.0);
+    }
+}
+
+mod props {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        #[test]
+        fn r_plus_t_is_one_for_any_angle_and_indices(
+            c in 0.0f64..=1.0, n_i in 1.0f64..2.0, n_t in 1.0f64..2.0,
+        ) {
+            let r = fr_dielectric(c, n_i, n_t);
+            let t = transmittance_from_amplitudes(c, n_i, n_t);
+            prop_assert!((0.0..=1.0).contains(&r));
+            // Near grazing incidence both sides of 3.13 are ill-conditioned; stay off c = 0.
+            if c > 1e-6 {
+                prop_assert!((r + t - 1.0).abs() < 1e-9, "r {} t {}", r, t);
+            }
+            // Reciprocity: the reflectance is the same from both sides at matching angles.
+            if let Some(th_t) = snell_angle(c.acos(), n_i, n_t) {
+                let back = fr_dielectric(th_t.cos(), n_t, n_i);
+                prop_assert!((back - r).abs() < 1e-9);
+            }
+        }
+
+        #[test]
+        fn refraction_is_reversible_and_keeps_unit_length(
+            th in 0.0f64..1.5, phi in 0.0f64..6.28, n_i in 1.0f64..2.0, n_t in 1.0f64..2.0,
+        ) {
+            let d = DVec3::new(th.sin() * phi.cos(), th.sin() * phi.sin(), th.cos());
+            let n = DVec3::new(0.0, 0.0, -1.0);
+            match refract(d, n, n_i, n_t) {
+                Some(t) => {
+                    prop_assert!((t.length() - 1.0).abs() < 1e-9);
+                    // Snell: n_i sin θ_i = n_t sin θ_t, azimuth kept.
+                    let (si, st) = (d.truncate().length(), t.truncate().length());
+                    prop_assert!((n_i * si - n_t * st).abs() < 1e-9);
+                    // Reversed ray (from the other side): it retraces the incident one.
+                    // (Skipped at grazing exit, where it is ill-conditioned.)
+                    if t.z > 1e-3 {
+                        let back = refract(-t, -n, n_t, n_i).unwrap_or(DVec3::ZERO);
+                        prop_assert!((back + d).length() < 1e-7);
+                    }
+                }
+                None => prop_assert!(n_i * th.sin() >= n_t * (1.0 - 1e-12)),
+            }
+        }
+    }
+}
