@@ -200,7 +200,7 @@ mod props {
 
         #[test]
         fn refraction_is_reversible_and_keeps_unit_length(
-            th in 0.0f64..1.5, phi in 0.0f64..6.28, n_i in 1.0f64..2.0, n_t in 1.0f64..2.0,
+            th in 0.0f64..1.5, phi in 0.0f64..std::f64::consts::TAU, n_i in 1.0f64..2.0, n_t in 1.0f64..2.0,
         ) {
             let d = DVec3::new(th.sin() * phi.cos(), th.sin() * phi.sin(), th.cos());
             let n = DVec3::new(0.0, 0.0, -1.0);
