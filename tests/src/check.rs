@@ -43,6 +43,14 @@ pub fn check(sc: &Scenario, o: &Outcome) -> Vec<String> {
             e.max_frames_lost
         ));
     }
+    if let Some(n) = e.min_frames_lost
+        && o.frames_lost() < n
+    {
+        fail.push(format!(
+            "{} frames lost, expected at least {n}",
+            o.frames_lost()
+        ));
+    }
     if o.stray_errors > e.max_errors {
         fail.push(format!(
             "{} Error frames not asked for, at most {} allowed",

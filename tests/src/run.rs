@@ -290,13 +290,9 @@ fn ns(t_s: f64) -> u64 {
 pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
     let start = Instant::now();
     let f = &sc.file;
-    let env = Arc::new(Environment::new(
-        sc.timeline.clone(),
-        f.sensor.kind(),
-        f.curve_seed,
-    ));
+    let env = Arc::new(Environment::new(sc.timeline.clone(), sc.sensor, sc.seed));
     let opts = NodeOptions {
-        seed: f.seed,
+        seed: sc.seed,
         calibrate_at_s: None,
         ..NodeOptions::default()
     };
@@ -321,9 +317,9 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
         out: Outcome {
             name: sc.name.clone(),
             class: f.class,
-            sensor: match f.sensor {
-                crate::scenario::Sensor::A => "A",
-                crate::scenario::Sensor::B => "B",
+            sensor: match sc.sensor {
+                fois_sim::SensorKind::A => "A",
+                fois_sim::SensorKind::B => "B",
             },
             checked: sc.checked,
             sweep_lsb: sc.sweep_lsb,

@@ -1,6 +1,12 @@
 //! The scenario file format (TOML, one file per case) and its translation
 //! into a [`Timeline`] of the virtual hardware.
 //!
+//! The timeline keys (`sensor`, `seed`, `[[segment]]`) are the host's
+//! scenario format (`fois_host::virtual_hw::scenario`, also read by
+//! `foisctl virtual-node --scenario`) and are parsed by the host's own
+//! parser; this module adds the name, class, config, overlays, commands,
+//! sweep, lossy link and expectations.
+//!
 //! Every table is `deny_unknown_fields`: a misspelt key is an error naming
 //! the file and the key. The format is documented key by key in
 //! `tests/README.md`.
@@ -10,6 +16,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail, ensure};
 use fois_host::virtual_hw::{Cover, Segment, Timeline};
+
 use fois_protocol::Config;
 use serde::Deserialize;
 
@@ -65,26 +72,6 @@ pub const RIME_GOAL_MM: f64 = 0.2;
 /// 0871 trips at 0.5 mm).
 pub const GLAZED_GOAL_MM: f64 = 0.5;
 
-/// Sensor construction (thesis §5.2.1).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
-pub enum Sensor {
-    /// Transparent separation: a dry offset.
-    A,
-    /// Opaque separation: a dry face reads ~0.
-    #[default]
-    B,
-}
-
-impl Sensor {
-    /// The simulator's kind.
-    pub fn kind(self) -> fois_sim::SensorKind {
-        match self {
-            Sensor::A => fois_sim::SensorKind::A,
-            Sensor::B => fois_sim::SensorKind::B,
-        }
-    }
-}
-
 /// One scenario file.
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -96,24 +83,19 @@ pub struct ScenarioFile {
     pub description: String,
     /// Which goal applies.
     pub class: Class,
-    /// Sensor A or B (default B).
-    #[serde(default)]
-    pub sensor: Sensor,
-    /// Seed of the ADC noise (default 1).
-    #[serde(default = "one")]
-    pub seed: u64,
-    /// Seed of the ray-traced accretion curves (default 1).
-    #[serde(default = "one")]
-    pub curve_seed: u64,
+    /// Sensor `"a"` or `"b"` (host format; default b).
+    pub sensor: Option<toml::Value>,
+    /// Seed of the accretion curves and the ADC noise (host format; default 1).
+    pub seed: Option<toml::Value>,
     /// Run until this virtual time, s (default: the end of the last segment).
     pub end_s: Option<f64>,
     /// Config fields (names of `foisctl config set`) sent in a `SetConfig`
     /// right after boot; the others keep their defaults.
     #[serde(default)]
     pub config: BTreeMap<String, toml::Value>,
-    /// The timeline.
+    /// The timeline: the host's `[[segment]]` tables, parsed by the host.
     #[serde(default, rename = "segment")]
-    pub segments: Vec<SegmentSpec>,
+    pub segments: Vec<toml::Value>,
     /// Temporary changes laid over the segments (sun steps, noise bursts).
     #[serde(default, rename = "overlay")]
     pub overlays: Vec<OverlaySpec>,
@@ -131,38 +113,6 @@ pub struct ScenarioFile {
 
 fn one() -> u64 {
     1
-}
-
-/// One stretch of the timeline. Unset keys carry over from the previous
-/// segment (a ramp's end value becomes the next segment's constant value);
-/// the first segment starts from [`Segment::new`]'s values.
-#[derive(Debug, Clone, Deserialize, Default)]
-#[serde(deny_unknown_fields)]
-pub struct SegmentSpec {
-    /// Length, s.
-    pub duration_s: f64,
-    /// dry | flat | glazed | rime | water.
-    pub cover: Option<String>,
-    /// Accretion rate, mm/h.
-    pub rate_mm_per_h: Option<f64>,
-    /// Thickness at the segment's start, mm (not carried over).
-    pub start_thickness_mm: Option<f64>,
-    /// Air temperature (at the start, if ramped), °C.
-    pub air_temp_c: Option<f64>,
-    /// Air temperature at the end (linear ramp), °C; not carried over.
-    pub air_temp_end_c: Option<f64>,
-    /// Ambient DC photocurrent per channel, µA.
-    pub ambient_ua: Option<[f64; 2]>,
-    /// 100 Hz flicker amplitude per channel, µA.
-    pub flicker_ua: Option<[f64; 2]>,
-    /// Flicker frequency, Hz.
-    pub flicker_hz: Option<f64>,
-    /// LED output relative to nominal (at the start, if ramped).
-    pub led_factor: Option<f64>,
-    /// LED output factor at the end (linear ramp); not carried over.
-    pub led_factor_end: Option<f64>,
-    /// ADC noise, rms LSB per conversion.
-    pub adc_noise_lsb: Option<f64>,
 }
 
 /// A temporary change: from `start_s` for `duration_s`, repeated `repeat`
@@ -293,6 +243,8 @@ pub struct Expect {
     /// Most frames lost (sequence gaps + undecodable frames) allowed (default 0).
     #[serde(default)]
     pub max_frames_lost: u64,
+    /// At least this many frames lost (a lossy-link scenario proves the count).
+    pub min_frames_lost: Option<u64>,
     /// Most `Error` replies not asked for by a command (default 0).
     #[serde(default)]
     pub max_errors: u32,
@@ -311,6 +263,10 @@ pub struct Scenario {
     pub path: PathBuf,
     /// The parsed file (sweep levels already applied to the segments).
     pub file: ScenarioFile,
+    /// Sensor construction.
+    pub sensor: fois_sim::SensorKind,
+    /// Seed of the curves and the ADC noise.
+    pub seed: u64,
     /// The config sent after boot (`None`: defaults, nothing sent).
     pub config: Option<Config>,
     /// The timeline, overlays applied.
@@ -382,6 +338,7 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
             ensure!((0.0..=1.0).contains(&p), "[link] {k} = {p} is not in 0..=1");
         }
     }
+    let host = host_scenario(&file)?;
     let levels: Vec<(Option<f64>, bool)> = match &file.sweep {
         None => vec![(None, true)],
         Some(s) => {
@@ -401,16 +358,20 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
     let mut out = Vec::new();
     for (level, checked) in levels {
         let mut f = file.clone();
+        let mut segments = host.timeline.segments().to_vec();
         if let Some(x) = level {
             ensure!(x >= 0.0 && x.is_finite(), "[sweep] noise {x} is not ≥ 0");
-            for s in &mut f.segments {
-                s.adc_noise_lsb = Some(x);
+            for s in &mut segments {
+                s.adc_noise_lsb = x;
             }
             for o in &mut f.overlays {
                 o.adc_noise_lsb = o.adc_noise_lsb.map(|_| x);
             }
         }
-        let segments = build_segments(&f.segments)?;
+        ensure!(
+            segments.iter().all(|s| s.duration_s.is_finite()) || f.end_s.is_some(),
+            "a segment lasts \"inf\": set end_s"
+        );
         let segments = apply_overlays(segments, &f.overlays)?;
         let timeline = Timeline::new(segments);
         let end_s = f.end_s.unwrap_or_else(|| timeline.duration_s());
@@ -430,6 +391,8 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
             name,
             path: path.to_path_buf(),
             file: f,
+            sensor: host.sensor,
+            seed: host.seed,
             config: config.clone(),
             timeline,
             end_s,
@@ -517,91 +480,18 @@ fn validate_expect(e: &Expect) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn build_segments(specs: &[SegmentSpec]) -> anyhow::Result<Vec<Segment>> {
-    let mut out: Vec<Segment> = Vec::with_capacity(specs.len());
-    for (i, s) in specs.iter().enumerate() {
-        let n = i + 1;
-        ensure!(
-            s.duration_s.is_finite() && s.duration_s > 0.0,
-            "[[segment]] #{n}: duration_s = {} must be > 0",
-            s.duration_s
-        );
-        // Start from the previous segment's values (its ramps' end values).
-        let mut seg = match out.last() {
-            Some(p) => {
-                let mut q = p.clone();
-                q.air_temp_c = p.air_temp_end_c.unwrap_or(p.air_temp_c);
-                q.led_factor = p.led_factor_end.unwrap_or(p.led_factor);
-                q.air_temp_end_c = None;
-                q.led_factor_end = None;
-                q.start_thickness_mm = None;
-                q.duration_s = s.duration_s;
-                q
-            }
-            None => Segment::new(s.duration_s, Cover::Dry),
-        };
-        if let Some(c) = &s.cover {
-            seg.cover = Cover::parse(c).with_context(|| {
-                format!("[[segment]] #{n}: cover `{c}` is not one of dry|flat|glazed|rime|water")
-            })?;
-        }
-        if let Some(x) = s.rate_mm_per_h {
-            seg.rate_mm_per_h = x;
-        }
-        if let Some(x) = s.start_thickness_mm {
-            ensure!(
-                (0.0..=15.0).contains(&x),
-                "[[segment]] #{n}: start_thickness_mm = {x} is not in 0..=15"
-            );
-            seg.start_thickness_mm = Some(x);
-        }
-        if let Some(x) = s.air_temp_c {
-            seg.air_temp_c = x;
-        }
-        seg.air_temp_end_c = s.air_temp_end_c;
-        if let Some(x) = s.ambient_ua {
-            seg.ambient_ua = x;
-        }
-        if let Some(x) = s.flicker_ua {
-            seg.flicker_ua = x;
-        }
-        if let Some(x) = s.flicker_hz {
-            seg.flicker_hz = x;
-        }
-        if let Some(x) = s.led_factor {
-            seg.led_factor = x;
-        }
-        seg.led_factor_end = s.led_factor_end;
-        if let Some(x) = s.adc_noise_lsb {
-            seg.adc_noise_lsb = x;
-        }
-        let finite = [
-            seg.rate_mm_per_h,
-            seg.air_temp_c,
-            seg.flicker_hz,
-            seg.led_factor,
-            seg.adc_noise_lsb,
-        ]
-        .iter()
-        .chain(seg.ambient_ua.iter())
-        .chain(seg.flicker_ua.iter())
-        .chain(seg.air_temp_end_c.iter())
-        .chain(seg.led_factor_end.iter())
-        .all(|x| x.is_finite());
-        ensure!(finite, "[[segment]] #{n}: a value is not a finite number");
-        ensure!(
-            seg.ambient_ua
-                .iter()
-                .chain(seg.flicker_ua.iter())
-                .all(|&x| x >= 0.0)
-                && seg.adc_noise_lsb >= 0.0
-                && seg.led_factor >= 0.0
-                && seg.led_factor_end.is_none_or(|x| x >= 0.0),
-            "[[segment]] #{n}: ambient, flicker, noise and LED factor must be ≥ 0"
-        );
-        out.push(seg);
+/// The timeline part of the file, parsed by the host's scenario parser.
+fn host_scenario(f: &ScenarioFile) -> anyhow::Result<fois_host::virtual_hw::Scenario> {
+    let mut t = toml::Table::new();
+    if let Some(v) = &f.sensor {
+        t.insert("sensor".into(), v.clone());
     }
-    Ok(out)
+    if let Some(v) = &f.seed {
+        t.insert("seed".into(), v.clone());
+    }
+    t.insert("segment".into(), toml::Value::Array(f.segments.clone()));
+    let text = toml::to_string(&t).context("cannot re-serialise the timeline")?;
+    fois_host::virtual_hw::scenario::parse(&text).map_err(|e| anyhow::anyhow!("timeline: {e}"))
 }
 
 /// Occurrences of the overlays: (start, end, overlay index), validated.
