@@ -4,7 +4,7 @@
 //! [`fois_firmware::PhotoAdc`]. The virtual node (`foisctl virtual-node`,
 //! `foisctl demo`) and the hardware-in-loop suite in `tests/` build on it.
 //!
-//! ```no_run
+//! ```
 //! use std::sync::Arc;
 //! use fois_host::virtual_hw::{Cover, Environment, Segment, Timeline};
 //! use fois_host::virtual_node::{NodeOptions, VirtualNode};
