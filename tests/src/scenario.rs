@@ -109,6 +109,9 @@ pub struct ScenarioFile {
     /// What must hold.
     #[serde(default)]
     pub expect: Expect,
+    /// The file's text (for error messages).
+    #[serde(skip)]
+    pub source: String,
 }
 
 fn one() -> u64 {
@@ -288,8 +291,9 @@ pub fn load(path: &Path) -> anyhow::Result<Vec<Scenario>> {
 
 /// Parse and validate `text` as the file `path`.
 pub fn parse(path: &Path, text: &str) -> anyhow::Result<Vec<Scenario>> {
-    let file: ScenarioFile =
+    let mut file: ScenarioFile =
         toml::from_str(text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e))?;
+    file.source = text.to_string();
     build(path, file).with_context(|| format!("{}", path.display()))
 }
 
@@ -491,7 +495,31 @@ fn host_scenario(f: &ScenarioFile) -> anyhow::Result<fois_host::virtual_hw::Scen
     }
     t.insert("segment".into(), toml::Value::Array(f.segments.clone()));
     let text = toml::to_string(&t).context("cannot re-serialise the timeline")?;
-    fois_host::virtual_hw::scenario::parse(&text).map_err(|e| anyhow::anyhow!("timeline: {e}"))
+    fois_host::virtual_hw::scenario::parse(&text).map_err(|e| {
+        // The host's parser saw a re-serialised copy: point at the file's line.
+        let at = unknown_key(&e)
+            .and_then(|k| line_of_key(&f.source, k))
+            .map(|n| format!(" (line {n} of the file)"))
+            .unwrap_or_default();
+        anyhow::anyhow!("[[segment]]{at}: {e}")
+    })
+}
+
+/// The key named by an "unknown field `key`" message.
+fn unknown_key(msg: &str) -> Option<&str> {
+    let rest = msg.split("unknown field `").nth(1)?;
+    rest.split('`').next()
+}
+
+/// 1-based number of the first line that sets `key`.
+fn line_of_key(text: &str, key: &str) -> Option<usize> {
+    text.lines()
+        .position(|l| {
+            l.trim_start()
+                .strip_prefix(key)
+                .is_some_and(|r| r.trim_start().starts_with('='))
+        })
+        .map(|i| i + 1)
 }
 
 /// Occurrences of the overlays: (start, end, overlay index), validated.

@@ -7,7 +7,14 @@ use std::time::Instant;
 
 use fois_hil::{report, run, scenario};
 
-fn main() -> anyhow::Result<()> {
+fn main() {
+    if let Err(e) = report() {
+        eprintln!("error: {e:#}");
+        std::process::exit(2);
+    }
+}
+
+fn report() -> anyhow::Result<()> {
     let args: Vec<PathBuf> = std::env::args_os().skip(1).map(PathBuf::from).collect();
     let paths = if args.is_empty() {
         vec![scenario::default_dir()]
