@@ -167,6 +167,8 @@ struct Session<'a> {
     view: View,
     sum: MonitorSummary,
     stop: &'a AtomicBool,
+    /// Node uptime of the last measurement or event, ms.
+    last_uptime_ms: Option<u64>,
 }
 
 impl Session<'_> {
@@ -193,6 +195,7 @@ impl Session<'_> {
                         self.row(Row::gap(f.seq, n))?;
                     }
                     SeqEvent::Restart => {
+                        self.last_uptime_ms = None;
                         self.view.say(&format!(
                             "! node restarted (sequence went back to {})",
                             f.seq
@@ -203,6 +206,29 @@ impl Session<'_> {
                         })?;
                     }
                     _ => {}
+                }
+                // A node that reset while we were away may have sent more
+                // frames than before: its uptime going back tells.
+                let uptime = match &f.msg {
+                    DeviceMsg::Measurement(m) => Some(m.uptime_ms),
+                    DeviceMsg::Event(e) => Some(e.uptime_ms),
+                    _ => None,
+                };
+                if let Some(u) = uptime {
+                    if let Some(last) = self.last_uptime_ms
+                        && u < last
+                        && ev != SeqEvent::Restart
+                    {
+                        self.view.say(&format!(
+                            "! node restarted (uptime went back from {last} to {u} ms)"
+                        ));
+                        self.row(Row {
+                            seq: Some(f.seq),
+                            uptime_ms: Some(u),
+                            ..Row::note("node_restart", format!("uptime went back from {last} ms"))
+                        })?;
+                    }
+                    self.last_uptime_ms = Some(u);
                 }
                 match &f.msg {
                     DeviceMsg::Measurement(m) => {
@@ -254,6 +280,7 @@ pub fn run(opts: &MonitorOptions, stop: &AtomicBool) -> anyhow::Result<MonitorSu
         view: View::new(opts.plain, opts.quiet),
         sum: MonitorSummary::default(),
         stop,
+        last_uptime_ms: None,
     };
     let result = run_session(opts, &mut s);
     s.view.finish();

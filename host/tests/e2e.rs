@@ -237,9 +237,10 @@ fn node_killed_and_restarted_monitor_reconnects_and_logs_the_gap() {
         .expect("link_lost row");
     let up2 = ks.iter().rposition(|k| k == "link_up").unwrap();
     assert!(up2 > lost, "{ks:?}");
-    assert!(
-        ks[lost..].iter().any(|k| k == "node_restart"),
-        "restart recorded"
+    assert_eq!(
+        ks[lost..].iter().filter(|k| *k == "node_restart").count(),
+        1,
+        "restart recorded once: {ks:?}"
     );
     assert!(ks[..lost].iter().filter(|k| *k == "measurement").count() > 20);
     assert!(ks[up2..].iter().filter(|k| *k == "measurement").count() > 20);
@@ -556,4 +557,52 @@ fn demo_runs_a_scenario_file_water_then_freezing() {
     let (code, _, err) = foisctl(&["virtual-node", "--scenario", bad.to_str().unwrap()]);
     assert_eq!(code, 1);
     assert!(err.contains("slush") && err.contains("segment 1"), "{err}");
+}
+
+#[test]
+fn node_refusal_exits_6_and_other_protocol_version_exits_5() {
+    // Sun strong enough to saturate both channels: dark calibration refused.
+    let node = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--ambient", "400"]);
+    let (code, _, err) = foisctl(&["calibrate-dark", "--port", &node.path]);
+    assert_eq!(code, 6, "{err}");
+    assert!(err.contains("CalibrationFailed"), "{err}");
+    drop(node);
+
+    // A "node" that speaks protocol version 2: its Hello (frozen shape) is
+    // readable, the version is refused.
+    use fois_protocol::{
+        DeviceFrame, DeviceMsg, Hello, PROTOCOL_VERSION, ResetReason, encode_to_vec,
+    };
+    use serialport::SerialPort;
+    use std::io::Write;
+    let (mut master, slave) = serialport::TTYPort::pair().unwrap();
+    master.set_timeout(Duration::from_millis(100)).unwrap();
+    let path = slave.name().unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let s2 = stop.clone();
+    let talker = std::thread::spawn(move || {
+        let hello = encode_to_vec(&DeviceFrame {
+            seq: 0,
+            msg: DeviceMsg::Hello(Hello {
+                protocol_version: PROTOCOL_VERSION + 1,
+                firmware_version: [9, 0, 0],
+                board: Hello::board_from_str("future"),
+                unique_id: [1; 12],
+                reset_reason: ResetReason::PowerOn,
+            }),
+        });
+        while !s2.load(Ordering::Relaxed) {
+            let _ = master.write_all(&hello);
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    });
+    let (code, _, err) = foisctl(&["monitor", "--port", &path]);
+    stop.store(true, Ordering::Relaxed);
+    talker.join().unwrap();
+    drop(slave);
+    assert_eq!(code, 5, "{err}");
+    assert!(
+        err.contains(&format!("speaks protocol version {}", PROTOCOL_VERSION + 1)),
+        "{err}"
+    );
 }
