@@ -14,8 +14,8 @@ use anyhow::{Context, Result, bail};
 use clap::{Args, Subcommand, ValueEnum};
 use fois_sim::montecarlo::{DEFAULT_FIT_HALF_WIDTH_MM, FitQuality, fit_quality};
 use fois_sim::{
-    Coupling, CrlbPoint, Curve, Geometry, IceKind, McPoint, MonteCarlo, SensorKind, SensorModel,
-    SimConfig, analytic_curve, crlb, monte_carlo,
+    Coupling, CrlbPoint, Curve, DiffuseFresnel, Geometry, IceKind, McPoint, MonteCarlo, SensorKind,
+    SensorModel, SimConfig, analytic_curve, crlb, monte_carlo,
 };
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -106,6 +106,15 @@ pub enum CouplingArg {
     Acceptance,
 }
 
+/// Fresnel angle of diffusely reflected rays.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum DiffuseFresnelArg {
+    /// At the micro-facet's angle of incidence (physical, total reflection beyond 49.8°).
+    Facet,
+    /// At the mean surface's angle; δ_R only deflects the ray (a reading of eq. 3.22).
+    MeanSurface,
+}
+
 /// Options shared by the subcommands that trace accretions.
 #[derive(Debug, Args, Clone)]
 pub struct ModelOpts {
@@ -130,6 +139,9 @@ pub struct ModelOpts {
     /// Override the diffuse reflection angle range δ_R ~ U(±deg), degrees (0 = off).
     #[arg(long)]
     pub diffuse_deg: Option<f64>,
+    /// Fresnel angle of diffusely reflected rays: facet (default) or mean-surface.
+    #[arg(long, value_enum, default_value = "facet")]
+    pub diffuse_fresnel: DiffuseFresnelArg,
     /// Every source fibre emits along its axis (no angular spread θ_f).
     #[arg(long)]
     pub no_spread: bool,
@@ -303,6 +315,10 @@ pub fn make_config(ice: IceArg, m: &ModelOpts) -> Result<SimConfig> {
         CouplingArg::Acceptance => Coupling::AcceptanceCone,
     };
     cfg.fibre_spread = !m.no_spread;
+    cfg.diffuse_fresnel = match m.diffuse_fresnel {
+        DiffuseFresnelArg::Facet => DiffuseFresnel::Facet,
+        DiffuseFresnelArg::MeanSurface => DiffuseFresnel::MeanSurface,
+    };
     if let Some(d) = m.diffuse_deg {
         if !(0.0..=60.0).contains(&d) {
             bail!("--diffuse-deg must be in 0..=60 degrees, got {d}");
@@ -472,6 +488,7 @@ fn cmd_analytic(
         step_mm,
         coupling: CouplingArg::Thesis,
         diffuse_deg: None,
+        diffuse_fresnel: DiffuseFresnelArg::Facet,
         no_spread: false,
         threads: None,
     };
@@ -833,7 +850,14 @@ fn cmd_gallery(dir: &Path, runs: u64, seed: u64) -> Result<()> {
     // 5.13, 5.14, 5.16: ten accretions each, thesis-ch5.
     let mut g0 = geo_cfg(IceKind::Glazed, ch5);
     g0.params.diffuse_max_rad = 0.0;
+    let mut g_mean = geo_cfg(IceKind::Glazed, ch5);
+    g_mean.diffuse_fresnel = DiffuseFresnel::MeanSurface;
     for (cfg, name, title) in [
+        (
+            g_mean,
+            "fig5_14b_glazed_diffuse_mean_surface_fresnel.png",
+            "glazed, δ_R ~ U(±30°), Fresnel at the mean surface: 10 accretions",
+        ),
         (
             g0,
             "fig5_13_glazed_no_diffuse.png",

@@ -16,7 +16,7 @@ pub mod montecarlo;
 pub use analytic::analytic_curve;
 pub use geometry::{Geometry, Region};
 pub use model::{
-    Coupling, Curve, CurvePoint, IceKind, IceParams, SensorKind, SensorModel, SimConfig, SimError,
-    accretion_curve,
+    Coupling, Curve, CurvePoint, DiffuseFresnel, IceKind, IceParams, SensorKind, SensorModel,
+    SimConfig, SimError, accretion_curve,
 };
 pub use montecarlo::{CrlbPoint, McPoint, MonteCarlo, crlb, monte_carlo};

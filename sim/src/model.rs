@@ -103,6 +103,19 @@ pub enum Coupling {
     AcceptanceCone,
 }
 
+/// At which angle the Fresnel reflectance of a diffusely reflected ray is taken.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum DiffuseFresnel {
+    /// At the micro-facet's angle of incidence (physical; beyond 49.8° the ray reflects
+    /// totally). The default.
+    #[default]
+    Facet,
+    /// At the angle of incidence on the mean (tilted) surface, the diffuse angle only
+    /// deflecting the ray — one reading of thesis eqs. 3.22–3.23; it makes diffuse reflection
+    /// lower the glazed levels as in thesis Fig. 5.14.
+    MeanSurface,
+}
+
 /// Configuration of a simulation.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SimConfig {
@@ -124,6 +137,8 @@ pub struct SimConfig {
     pub fibre_spread: bool,
     /// Seed of the fibre angles, drawn once per model set-up (the sensor), not per accretion.
     pub fibre_seed: u64,
+    /// Fresnel angle of diffusely reflected rays (default: the facet's).
+    pub diffuse_fresnel: DiffuseFresnel,
 }
 
 impl SimConfig {
@@ -139,6 +154,7 @@ impl SimConfig {
             coupling: Coupling::ThesisLiteral,
             fibre_spread: true,
             fibre_seed: DEFAULT_FIBRE_SEED,
+            diffuse_fresnel: DiffuseFresnel::Facet,
         }
     }
 
@@ -603,7 +619,11 @@ impl SensorModel {
                         ray.p0 + DVec2::new(v.x, v.y) * t_up + DVec2::new(rd.x, rd.y) * t_down;
                     let k = bundle_index(geo.region(land.x, land.y));
                     if k < 2 {
-                        let rfl = fr_dielectric(cos_i, n_med, N_AIR);
+                        let cos_f = match cfg.diffuse_fresnel {
+                            DiffuseFresnel::Facet => cos_i,
+                            DiffuseFresnel::MeanSurface => v.dot(normal),
+                        };
+                        let rfl = fr_dielectric(cos_f, n_med, N_AIR);
                         let att = (-alpha * (t_up + t_down)).exp();
                         refl[i][k] += fwd * rfl * self.couple(rd) * att;
                     }
