@@ -363,7 +363,13 @@ fn geometric_gap(rng: &mut Pcg32, ln_q: f64) -> u32 {
 impl SensorModel {
     /// Set up the sensor: source fibres on their grid, fibre angles θ_f ~ N(0, θ_max/5)
     /// clipped to ±θ_max,f with a uniform azimuth (eqs. 3.17–3.20), drawn from `fibre_seed`.
+    ///
+    /// # Panics
+    /// If `cfg.validate()` fails (e.g. a zero step): check user input with `validate` first.
     pub fn new(cfg: &SimConfig) -> Self {
+        if let Err(e) = cfg.validate() {
+            panic!("invalid SimConfig: {e}");
+        }
         let n_med = cfg.params.n_medium;
         let th_max = theta_max(NA, N_AIR); // (3.17)
         let th_max_f = theta_max_fibre(th_max, N_AIR, N_FIBRE); // (3.18)
@@ -771,6 +777,9 @@ fn bundle_index(r: Region) -> usize {
 }
 
 /// One physical accretion of `cfg`, deterministic in (seed, run).
+///
+/// # Panics
+/// If `cfg.validate()` fails.
 pub fn accretion_curve(cfg: &SimConfig, seed: u64, run: u64) -> Curve {
     SensorModel::new(cfg).accretion(seed, run)
 }

@@ -333,3 +333,11 @@ fn diffuse_reflection_lowers_glazed_levels_only_with_mean_surface_fresnel() {
         none.to_bits()
     );
 }
+
+#[test]
+#[should_panic(expected = "invalid SimConfig: bad parameter: step")]
+fn an_invalid_config_panics_with_a_message_instead_of_allocating_forever() {
+    let mut c = cfg(IceKind::Rime, SensorKind::B, Geometry::ThesisCh5);
+    c.step_mm = 0.0;
+    let _ = accretion_curve(&c, 1, 0);
+}
