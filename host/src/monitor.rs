@@ -104,16 +104,16 @@ impl View {
         }
     }
 
-    fn status(&mut self, text: String) {
+    fn status(&mut self, [a, b]: [String; 2]) {
         if self.quiet {
             return;
         }
         match &self.bar {
-            Some(b) => b.set_message(text),
+            Some(bar) => bar.set_message(format!("{a}\n  {b}")),
             None => {
                 if self.last_line.elapsed() >= Duration::from_secs(1) {
                     self.last_line = Instant::now();
-                    println!("{text}");
+                    println!("{a}  | {b}");
                 }
             }
         }
@@ -126,40 +126,49 @@ impl View {
     }
 }
 
-/// One status line from the last measurement and the counters.
-pub fn status_line(m: Option<&Measurement>, s: &MonitorSummary) -> String {
-    let head = match m {
-        None => "waiting for measurements".to_string(),
-        Some(m) => {
-            let alarm = if m.flags & flags::ALARM != 0 {
-                if m.flags & flags::ALARM_ACKED != 0 {
-                    "ALARM (acked)"
-                } else {
-                    "ALARM"
-                }
-            } else {
-                "off"
-            };
-            let state = match m.state {
-                DetectorState::Dry => "Dry",
-                DetectorState::Wet => "Wet",
-                DetectorState::Ice => "ICE",
-            };
-            format!(
-                "I1 {:8.3} µA  I2 {:8.3} µA  ambient {:7.2}/{:7.2} µA  {:6.2} °C  state {state:3}  alarm {alarm}{}",
-                m.i1_na as f64 / 1000.0,
-                m.i2_na as f64 / 1000.0,
-                m.ambient1_na as f64 / 1000.0,
-                m.ambient2_na as f64 / 1000.0,
-                f64::from(m.temperature_centi_c) / 100.0,
-                if m.is_valid() { "" } else { "  SATURATED" }
-            )
-        }
-    };
-    format!(
-        "{head}  | frames {} lost {} rejected {}",
+/// The status from the last measurement and the counters: two lines of at
+/// most 80 columns (measurement; state and counters).
+pub fn status_lines(m: Option<&Measurement>, s: &MonitorSummary) -> [String; 2] {
+    let counters = format!(
+        "frames {}  lost {}  rejected {}",
         s.frames, s.lost, s.rejected
-    )
+    );
+    let Some(m) = m else {
+        return ["waiting for measurements".to_string(), counters];
+    };
+    let alarm = match (
+        m.flags & flags::ALARM != 0,
+        m.flags & flags::ALARM_ACKED != 0,
+    ) {
+        (true, true) => "ON (acked)",
+        (true, false) => "ON",
+        _ => "off",
+    };
+    let state = match m.state {
+        DetectorState::Dry => "Dry",
+        DetectorState::Wet => "Wet",
+        DetectorState::Ice => "ICE",
+    };
+    [
+        format!(
+            "I1 {:8.3} µA  I2 {:8.3} µA  ambient {:.2}/{:.2} µA  {:6.2} °C",
+            m.i1_na as f64 / 1000.0,
+            m.i2_na as f64 / 1000.0,
+            m.ambient1_na as f64 / 1000.0,
+            m.ambient2_na as f64 / 1000.0,
+            f64::from(m.temperature_centi_c) / 100.0,
+        ),
+        format!(
+            "state {state:3}  alarm {alarm:10}  {counters}{}",
+            if m.is_valid() { "" } else { "  SATURATED" }
+        ),
+    ]
+}
+
+/// The status on one line (plain output).
+pub fn status_line(m: Option<&Measurement>, s: &MonitorSummary) -> String {
+    let [a, b] = status_lines(m, s);
+    format!("{a}  | {b}")
 }
 
 struct Session<'a> {
@@ -262,8 +271,8 @@ impl Session<'_> {
         if let Some(log) = &mut self.log {
             log.tick()?;
         }
-        let line = status_line(self.sum.last.as_ref(), &self.sum);
-        self.view.status(line);
+        let lines = status_lines(self.sum.last.as_ref(), &self.sum);
+        self.view.status(lines);
         Ok(())
     }
 }
