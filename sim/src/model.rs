@@ -340,6 +340,9 @@ pub(crate) fn accretion_key(seed: u64, run: u64) -> u64 {
     mix64(mix64(seed) ^ run.wrapping_mul(0xD6E8_FEB8_6659_FD93))
 }
 
+/// Most bubble layers one ray walks through (20 000 × 0.1 mm = 2 m of ice along z).
+const MAX_LAYERS_PER_RAY: u32 = 20_000;
+
 /// Above this P_B the bubbles are drawn layer by layer, below it by geometric gaps.
 const BERNOULLI_ABOVE: f64 = 0.02;
 
@@ -530,12 +533,14 @@ impl SensorModel {
                 let q = (z_top - a - off1 * z_b) * inv_step - 1e-9;
                 // First output index at or above d_j: q grows with j, so step the index up
                 // (about one step per layer, no float-to-int conversion).
-                while i_f < q {
+                while i_f < q && i_cur < nt {
                     i_f += 1.0;
                     i_cur += 1;
                 }
                 let i = i_cur;
-                if i >= nt {
+                // A ray almost parallel to a tilted surface would walk very many layers
+                // before the surface covers them: stop after MAX_LAYERS_PER_RAY (2 m).
+                if i >= nt || next_layer >= MAX_LAYERS_PER_RAY {
                     break;
                 }
                 if bernoulli && bub.next_u32() >= p_thr {

@@ -341,3 +341,26 @@ fn an_invalid_config_panics_with_a_message_instead_of_allocating_forever() {
     c.step_mm = 0.0;
     let _ = accretion_curve(&c, 1, 0);
 }
+
+#[test]
+fn extreme_parameters_finish_quickly() {
+    // Very rare bubbles (huge geometric gaps) and the steepest allowed slope: no hang, no NaN.
+    let mut c = cfg(IceKind::Glazed, SensorKind::A, Geometry::ThesisCh5);
+    c.params.p_bubble = 1e-12;
+    c.params.slope_max_rad = 20f64.to_radians();
+    for run in 0..20 {
+        let k = accretion_curve(&c, 5, run);
+        assert!(
+            k.points
+                .iter()
+                .all(|p| p.i1_ua.is_finite() && p.i2_ua.is_finite())
+        );
+    }
+    c.params.p_bubble = 1.0;
+    let k = accretion_curve(&c, 5, 0);
+    assert!(
+        k.points
+            .iter()
+            .all(|p| p.i1_ua.is_finite() && p.i1_ua >= 0.0)
+    );
+}
