@@ -152,7 +152,7 @@ pub fn samples_from_log(
             format!(
                 "log {} has no column `{name}` (columns: {})",
                 path.display(),
-                t.columns.join(", ")
+                t.header.join(", ")
             )
         })
     };
@@ -203,7 +203,11 @@ pub fn samples_from_log(
 
 /// Run the whole comparison (reads the log, runs the Monte Carlo).
 pub fn run(opts: &CompareOptions) -> anyhow::Result<Comparison> {
-    let table = LogTable::read(&opts.log)?;
+    let mut wanted = vec!["kind", "valid", "i1_ua", "i2_ua", "uptime_ms"];
+    if let ThicknessSource::Column(c) = &opts.thickness {
+        wanted.push(c.as_str());
+    }
+    let table = LogTable::read_columns(&opts.log, Some(&wanted))?;
     let samples = samples_from_log(&table, &opts.thickness, &opts.log)?;
     if samples.is_empty() {
         bail!(

@@ -98,6 +98,35 @@ pub fn alarm_periods(points: &[TimePoint]) -> Vec<(f64, f64)> {
     out
 }
 
+/// At most `2 * buckets` points: the minimum and the maximum of each run of
+/// consecutive points, in their order (spikes survive, a day at 10 Hz draws
+/// fast).
+pub fn decimate(points: &[(f64, f64)], buckets: usize) -> Vec<(f64, f64)> {
+    if points.len() <= 2 * buckets.max(1) {
+        return points.to_vec();
+    }
+    let size = points.len().div_ceil(buckets.max(1));
+    let mut out = Vec::with_capacity(2 * buckets);
+    for chunk in points.chunks(size) {
+        let mut lo = 0;
+        let mut hi = 0;
+        for (i, p) in chunk.iter().enumerate() {
+            if p.1 < chunk[lo].1 {
+                lo = i;
+            }
+            if p.1 > chunk[hi].1 {
+                hi = i;
+            }
+        }
+        let (a, b) = if lo <= hi { (lo, hi) } else { (hi, lo) };
+        out.push(chunk[a]);
+        if b != a {
+            out.push(chunk[b]);
+        }
+    }
+    out
+}
+
 fn draw_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow::anyhow!("drawing failed: {e:?}")
 }
@@ -105,7 +134,10 @@ fn draw_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 /// `foisctl plot`: I1 and I2 over host time, alarm periods shaded, breaks
 /// in the link as grey lines.
 pub fn plot_log(log: &Path, out: &Path) -> anyhow::Result<usize> {
-    let table = LogTable::read(log)?;
+    let table = LogTable::read_columns(
+        log,
+        Some(&["host_unix_ms", "kind", "i1_ua", "i2_ua", "alarm", "valid"]),
+    )?;
     let ts = time_series(&table, log)?;
     if ts.points.is_empty() {
         bail!("log {} holds no valid measurement to plot", log.display());
@@ -195,6 +227,7 @@ pub fn plot_log(log: &Path, out: &Path) -> anyhow::Result<usize> {
             }
         }
         for (k, s) in segs.into_iter().enumerate() {
+            let s = decimate(&s, 3000);
             let a = chart
                 .draw_series(LineSeries::new(s, color.stroke_width(2)))
                 .map_err(draw_err)?;
@@ -336,6 +369,23 @@ pub fn plot_comparison(c: &Comparison, ice: &str, out: &Path) -> anyhow::Result<
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn decimation_keeps_extremes_in_order() {
+        let pts: Vec<(f64, f64)> = (0..10_000)
+            .map(|i| {
+                (
+                    f64::from(i),
+                    if i == 4321 { 99.0 } else { f64::from(i % 7) },
+                )
+            })
+            .collect();
+        let d = decimate(&pts, 100);
+        assert!(d.len() <= 200);
+        assert!(d.windows(2).all(|w| w[0].0 < w[1].0));
+        assert!(d.contains(&(4321.0, 99.0)));
+        assert_eq!(decimate(&pts[..50], 100).len(), 50);
+    }
 
     #[test]
     fn alarm_periods_are_runs_of_alarm_rows() {
