@@ -297,14 +297,9 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
         ..NodeOptions::default()
     };
     let mut node = VirtualNode::new(env.clone(), opts);
-    let mut ids: Vec<u16> = Vec::new();
-    let mut next_id = 1u16;
-    // The ids our commands will carry (so their Errors are not stray).
+    // The ids our commands will carry, 1.. (so their Errors are not stray).
     let n_ids = f.commands.len() + usize::from(sc.config.is_some());
-    for _ in 0..n_ids {
-        ids.push(next_id);
-        next_id += 1;
-    }
+    let mut ids: Vec<u16> = (1u16..).take(n_ids).collect();
     ids.push(fois_firmware::dispatch::BUTTON_ID);
     let mut obs = Observer {
         env: env.clone(),
