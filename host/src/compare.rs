@@ -9,10 +9,10 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail};
+use anyhow::bail;
 use fois_sim::{Geometry, IceKind, McPoint, SensorKind, SimConfig, monte_carlo};
 
-use crate::csvlog::LogTable;
+use crate::csvlog::LogReader;
 
 /// How the thickness of each sample is known.
 #[derive(Debug, Clone, PartialEq)]
@@ -141,30 +141,18 @@ pub fn compare_samples(samples: Vec<Sample>, band: Vec<McPoint>, k_sigma: f64) -
 }
 
 /// Samples of a log: measurement rows (if the log has `kind`) that are
-/// valid (if it has `valid`), with their thickness.
-pub fn samples_from_log(
-    t: &LogTable,
-    src: &ThicknessSource,
-    path: &Path,
-) -> anyhow::Result<Vec<Sample>> {
-    let need = |name: &str| {
-        t.col(name).with_context(|| {
-            format!(
-                "log {} has no column `{name}` (columns: {})",
-                path.display(),
-                t.header.join(", ")
-            )
-        })
-    };
-    let (i1, i2) = (need("i1_ua")?, need("i2_ua")?);
-    let kind = t.col("kind");
-    let valid = t.col("valid");
+/// valid (if it has `valid`), with their thickness. Reads row by row.
+pub fn samples_from_log(path: &Path, src: &ThicknessSource) -> anyhow::Result<Vec<Sample>> {
+    let mut rd = LogReader::open(path)?;
+    let (i1, i2) = (rd.need("i1_ua")?, rd.need("i2_ua")?);
+    let kind = rd.col("kind");
+    let valid = rd.col("valid");
     let thick_col = match src {
-        ThicknessSource::Column(name) => Some(need(name)?),
+        ThicknessSource::Column(name) => Some(rd.need(name)?),
         ThicknessSource::Rate { .. } => None,
     };
     let uptime = match src {
-        ThicknessSource::Rate { .. } => Some(need("uptime_ms")?),
+        ThicknessSource::Rate { .. } => Some(rd.need("uptime_ms")?),
         _ => None,
     };
     let num = |s: &str| s.trim().parse::<f64>().ok().filter(|x| x.is_finite());
@@ -173,7 +161,8 @@ pub fn samples_from_log(
         _ => None,
     };
     let mut out = Vec::new();
-    for r in &t.rows {
+    let mut r = Vec::new();
+    while rd.next_row(&mut r)? {
         if kind.is_some_and(|k| r[k] != "measurement") {
             continue;
         }
@@ -203,12 +192,7 @@ pub fn samples_from_log(
 
 /// Run the whole comparison (reads the log, runs the Monte Carlo).
 pub fn run(opts: &CompareOptions) -> anyhow::Result<Comparison> {
-    let mut wanted = vec!["kind", "valid", "i1_ua", "i2_ua", "uptime_ms"];
-    if let ThicknessSource::Column(c) = &opts.thickness {
-        wanted.push(c.as_str());
-    }
-    let table = LogTable::read_columns(&opts.log, Some(&wanted))?;
-    let samples = samples_from_log(&table, &opts.thickness, &opts.log)?;
+    let samples = samples_from_log(&opts.log, &opts.thickness)?;
     if samples.is_empty() {
         bail!(
             "log {} has no valid measurement with a thickness in 0..=15 mm to compare",
@@ -348,26 +332,24 @@ mod tests {
              measurement,7200000,4,0.4,1,2.0\n",
         )
         .unwrap();
-        let t = LogTable::read(&p).unwrap();
         let by_rate = samples_from_log(
-            &t,
+            &p,
             &ThicknessSource::Rate {
                 mm_per_h: 2.0,
                 start_s: None,
             },
-            &p,
         )
         .unwrap();
         let d: Vec<f64> = by_rate.iter().map(|s| s.thickness_mm).collect();
         assert_eq!(d, [0.0, 1.0, 4.0]);
-        let by_col = samples_from_log(&t, &ThicknessSource::Column("laser_mm".into()), &p).unwrap();
+        let by_col = samples_from_log(&p, &ThicknessSource::Column("laser_mm".into())).unwrap();
         let d: Vec<f64> = by_col.iter().map(|s| s.thickness_mm).collect();
         assert_eq!(
             d,
             [0.5, 2.0],
             "20 mm is out of range, the invalid row is skipped"
         );
-        let err = samples_from_log(&t, &ThicknessSource::Column("nope".into()), &p).unwrap_err();
+        let err = samples_from_log(&p, &ThicknessSource::Column("nope".into())).unwrap_err();
         assert!(err.to_string().contains("no column `nope`"), "{err}");
     }
 }

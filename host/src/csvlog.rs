@@ -407,48 +407,19 @@ impl LogTable {
     }
 
     /// Read only the columns named in `wanted` (those the file has; all
-    /// when `None`), line by line.
+    /// when `None`).
     pub fn read_columns(path: &Path, wanted: Option<&[&str]>) -> anyhow::Result<LogTable> {
-        use anyhow::Context;
-        let cannot = || format!("cannot read log {}", path.display());
-        let file = File::open(path).with_context(cannot)?;
-        let mut reader = BufReader::with_capacity(1 << 16, file);
-        let mut line = String::new();
-        if reader.read_line(&mut line).with_context(cannot)? == 0 {
-            anyhow::bail!("log {} is empty", path.display());
-        }
-        let header = split_csv(line.trim_end_matches(['\n', '\r']));
+        let mut rd = LogReader::open(path)?;
+        let header = rd.header().to_vec();
         let keep: Vec<usize> = match wanted {
             None => (0..header.len()).collect(),
-            Some(names) => names
-                .iter()
-                .filter_map(|n| header.iter().position(|h| h == n))
-                .collect(),
+            Some(names) => names.iter().filter_map(|n| rd.col(n)).collect(),
         };
         let columns = keep.iter().map(|&i| header[i].clone()).collect();
         let mut rows = Vec::new();
-        loop {
-            line.clear();
-            if reader.read_line(&mut line).with_context(cannot)? == 0 {
-                break;
-            }
-            // A line without its newline was cut short (a killed logger).
-            let Some(text) = line.strip_suffix('\n') else {
-                break;
-            };
-            let text = text.strip_suffix('\r').unwrap_or(text);
-            if text.is_empty() {
-                continue;
-            }
-            let mut fields = split_csv(text);
-            if fields.len() != header.len() {
-                continue;
-            }
-            rows.push(
-                keep.iter()
-                    .map(|&i| std::mem::take(&mut fields[i]))
-                    .collect(),
-            );
+        let mut fields = Vec::new();
+        while rd.next_row(&mut fields)? {
+            rows.push(keep.iter().map(|&i| fields[i].clone()).collect());
         }
         Ok(LogTable {
             header,
@@ -469,6 +440,122 @@ impl LogTable {
             .map(|r| r[col].trim().parse::<f64>().unwrap_or(f64::NAN))
             .collect()
     }
+}
+
+/// Reads a CSV log row by row without keeping it (a day at 10 Hz is
+/// 864 000 rows).
+pub struct LogReader {
+    path: PathBuf,
+    reader: BufReader<File>,
+    header: Vec<String>,
+    line: String,
+}
+
+impl LogReader {
+    /// Open a CSV file and read its header.
+    pub fn open(path: &Path) -> anyhow::Result<LogReader> {
+        use anyhow::Context;
+        let file =
+            File::open(path).with_context(|| format!("cannot read log {}", path.display()))?;
+        let mut reader = BufReader::with_capacity(1 << 16, file);
+        let mut line = String::new();
+        let n = reader
+            .read_line(&mut line)
+            .with_context(|| format!("cannot read log {}", path.display()))?;
+        if n == 0 {
+            anyhow::bail!("log {} is empty", path.display());
+        }
+        let header = split_csv(line.trim_end_matches(['\n', '\r']));
+        Ok(LogReader {
+            path: path.to_path_buf(),
+            reader,
+            header,
+            line,
+        })
+    }
+
+    /// The header's columns.
+    pub fn header(&self) -> &[String] {
+        &self.header
+    }
+
+    /// Index of a column.
+    pub fn col(&self, name: &str) -> Option<usize> {
+        self.header.iter().position(|c| c == name)
+    }
+
+    /// Index of a column, or an error naming the file and its columns.
+    pub fn need(&self, name: &str) -> anyhow::Result<usize> {
+        self.col(name).ok_or_else(|| {
+            anyhow::anyhow!(
+                "log {} has no column `{name}` (columns: {})",
+                self.path.display(),
+                self.header.join(", ")
+            )
+        })
+    }
+
+    /// The next complete row with as many fields as the header, into
+    /// `fields`; `false` at the end. A last line cut short (a killed
+    /// logger) is ignored, and so are rows of the wrong width.
+    pub fn next_row(&mut self, fields: &mut Vec<String>) -> anyhow::Result<bool> {
+        use anyhow::Context;
+        loop {
+            self.line.clear();
+            let n = self
+                .reader
+                .read_line(&mut self.line)
+                .with_context(|| format!("cannot read log {}", self.path.display()))?;
+            if n == 0 {
+                return Ok(false);
+            }
+            let Some(text) = self.line.strip_suffix('\n') else {
+                return Ok(false);
+            };
+            let text = text.strip_suffix('\r').unwrap_or(text);
+            if text.is_empty() {
+                continue;
+            }
+            split_csv_into(text, fields);
+            if fields.len() == self.header.len() {
+                return Ok(true);
+            }
+        }
+    }
+}
+
+/// Split one CSV line into `out`, reusing its strings.
+pub fn split_csv_into(line: &str, out: &mut Vec<String>) {
+    let mut n = 0;
+    let mut quoted = false;
+    let mut chars = line.chars().peekable();
+    let field = |n: usize, out: &mut Vec<String>| {
+        if out.len() <= n {
+            out.push(String::new());
+        }
+        out[n].clear();
+    };
+    field(0, out);
+    let mut fresh = true;
+    while let Some(c) = chars.next() {
+        match (c, quoted) {
+            ('"', true) if chars.peek() == Some(&'"') => {
+                out[n].push('"');
+                chars.next();
+            }
+            ('"', true) => quoted = false,
+            ('"', false) if fresh => quoted = true,
+            (',', false) => {
+                n += 1;
+                field(n, out);
+                fresh = true;
+                continue;
+            }
+            (c, _) => out[n].push(c),
+        }
+        fresh = false;
+    }
+    out.truncate(n + 1);
 }
 
 /// Split one CSV line (RFC 4180 quoting).
@@ -523,6 +610,15 @@ mod tests {
         let f = split_csv(g.trim_end());
         assert_eq!(f[2], "gap");
         assert_eq!(f[15], "3");
+    }
+
+    #[test]
+    fn split_into_reuses_and_matches_split() {
+        let mut v = vec!["old".to_string(); 5];
+        for line in ["a,b,,\"c,\"\"d\"\"\",e", "", "x", ",", "\"\",1"] {
+            split_csv_into(line, &mut v);
+            assert_eq!(v, split_csv(line), "{line:?}");
+        }
     }
 
     #[test]

@@ -7,7 +7,7 @@ use anyhow::{Context, bail};
 use plotters::prelude::*;
 
 use crate::compare::{Comparison, band_at};
-use crate::csvlog::LogTable;
+use crate::csvlog::LogReader;
 
 const SIZE: (u32, u32) = (1200, 700);
 
@@ -32,30 +32,28 @@ pub struct TimeSeries {
     pub breaks_s: Vec<f64>,
 }
 
-/// Extract the time series from a foisctl log.
-pub fn time_series(t: &LogTable, path: &Path) -> anyhow::Result<TimeSeries> {
-    let need = |name: &str| {
-        t.col(name).with_context(|| {
-            format!(
-                "log {} has no column `{name}`: is it a foisctl log?",
-                path.display()
-            )
-        })
+/// Extract the time series from a foisctl log, row by row.
+pub fn time_series(path: &Path) -> anyhow::Result<TimeSeries> {
+    let mut rd = LogReader::open(path)?;
+    let need = |rd: &LogReader, name: &str| {
+        rd.need(name)
+            .with_context(|| format!("is {} a foisctl log?", path.display()))
     };
     let (ms, kind, i1, i2, alarm) = (
-        need("host_unix_ms")?,
-        need("kind")?,
-        need("i1_ua")?,
-        need("i2_ua")?,
-        need("alarm")?,
+        need(&rd, "host_unix_ms")?,
+        need(&rd, "kind")?,
+        need(&rd, "i1_ua")?,
+        need(&rd, "i2_ua")?,
+        need(&rd, "alarm")?,
     );
-    let valid = t.col("valid");
+    let valid = rd.col("valid");
     let num = |s: &str| s.trim().parse::<f64>().ok().filter(|x| x.is_finite());
-    let t0 = t.rows.iter().find_map(|r| num(&r[ms])).unwrap_or(0.0);
+    let mut t0: Option<f64> = None;
     let mut out = TimeSeries::default();
-    for r in &t.rows {
+    let mut r = Vec::new();
+    while rd.next_row(&mut r)? {
         let Some(tm) = num(&r[ms]) else { continue };
-        let t_s = (tm - t0) / 1000.0;
+        let t_s = (tm - *t0.get_or_insert(tm)) / 1000.0;
         match r[kind].as_str() {
             "measurement" => {
                 if valid.is_some_and(|v| r[v].trim() == "0") {
@@ -134,11 +132,7 @@ fn draw_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 /// `foisctl plot`: I1 and I2 over host time, alarm periods shaded, breaks
 /// in the link as grey lines.
 pub fn plot_log(log: &Path, out: &Path) -> anyhow::Result<usize> {
-    let table = LogTable::read_columns(
-        log,
-        Some(&["host_unix_ms", "kind", "i1_ua", "i2_ua", "alarm", "valid"]),
-    )?;
-    let ts = time_series(&table, log)?;
+    let ts = time_series(log)?;
     if ts.points.is_empty() {
         bail!("log {} holds no valid measurement to plot", log.display());
     }
