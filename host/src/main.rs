@@ -53,6 +53,7 @@ enum Cmd {
     /// Live view of a node (I1, I2, ambient, temperature, state, alarm, frames
     /// lost and rejected), optionally logged to CSV. Reconnects when the port
     /// returns; Ctrl-C exits.
+    #[command(after_help = exit::TABLE)]
     Monitor {
         #[command(flatten)]
         port: PortArgs,
@@ -74,8 +75,10 @@ enum Cmd {
     },
     /// Take the current readings of a dry, clean sensor face as the dark
     /// baseline (the node checks that the channels are steady).
+    #[command(after_help = exit::TABLE)]
     CalibrateDark(CmdArgs),
     /// Acknowledge the ice alarm (the output stays on while ice remains).
+    #[command(after_help = exit::TABLE)]
     Ack(CmdArgs),
     /// Run the firmware's own logic on simulated hardware (ray-traced ice
     /// accretion, analog front end, ambient light) and serve it on a
@@ -170,9 +173,11 @@ enum Cmd {
 #[derive(Debug, Subcommand)]
 enum ConfigCmd {
     /// Print every config field with its value, unit and allowed range.
+    #[command(after_help = exit::TABLE)]
     Get(CmdArgs),
     /// Change fields: KEY=VALUE ... (integers in the field's unit, see `config
     /// get`). Checked on the host with the node's own rule before sending.
+    #[command(after_help = exit::TABLE)]
     Set {
         #[command(flatten)]
         args: CmdArgs,
@@ -226,7 +231,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             opts.baud = port.baud;
             opts.log = log;
             opts.plain = plain;
-            opts.duration = duration.map(Duration::from_secs_f64);
+            opts.duration = match duration {
+                Some(d) if !(d.is_finite() && d >= 0.0) => {
+                    return Err(
+                        exit::Exit::new(exit::USAGE, "--duration must be >= 0 seconds").into(),
+                    );
+                }
+                d => d.map(Duration::from_secs_f64),
+            };
             let sum = monitor::run(&opts, &STOP)?;
             println!(
                 "monitor: {} frames, {} measurements, {} lost, {} rejected, {} disconnect(s){}",
@@ -271,6 +283,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 },
                 (None, None) => anyhow::bail!("give --thickness-col or --rate-mm-per-h"),
             };
+            if !(k_sigma.is_finite() && k_sigma > 0.0) {
+                return Err(exit::Exit::new(exit::USAGE, "--k-sigma must be > 0").into());
+            }
+            if rate_mm_per_h.is_some_and(|r| !(r.is_finite() && r > 0.0)) {
+                return Err(exit::Exit::new(exit::USAGE, "--rate-mm-per-h must be > 0").into());
+            }
             let opts = CompareOptions {
                 log,
                 ice,
@@ -317,6 +335,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 fn main() {
+    // Die quietly on a closed pipe (`foisctl config get | head -1`) like
+    // other Unix tools, instead of failing to print.
+    #[cfg(unix)]
+    // SAFETY: restoring the default disposition of SIGPIPE at start-up,
+    // before any thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     if let Err(e) = run(cli) {
         eprintln!("foisctl: error: {e:#}");
