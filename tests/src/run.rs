@@ -422,8 +422,20 @@ fn check_alarm_pin(node: &VirtualNode, out: &mut Outcome) {
     }
 }
 
-/// Run `scenarios` on `threads` threads; results in the input order.
+/// Run `scenarios` on `threads` threads, the longest (in frames) first so
+/// that the longest run sets the wall time; results in the input order.
 pub fn run_all(scenarios: &[Scenario], threads: usize) -> Vec<anyhow::Result<Outcome>> {
+    let frames = |sc: &Scenario| {
+        let period_ms = sc
+            .config
+            .as_ref()
+            .map_or(fois_protocol::Config::default().frame_period_ms, |c| {
+                c.frame_period_ms
+            });
+        sc.end_s * 1000.0 / f64::from(period_ms.max(1))
+    };
+    let mut order: Vec<usize> = (0..scenarios.len()).collect();
+    order.sort_by(|&a, &b| frames(&scenarios[b]).total_cmp(&frames(&scenarios[a])));
     let next = AtomicUsize::new(0);
     let mut slots: Vec<Option<anyhow::Result<Outcome>>> = Vec::new();
     slots.resize_with(scenarios.len(), || None);
@@ -432,8 +444,9 @@ pub fn run_all(scenarios: &[Scenario], threads: usize) -> Vec<anyhow::Result<Out
         for _ in 0..threads.max(1) {
             s.spawn(|| {
                 loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    let Some(sc) = scenarios.get(i) else { break };
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&i) = order.get(k) else { break };
+                    let sc = &scenarios[i];
                     let mut r = run(sc);
                     if let Ok(o) = &mut r {
                         o.failures = crate::check::check(sc, o);
