@@ -92,6 +92,11 @@ enum Cmd {
         /// (e.g. /tmp/fois-node), so a monitor reconnects after a restart.
         #[arg(long, value_name = "PATH")]
         link: Option<PathBuf>,
+        /// Keep the node's flash record (config, dark baseline) in this file,
+        /// so it survives a restart of the virtual node as it survives a power
+        /// cycle on a board [default: RAM only].
+        #[arg(long, value_name = "FILE")]
+        state: Option<PathBuf>,
     },
     /// A virtual node and the monitor in one process: watch rime accrete and
     /// trip the alarm. Defaults: 60 s dry, then rime at 3 mm/h, -5 °C, speed
@@ -254,9 +259,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
             Ok(())
         }
-        Cmd::VirtualNode { scene, link } => {
+        Cmd::VirtualNode { scene, link, state } => {
             install_ctrlc();
-            vnode_cmd::run_virtual_node(&scene, link, &STOP)
+            vnode_cmd::run_virtual_node(&scene, link, state, &STOP)
         }
         Cmd::Demo { scene, log, plain } => {
             install_ctrlc();

@@ -12,13 +12,69 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use fois_firmware::{BoardInfo, MemStorage, Node};
+use std::sync::Mutex;
+
+use fois_firmware::{BoardInfo, MemStorage, Node, Storage, StorageError};
 use fois_protocol::ResetReason;
 
 use crate::virtual_hw::{Environment, SimAdc, Truth, VirtualClock, VirtualDelay, VirtualPin};
 
 /// The firmware node on virtual hardware.
-pub type FirmwareNode = Node<SimAdc, VirtualPin, VirtualPin, VirtualPin, VirtualDelay, MemStorage>;
+pub type FirmwareNode =
+    Node<SimAdc, VirtualPin, VirtualPin, VirtualPin, VirtualDelay, SharedStorage>;
+
+/// The node's flash record: RAM shared with the runner (so it survives a
+/// `Reset` and can be inspected), optionally mirrored to a file (so it
+/// survives the process, like flash survives a power cycle).
+#[derive(Debug, Clone)]
+pub struct SharedStorage {
+    mem: Arc<Mutex<MemStorage>>,
+    file: Option<PathBuf>,
+}
+
+impl SharedStorage {
+    /// RAM only, starting with `initial`.
+    pub fn new(initial: MemStorage) -> Self {
+        SharedStorage {
+            mem: Arc::new(Mutex::new(initial)),
+            file: None,
+        }
+    }
+
+    /// Backed by `path`: starts with its bytes (empty if it does not exist)
+    /// and rewrites it on every write.
+    pub fn with_file(path: &Path) -> std::io::Result<Self> {
+        let initial = match std::fs::read(path) {
+            Ok(bytes) => MemStorage::with_bytes(&bytes),
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => MemStorage::new(),
+            Err(e) => return Err(e),
+        };
+        Ok(SharedStorage {
+            mem: Arc::new(Mutex::new(initial)),
+            file: Some(path.to_path_buf()),
+        })
+    }
+
+    /// A copy of the record now.
+    pub fn snapshot(&self) -> MemStorage {
+        self.mem.lock().map(|m| m.clone()).unwrap_or_default()
+    }
+}
+
+impl Storage for SharedStorage {
+    fn read(&mut self, buf: &mut [u8]) -> Result<usize, StorageError> {
+        self.mem.lock().map_err(|_| StorageError::Read)?.read(buf)
+    }
+
+    fn write(&mut self, data: &[u8]) -> Result<(), StorageError> {
+        let mut mem = self.mem.lock().map_err(|_| StorageError::Write)?;
+        mem.write(data)?;
+        if let Some(path) = &self.file {
+            std::fs::write(path, mem.bytes()).map_err(|_| StorageError::Write)?;
+        }
+        Ok(())
+    }
+}
 
 /// How to build a virtual node.
 #[derive(Debug, Clone)]
@@ -29,6 +85,9 @@ pub struct NodeOptions {
     pub board: &'static str,
     /// Initial storage (config + baseline record); empty = defaults.
     pub storage: MemStorage,
+    /// Keep the storage in this file instead (loaded if it exists, rewritten
+    /// on every write; `storage` is then ignored).
+    pub state_file: Option<PathBuf>,
     /// Press the user button (dark calibration) at this virtual time, s,
     /// if the face is dry then. `None`: never.
     pub calibrate_at_s: Option<f64>,
@@ -40,6 +99,7 @@ impl Default for NodeOptions {
             seed: 1,
             board: "virtual-f446",
             storage: MemStorage::new(),
+            state_file: None,
             calibrate_at_s: Some(1.0),
         }
     }
@@ -59,6 +119,7 @@ pub struct VirtualNode {
     booted: bool,
     resets: u32,
     frames: u64,
+    storage: SharedStorage,
 }
 
 const NS_PER_MS: u64 = 1_000_000;
@@ -83,12 +144,24 @@ impl VirtualNode {
             booted: false,
             resets: 0,
             frames: 0,
+            storage: SharedStorage::new(MemStorage::new()),
         };
-        vn.build(ResetReason::PowerOn, vn.opts.storage.clone());
+        let storage = match &vn.opts.state_file {
+            Some(p) => SharedStorage::with_file(p).unwrap_or_else(|_| {
+                // Unreadable state: start empty, writes will report failure.
+                SharedStorage {
+                    mem: Arc::new(Mutex::new(MemStorage::new())),
+                    file: Some(p.clone()),
+                }
+            }),
+            None => SharedStorage::new(vn.opts.storage.clone()),
+        };
+        vn.build(ResetReason::PowerOn, storage);
         vn
     }
 
-    fn build(&mut self, reason: ResetReason, storage: MemStorage) {
+    fn build(&mut self, reason: ResetReason, storage: SharedStorage) {
+        self.storage = storage.clone();
         let adc = SimAdc::new(
             self.clock.clone(),
             self.led.clone(),
@@ -153,6 +226,11 @@ impl VirtualNode {
     /// The LED pin.
     pub fn led_pin(&self) -> &VirtualPin {
         &self.led
+    }
+
+    /// The node's persisted record now (config + baseline).
+    pub fn storage(&self) -> MemStorage {
+        self.storage.snapshot()
     }
 
     /// Frames run so far.

@@ -257,6 +257,11 @@ fn describe(scene: &Scene) -> String {
 
 /// Build the node of a scene (ray-traces the curves: about a second).
 pub fn build_node(scene: &Scene) -> VirtualNode {
+    build_node_with_state(scene, None)
+}
+
+/// Build the node of a scene, its flash record kept in `state` (a file).
+pub fn build_node_with_state(scene: &Scene, state: Option<PathBuf>) -> VirtualNode {
     let env = Arc::new(Environment::new(
         scene.timeline.clone(),
         scene.sensor,
@@ -266,6 +271,7 @@ pub fn build_node(scene: &Scene) -> VirtualNode {
         env,
         NodeOptions {
             seed: scene.seed,
+            state_file: state,
             ..NodeOptions::default()
         },
     )
@@ -275,10 +281,15 @@ pub fn build_node(scene: &Scene) -> VirtualNode {
 pub fn run_virtual_node(
     args: &SceneArgs,
     link: Option<PathBuf>,
+    state: Option<PathBuf>,
     stop: &AtomicBool,
 ) -> anyhow::Result<()> {
     let scene = args.resolve(VIRTUAL_NODE_DEFAULTS)?;
-    let mut node = build_node(&scene);
+    if let Some(p) = &state {
+        crate::virtual_node::SharedStorage::with_file(p)
+            .with_context(|| format!("cannot read the node state {}", p.display()))?;
+    }
+    let mut node = build_node_with_state(&scene, state);
     let mut pty = Pty::open()?;
     let _guard = match &link {
         Some(l) => Some(virtual_node::make_link(l, pty.path())?),

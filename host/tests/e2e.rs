@@ -606,3 +606,20 @@ fn node_refusal_exits_6_and_other_protocol_version_exits_5() {
         "{err}"
     );
 }
+
+#[test]
+fn virtual_node_state_file_keeps_the_config_across_restarts() {
+    let dir = tempfile::tempdir().unwrap();
+    let state = dir.path().join("flash.bin");
+    let st = state.to_str().unwrap();
+    let mut node = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--state", st]);
+    let (code, _, err) = foisctl(&["config", "set", "--port", &node.path, "onset_frames=17"]);
+    assert_eq!(code, 0, "{err}");
+    node.kill9();
+    assert!(std::fs::metadata(&state).unwrap().len() > 0);
+    let node = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--state", st]);
+    let (code, out, err) = foisctl(&["config", "get", "--port", &node.path]);
+    assert_eq!(code, 0, "{err}");
+    let line = out.lines().find(|l| l.starts_with("onset_frames")).unwrap();
+    assert_eq!(line.split_whitespace().nth(1), Some("17"), "{line}");
+}
