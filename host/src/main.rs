@@ -163,6 +163,10 @@ enum Cmd {
         /// The PNG to write.
         #[arg(long, value_name = "FILE.png")]
         out: PathBuf,
+        /// Time axis: host (host clock since the first row) or node (node
+        /// uptime: the virtual time of a virtual node) [default: host].
+        #[arg(long, value_name = "host|node", default_value = "host", value_parser = parse_axis)]
+        time: fois_host::plot::TimeAxis,
     },
     /// Decoder throughput: encode a stream of measurement frames and decode
     /// it, print frames/s and MB/s.
@@ -208,6 +212,14 @@ fn parse_sensor(s: &str) -> Result<fois_sim::SensorKind, String> {
         "a" => Ok(fois_sim::SensorKind::A),
         "b" => Ok(fois_sim::SensorKind::B),
         _ => Err(format!("`{s}` is not a or b")),
+    }
+}
+
+fn parse_axis(s: &str) -> Result<fois_host::plot::TimeAxis, String> {
+    match s.trim().to_ascii_lowercase().as_str() {
+        "host" => Ok(fois_host::plot::TimeAxis::Host),
+        "node" => Ok(fois_host::plot::TimeAxis::Node),
+        _ => Err(format!("`{s}` is not host or node")),
     }
 }
 
@@ -311,8 +323,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             Ok(())
         }
-        Cmd::Plot { log, out } => {
-            let n = fois_host::plot::plot_log(&log, &out)?;
+        Cmd::Plot { log, out, time } => {
+            let n = fois_host::plot::plot_log(&log, &out, time)?;
             println!("{n} measurements drawn to {}", out.display());
             Ok(())
         }

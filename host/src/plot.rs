@@ -32,15 +32,31 @@ pub struct TimeSeries {
     pub breaks_s: Vec<f64>,
 }
 
+/// The time axis of `plot`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum TimeAxis {
+    /// Host clock, from the first row (survives node restarts).
+    #[default]
+    Host,
+    /// Node uptime (virtual time of a virtual node; restarts start over).
+    Node,
+}
+
 /// Extract the time series from a foisctl log, row by row.
-pub fn time_series(path: &Path) -> anyhow::Result<TimeSeries> {
+pub fn time_series(path: &Path, axis: TimeAxis) -> anyhow::Result<TimeSeries> {
     let mut rd = LogReader::open(path)?;
     let need = |rd: &LogReader, name: &str| {
         rd.need(name)
             .with_context(|| format!("is {} a foisctl log?", path.display()))
     };
     let (ms, kind, i1, i2, alarm) = (
-        need(&rd, "host_unix_ms")?,
+        need(
+            &rd,
+            match axis {
+                TimeAxis::Host => "host_unix_ms",
+                TimeAxis::Node => "uptime_ms",
+            },
+        )?,
         need(&rd, "kind")?,
         need(&rd, "i1_ua")?,
         need(&rd, "i2_ua")?,
@@ -53,7 +69,10 @@ pub fn time_series(path: &Path) -> anyhow::Result<TimeSeries> {
     let mut r = Vec::new();
     while rd.next_row(&mut r)? {
         let Some(tm) = num(&r[ms]) else { continue };
-        let t_s = (tm - *t0.get_or_insert(tm)) / 1000.0;
+        let t_s = match axis {
+            TimeAxis::Host => (tm - *t0.get_or_insert(tm)) / 1000.0,
+            TimeAxis::Node => tm / 1000.0,
+        };
         match r[kind].as_str() {
             "measurement" => {
                 if valid.is_some_and(|v| r[v].trim() == "0") {
@@ -131,8 +150,8 @@ fn draw_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 
 /// `foisctl plot`: I1 and I2 over host time, alarm periods shaded, breaks
 /// in the link as grey lines.
-pub fn plot_log(log: &Path, out: &Path) -> anyhow::Result<usize> {
-    let ts = time_series(log)?;
+pub fn plot_log(log: &Path, out: &Path, axis: TimeAxis) -> anyhow::Result<usize> {
+    let ts = time_series(log, axis)?;
     if ts.points.is_empty() {
         bail!("log {} holds no valid measurement to plot", log.display());
     }
@@ -172,7 +191,10 @@ pub fn plot_log(log: &Path, out: &Path) -> anyhow::Result<usize> {
         .map_err(draw_err)?;
     chart
         .configure_mesh()
-        .x_desc(format!("host time since the first row ({unit})"))
+        .x_desc(match axis {
+            TimeAxis::Host => format!("host time since the first row ({unit})"),
+            TimeAxis::Node => format!("node uptime ({unit})"),
+        })
         .y_desc("net photocurrent (µA)")
         .label_style(("sans-serif", 15))
         .draw()

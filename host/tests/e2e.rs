@@ -457,6 +457,17 @@ fn plot_and_compare_read_a_log() {
     assert!(out.contains(&format!("{n} measurements drawn")), "{out}");
     let bytes = std::fs::read(&png).unwrap();
     assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n");
+    let (code, out, err) = foisctl(&[
+        "plot",
+        "--log",
+        l,
+        "--out",
+        png.to_str().unwrap(),
+        "--time",
+        "node",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains(&format!("{n} measurements drawn")), "{out}");
 
     let cmp_png = dir.path().join("cmp.png");
     let (code, out, err) = foisctl(&[
