@@ -192,12 +192,17 @@ pub struct CommandSpec {
     pub expect: Reply,
 }
 
-/// Run the scenario once per noise level.
+/// Run the scenario once per noise level and/or seed (every combination).
 #[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SweepSpec {
     /// Noise levels, rms LSB: replace every segment's and overlay's noise.
+    #[serde(default)]
     pub adc_noise_lsb: Vec<f64>,
+    /// Seeds: replace the file's seed (another ray-traced ice body, other
+    /// noise draws).
+    #[serde(default)]
+    pub seed: Vec<u64>,
     /// The file's expectations are asserted for levels up to this; above
     /// it the runs are only reported (default: all levels).
     pub expect_up_to_lsb: Option<f64>,
@@ -343,24 +348,38 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
         }
     }
     let host = host_scenario(&file)?;
-    let levels: Vec<(Option<f64>, bool)> = match &file.sweep {
-        None => vec![(None, true)],
+    let (noises, seeds): (Vec<Option<f64>>, Vec<Option<u64>>) = match &file.sweep {
+        None => (vec![None], vec![None]),
         Some(s) => {
             ensure!(
-                !s.adc_noise_lsb.is_empty(),
-                "[sweep] adc_noise_lsb is empty"
+                !s.adc_noise_lsb.is_empty() || !s.seed.is_empty(),
+                "[sweep] needs adc_noise_lsb or seed values"
             );
-            s.adc_noise_lsb
-                .iter()
-                .map(|&x| {
-                    let checked = s.expect_up_to_lsb.is_none_or(|m| x <= m);
-                    (Some(x), checked)
-                })
-                .collect()
+            let opt_all = |v: Vec<Option<f64>>| if v.is_empty() { vec![None] } else { v };
+            let noises = opt_all(s.adc_noise_lsb.iter().map(|&x| Some(x)).collect());
+            let seeds: Vec<Option<u64>> = if s.seed.is_empty() {
+                vec![None]
+            } else {
+                s.seed.iter().map(|&x| Some(x)).collect()
+            };
+            (noises, seeds)
         }
     };
+    let up_to = file.sweep.as_ref().and_then(|s| s.expect_up_to_lsb);
+    let levels: Vec<(Option<f64>, Option<u64>, bool)> = noises
+        .iter()
+        .flat_map(|&x| {
+            seeds.iter().map(move |&seed| {
+                let checked = match (x, up_to) {
+                    (Some(x), Some(m)) => x <= m,
+                    _ => true,
+                };
+                (x, seed, checked)
+            })
+        })
+        .collect();
     let mut out = Vec::new();
-    for (level, checked) in levels {
+    for (level, seed, checked) in levels {
         let mut f = file.clone();
         let mut segments = host.timeline.segments().to_vec();
         if let Some(x) = level {
@@ -387,16 +406,19 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
                 c.at_s
             );
         }
-        let name = match level {
-            Some(x) => format!("{name}@{x}lsb"),
-            None => name.clone(),
-        };
+        let mut run_name = name.clone();
+        if let Some(x) = level {
+            run_name.push_str(&format!("@{x}lsb"));
+        }
+        if let Some(k) = seed {
+            run_name.push_str(&format!("@seed{k}"));
+        }
         out.push(Scenario {
-            name,
+            name: run_name,
             path: path.to_path_buf(),
             file: f,
             sensor: host.sensor,
-            seed: host.seed,
+            seed: seed.unwrap_or(host.seed),
             config: config.clone(),
             timeline,
             end_s,

@@ -139,6 +139,41 @@ fn config_sweep_and_overlays_build_the_expected_timeline() {
 }
 
 #[test]
+fn a_sweep_runs_every_noise_and_seed_combination() {
+    let text = format!(
+        "{BASE}seed = 9\n[sweep]\nadc_noise_lsb = [1.0, 50.0]\nseed = [3, 4, 5]\nexpect_up_to_lsb = 10.0\n"
+    );
+    // `seed` after [[segment]] belongs to the segment: refused by the host's parser.
+    assert!(scenario::parse(Path::new("s.toml"), &text).is_err());
+    let text = format!(
+        "seed = 9\n{BASE}[sweep]\nadc_noise_lsb = [1.0, 50.0]\nseed = [3, 4, 5]\nexpect_up_to_lsb = 10.0\n"
+    );
+    let runs = scenario::parse(Path::new("s.toml"), &text).unwrap();
+    let got: Vec<(String, u64, bool)> = runs
+        .iter()
+        .map(|r| (r.name.clone(), r.seed, r.checked))
+        .collect();
+    let want: Vec<(String, u64, bool)> = [1.0, 50.0]
+        .iter()
+        .flat_map(|&n| {
+            [3u64, 4, 5]
+                .iter()
+                .map(move |&k| (format!("s@{n}lsb@seed{k}"), k, n <= 10.0))
+        })
+        .collect();
+    assert_eq!(got, want);
+    assert!(
+        runs[3]
+            .timeline
+            .segments()
+            .iter()
+            .all(|s| s.adc_noise_lsb == 50.0)
+    );
+    let one = scenario::parse(Path::new("s.toml"), &format!("seed = 9\n{BASE}")).unwrap();
+    assert_eq!((one.len(), one[0].seed, one[0].name.as_str()), (1, 9, "s"));
+}
+
+#[test]
 fn every_shipped_file_loads() {
     let files = scenario::files_in(&scenario::default_dir()).unwrap();
     assert!(files.len() >= 14, "{} files", files.len());
