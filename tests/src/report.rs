@@ -149,10 +149,10 @@ pub fn notes(outcomes: &[Outcome]) -> String {
 /// The goals in one paragraph: met or missed, with the margins.
 pub fn goals_summary(outcomes: &[Outcome]) -> String {
     let mut s = String::new();
-    let worst = |cls: crate::scenario::Class| {
+    let worst = |cls: crate::scenario::Class, sensor: &str| {
         let runs: Vec<&Outcome> = outcomes
             .iter()
-            .filter(|o| o.class == cls && o.checked)
+            .filter(|o| o.class == cls && o.sensor == sensor && o.checked)
             .collect();
         let missed: Vec<String> = runs
             .iter()
@@ -169,23 +169,25 @@ pub fn goals_summary(outcomes: &[Outcome]) -> String {
     };
     for (cls, label) in [
         (crate::scenario::Class::Rime, "rime, first alarm ≤ 0.2 mm"),
-        (
-            crate::scenario::Class::Glazed,
-            "glazed, first alarm ≤ 0.5 mm",
-        ),
+        (crate::scenario::Class::Glazed, "glazed, first alarm ≤ 0.5 mm"),
     ] {
-        let (n, missed, max) = worst(cls);
-        let _ = writeln!(
-            s,
-            "- {label}: {} of {n} scenarios met; largest thickness at first alarm {} mm{}",
-            n - missed.len(),
-            opt(max, 3),
-            if missed.is_empty() {
-                String::new()
-            } else {
-                format!("; missed: {}", missed.join(", "))
+        for sensor in ["B", "A"] {
+            let (n, missed, max) = worst(cls, sensor);
+            if n == 0 {
+                continue;
             }
-        );
+            let _ = writeln!(
+                s,
+                "- {label}, Sensor {sensor}: {} of {n} runs met; largest thickness at first alarm {} mm{}",
+                n - missed.len(),
+                opt(max, 3),
+                if missed.is_empty() {
+                    String::new()
+                } else {
+                    format!("; missed: {}", missed.join(", "))
+                }
+            );
+        }
     }
     let no_ice: Vec<&Outcome> = outcomes
         .iter()
