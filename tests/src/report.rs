@@ -169,7 +169,10 @@ pub fn goals_summary(outcomes: &[Outcome]) -> String {
     };
     for (cls, label) in [
         (crate::scenario::Class::Rime, "rime, first alarm ≤ 0.2 mm"),
-        (crate::scenario::Class::Glazed, "glazed, first alarm ≤ 0.5 mm"),
+        (
+            crate::scenario::Class::Glazed,
+            "glazed, first alarm ≤ 0.5 mm",
+        ),
     ] {
         for sensor in ["B", "A"] {
             let (n, missed, max) = worst(cls, sensor);
