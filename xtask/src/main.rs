@@ -91,11 +91,20 @@ fn ci() -> Result<()> {
         }
         Ok(())
     })?;
-    step("format", &mut || run("cargo", &["fmt", "--all", "--", "--check"]))?;
+    step("format", &mut || {
+        run("cargo", &["fmt", "--all", "--", "--check"])
+    })?;
     step("clippy (host)", &mut || {
         run(
             "cargo",
-            &["clippy", "--workspace", "--all-targets", "--", "-D", "warnings"],
+            &[
+                "clippy",
+                "--workspace",
+                "--all-targets",
+                "--",
+                "-D",
+                "warnings",
+            ],
         )
     })?;
     step("clippy (firmware, thumb)", &mut || {
@@ -122,7 +131,10 @@ fn ci() -> Result<()> {
             RAM_BUDGET_BYTES / 1024
         );
     }
-    eprintln!("  total {:.1} s: all checks passed", started.elapsed().as_secs_f64());
+    eprintln!(
+        "  total {:.1} s: all checks passed",
+        started.elapsed().as_secs_f64()
+    );
     Ok(())
 }
 
@@ -238,6 +250,9 @@ mod tests {
                     .gnu.sgstubs             0   134241200\n.bss                  1200   536870968\n\
                     .uninit               1024   536872168\n.defmt                  12           0\n\
                     .debug_info         90000           0\nTotal              115700\n";
-        assert_eq!(parse_sizes(text), (408 + 20_000 + 3_000 + 56, 56 + 1_200 + 1_024));
+        assert_eq!(
+            parse_sizes(text),
+            (408 + 20_000 + 3_000 + 56, 56 + 1_200 + 1_024)
+        );
     }
 }
