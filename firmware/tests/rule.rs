@@ -41,7 +41,7 @@ fn wet(c: &Config) -> Rule {
 fn defaults_are_the_documented_ones() {
     let c = cfg();
     assert_eq!(c.load_r1_ohm, 10_000);
-    assert_eq!((c.onset_rise_na, c.clear_rise_na), (1_000, 500));
+    assert_eq!((c.onset_rise_na, c.clear_rise_na), (1_000, 200));
     assert_eq!((c.onset_frames, c.clear_frames), (30, 300));
     assert_eq!((c.freeze_limit_centi_c, c.thaw_limit_centi_c), (50, 250));
 }

@@ -49,7 +49,7 @@ impl Default for Config {
             load_r2_ohm: 10_000,
             onset_rise_na: 1_000,
             onset_frames: 30,
-            clear_rise_na: 500,
+            clear_rise_na: 200,
             clear_frames: 300,
             freeze_limit_centi_c: 50,
             thaw_limit_centi_c: 250,
