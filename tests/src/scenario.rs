@@ -3,8 +3,8 @@
 //!
 //! The timeline keys (`sensor`, `seed`, `[[segment]]`) are the host's
 //! scenario format (`fois_host::virtual_hw::scenario`, also read by
-//! `foisctl virtual-node --scenario`) and are parsed by the host's own
-//! parser; this module adds the name, class, config, overlays, commands,
+//! `foisctl virtual-node --scenario`): the segment tables are the host's own
+//! `SegmentSpec`, checked by its `timeline`; this module adds the name, class, config, overlays, commands,
 //! sweep, lossy link and expectations.
 //!
 //! Every table is `deny_unknown_fields`: a misspelt key is an error naming
@@ -15,6 +15,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail, ensure};
+use fois_host::virtual_hw::scenario::{self, SegmentSpec};
 use fois_host::virtual_hw::{Cover, Segment, Timeline};
 
 use fois_protocol::Config;
@@ -84,18 +85,18 @@ pub struct ScenarioFile {
     /// Which goal applies.
     pub class: Class,
     /// Sensor `"a"` or `"b"` (host format; default b).
-    pub sensor: Option<toml::Value>,
-    /// Seed of the accretion curves and the ADC noise (host format; default 1).
-    pub seed: Option<toml::Value>,
+    pub sensor: Option<String>,
+    /// Seed of the accretion curves and the ADC noise (default 1).
+    pub seed: Option<u64>,
     /// Run until this virtual time, s (default: the end of the last segment).
     pub end_s: Option<f64>,
     /// Config fields (names of `foisctl config set`) sent in a `SetConfig`
     /// right after boot; the others keep their defaults.
     #[serde(default)]
     pub config: BTreeMap<String, toml::Value>,
-    /// The timeline: the host's `[[segment]]` tables, parsed by the host.
+    /// The timeline: the host's `[[segment]]` tables, checked by the host.
     #[serde(default, rename = "segment")]
-    pub segments: Vec<toml::Value>,
+    pub segments: Vec<SegmentSpec>,
     /// Temporary changes laid over the segments (sun steps, noise bursts).
     #[serde(default, rename = "overlay")]
     pub overlays: Vec<OverlaySpec>,
@@ -506,42 +507,14 @@ fn validate_expect(e: &Expect) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The timeline part of the file, parsed by the host's scenario parser.
+/// The timeline part of the file, checked and built by the host's scenario code.
 fn host_scenario(f: &ScenarioFile) -> anyhow::Result<fois_host::virtual_hw::Scenario> {
-    let mut t = toml::Table::new();
-    if let Some(v) = &f.sensor {
-        t.insert("sensor".into(), v.clone());
-    }
-    if let Some(v) = &f.seed {
-        t.insert("seed".into(), v.clone());
-    }
-    t.insert("segment".into(), toml::Value::Array(f.segments.clone()));
-    let text = toml::to_string(&t).context("cannot re-serialise the timeline")?;
-    fois_host::virtual_hw::scenario::parse(&text).map_err(|e| {
-        // The host's parser saw a re-serialised copy: point at the file's line.
-        let at = unknown_key(&e)
-            .and_then(|k| line_of_key(&f.source, k))
-            .map(|n| format!(" (line {n} of the file)"))
-            .unwrap_or_default();
-        anyhow::anyhow!("[[segment]]{at}: {e}")
+    Ok(fois_host::virtual_hw::Scenario {
+        timeline: scenario::timeline(f.segments.clone())
+            .map_err(|e| anyhow::anyhow!("[[segment]] {e}"))?,
+        sensor: scenario::sensor_named(f.sensor.as_deref()).map_err(anyhow::Error::msg)?,
+        seed: f.seed.unwrap_or(1),
     })
-}
-
-/// The key named by an "unknown field `key`" message.
-fn unknown_key(msg: &str) -> Option<&str> {
-    let rest = msg.split("unknown field `").nth(1)?;
-    rest.split('`').next()
-}
-
-/// 1-based number of the first line that sets `key`.
-fn line_of_key(text: &str, key: &str) -> Option<usize> {
-    text.lines()
-        .position(|l| {
-            l.trim_start()
-                .strip_prefix(key)
-                .is_some_and(|r| r.trim_start().starts_with('='))
-        })
-        .map(|i| i + 1)
 }
 
 /// Occurrences of the overlays: (start, end, overlay index), validated.

@@ -49,51 +49,73 @@ pub struct Scenario {
 struct File {
     sensor: Option<String>,
     seed: Option<u64>,
-    segment: Vec<Seg>,
+    segment: Vec<SegmentSpec>,
 }
 
-#[derive(Debug, Deserialize)]
+/// One `[[segment]]` table as written in a file (every key but
+/// `duration_s` and `cover` optional). Public so that other file formats
+/// (the hardware-in-loop scenarios) embed the same table and get the same
+/// checks; turn a list of them into a [`Timeline`] with [`timeline`].
+#[derive(Debug, Clone, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct Seg {
-    duration_s: Duration,
-    cover: String,
-    rate_mm_per_h: Option<f64>,
-    air_temp_c: Option<f64>,
-    air_temp_end_c: Option<f64>,
-    ambient_ua: Option<[f64; 2]>,
-    flicker_ua: Option<[f64; 2]>,
-    flicker_hz: Option<f64>,
-    led_factor: Option<f64>,
-    led_factor_end: Option<f64>,
-    adc_noise_lsb: Option<f64>,
-    thickness_mm: Option<f64>,
+pub struct SegmentSpec {
+    /// Virtual seconds; `"inf"` only for the last segment.
+    pub duration_s: DurationSpec,
+    /// dry | flat | glazed | rime | water.
+    pub cover: String,
+    /// Accretion rate, mm/h (default 0).
+    pub rate_mm_per_h: Option<f64>,
+    /// Air temperature, °C (default −5).
+    pub air_temp_c: Option<f64>,
+    /// Air temperature at the segment's end (linear ramp), °C.
+    pub air_temp_end_c: Option<f64>,
+    /// Ambient DC per channel, µA (default 0).
+    pub ambient_ua: Option<[f64; 2]>,
+    /// Flicker amplitude per channel, µA (default 0).
+    pub flicker_ua: Option<[f64; 2]>,
+    /// Flicker frequency, Hz (default 100).
+    pub flicker_hz: Option<f64>,
+    /// LED output factor (default 1).
+    pub led_factor: Option<f64>,
+    /// LED output factor at the segment's end (linear ramp).
+    pub led_factor_end: Option<f64>,
+    /// ADC noise, rms LSB (default 1).
+    pub adc_noise_lsb: Option<f64>,
+    /// Thickness at the segment's start, mm (default: carried over).
+    pub thickness_mm: Option<f64>,
 }
 
-#[derive(Debug, Deserialize)]
+/// A segment's length: seconds, or `"inf"`.
+#[derive(Debug, Clone, Deserialize)]
 #[serde(untagged)]
-enum Duration {
+pub enum DurationSpec {
+    /// Virtual seconds.
     Seconds(f64),
+    /// `"inf"` (only for the last segment).
     Text(String),
 }
 
-/// Parse a scenario from TOML text.
-pub fn parse(text: &str) -> Result<Scenario, String> {
-    let f: File = toml::from_str(text).map_err(|e| e.to_string())?;
-    if f.segment.is_empty() {
+/// `"a"` / `"b"` (any case; `None` = B) as a sensor construction.
+pub fn sensor_named(name: Option<&str>) -> Result<SensorKind, String> {
+    match name.map(str::to_ascii_lowercase).as_deref() {
+        None | Some("b") => Ok(SensorKind::B),
+        Some("a") => Ok(SensorKind::A),
+        Some(other) => Err(format!("sensor = \"{other}\": expected \"a\" or \"b\"")),
+    }
+}
+
+/// Check every segment table and build the timeline.
+pub fn timeline(specs: Vec<SegmentSpec>) -> Result<Timeline, String> {
+    if specs.is_empty() {
         return Err("a scenario needs at least one [[segment]]".into());
     }
-    let sensor = match f.sensor.as_deref().map(str::to_ascii_lowercase).as_deref() {
-        None | Some("b") => SensorKind::B,
-        Some("a") => SensorKind::A,
-        Some(other) => return Err(format!("sensor = \"{other}\": expected \"a\" or \"b\"")),
-    };
-    let n = f.segment.len();
+    let n = specs.len();
     let mut segs = Vec::with_capacity(n);
-    for (i, s) in f.segment.into_iter().enumerate() {
+    for (i, s) in specs.into_iter().enumerate() {
         let at = |what: &str| format!("segment {}: {what}", i + 1);
         let duration_s = match s.duration_s {
-            Duration::Seconds(x) if x.is_finite() && x >= 0.0 => x,
-            Duration::Text(t) if t == "inf" && i + 1 == n => f64::INFINITY,
+            DurationSpec::Seconds(x) if x.is_finite() && x >= 0.0 => x,
+            DurationSpec::Text(t) if t == "inf" && i + 1 == n => f64::INFINITY,
             _ => {
                 return Err(at(
                     "duration_s must be >= 0 seconds (\"inf\" only for the last segment)",
@@ -137,9 +159,15 @@ pub fn parse(text: &str) -> Result<Scenario, String> {
         seg.start_thickness_mm = finite(s.thickness_mm, "thickness_mm", 0.0, 15.0)?;
         segs.push(seg);
     }
+    Ok(Timeline::new(segs))
+}
+
+/// Parse a scenario from TOML text.
+pub fn parse(text: &str) -> Result<Scenario, String> {
+    let f: File = toml::from_str(text).map_err(|e| e.to_string())?;
     Ok(Scenario {
-        timeline: Timeline::new(segs),
-        sensor,
+        timeline: timeline(f.segment)?,
+        sensor: sensor_named(f.sensor.as_deref())?,
         seed: f.seed.unwrap_or(1),
     })
 }
