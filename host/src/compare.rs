@@ -46,6 +46,9 @@ pub struct CompareOptions {
     pub seed: u64,
     /// Band half-width in σ.
     pub k_sigma: f64,
+    /// Measurement noise of one logged sample, rms µA: added in quadrature
+    /// to the Monte Carlo spread (which holds only the ice's randomness).
+    pub noise_ua: f64,
     /// Also draw the comparison here.
     pub plot: Option<PathBuf>,
 }
@@ -204,17 +207,30 @@ pub fn run(opts: &CompareOptions) -> anyhow::Result<Comparison> {
     }
     let cfg = SimConfig::new(opts.ice, opts.sensor, Geometry::default());
     let mc = monte_carlo(&cfg, opts.runs, opts.seed, &|| {});
-    let cmp = compare_samples(samples, mc.points, opts.k_sigma);
+    let band = with_noise(mc.points, opts.noise_ua);
+    let cmp = compare_samples(samples, band, opts.k_sigma);
     if let Some(p) = &opts.plot {
         crate::plot::plot_comparison(&cmp, opts.ice.name(), p)?;
     }
     Ok(cmp)
 }
 
+/// The band widened by a sample's measurement noise: σ² + noise² on the
+/// diagonal of each Σ(d) (the noise of I1 and I2 is independent).
+pub fn with_noise(mut band: Vec<McPoint>, noise_ua: f64) -> Vec<McPoint> {
+    let var = noise_ua * noise_ua;
+    for p in &mut band {
+        p.cov_ua2[0][0] += var;
+        p.cov_ua2[1][1] += var;
+    }
+    band
+}
+
 /// The text report.
 pub fn report(c: &Comparison) -> String {
     let mut s = format!(
-        "{} samples, thickness {:.2}..{:.2} mm; band mu(d) +/- {}*sigma(d)\n",
+        "{} samples, thickness {:.2}..{:.2} mm; band mu(d) +/- {}*sigma(d) \
+         (sigma: Monte Carlo spread and measurement noise in quadrature)\n",
         c.samples.len(),
         c.samples
             .iter()
@@ -316,6 +332,25 @@ mod tests {
         // Interpolation between grid points.
         let (mu, sg) = band_at(&band(), 0.25);
         assert!((mu[0] - 2.5).abs() < 1e-9 && (sg[0] - 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn measurement_noise_widens_the_band_in_quadrature() {
+        // σ1 = 2 µA, σ2 = 0.5 µA; noise 1.5 µA → σ1 = 2.5, σ2 = √2.5.
+        let wide = with_noise(band(), 1.5);
+        let (_, sg) = band_at(&wide, 0.3);
+        assert!((sg[0] - 2.5).abs() < 1e-12, "{sg:?}");
+        assert!((sg[1] - 2.5f64.sqrt()).abs() < 1e-12, "{sg:?}");
+        // An I2 sample 1 µA off: outside the bare 1σ band, inside the widened one.
+        let s = vec![Sample {
+            thickness_mm: 0.3,
+            i_ua: [3.0, 1.3],
+        }];
+        assert_eq!(
+            compare_samples(s.clone(), band(), 1.0).channels[1].inside,
+            0.0
+        );
+        assert_eq!(compare_samples(s, wide, 1.0).channels[1].inside, 1.0);
     }
 
     #[test]

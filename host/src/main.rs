@@ -147,6 +147,11 @@ enum Cmd {
         /// Band half-width, in sigma.
         #[arg(long, default_value_t = 1.0, value_name = "K")]
         k_sigma: f64,
+        /// Measurement noise of one logged sample, rms µA, added in
+        /// quadrature to the Monte Carlo spread (which models only the ice).
+        /// The node's frame noise at the default config is about 0.035 µA.
+        #[arg(long, default_value_t = 0.035, value_name = "UA")]
+        noise_ua: f64,
         /// Sensor construction: a or b.
         #[arg(long, default_value = "b", value_name = "a|b", value_parser = parse_sensor)]
         sensor: fois_sim::SensorKind,
@@ -288,6 +293,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             runs,
             seed,
             k_sigma,
+            noise_ua,
             sensor,
             plot,
         } => {
@@ -303,6 +309,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if !(k_sigma.is_finite() && k_sigma > 0.0) {
                 return Err(exit::Exit::new(exit::USAGE, "--k-sigma must be > 0").into());
             }
+            if !(noise_ua.is_finite() && noise_ua >= 0.0) {
+                return Err(exit::Exit::new(exit::USAGE, "--noise-ua must be >= 0").into());
+            }
             if rate_mm_per_h.is_some_and(|r| !(r.is_finite() && r > 0.0)) {
                 return Err(exit::Exit::new(exit::USAGE, "--rate-mm-per-h must be > 0").into());
             }
@@ -314,6 +323,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 runs,
                 seed,
                 k_sigma,
+                noise_ua,
                 plot,
             };
             let c = compare::run(&opts)?;

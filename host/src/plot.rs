@@ -279,12 +279,15 @@ pub fn plot_comparison(c: &Comparison, ice: &str, out: &Path) -> anyhow::Result<
         .fold(0.5, f64::max)
         .min(15.0);
     for (ch, area) in panels.iter().enumerate() {
-        let grid: Vec<f64> = c
+        // The band's grid up to the axis' end, closed by an interpolated
+        // point exactly at d_max (nothing is drawn past the axis).
+        let mut grid: Vec<f64> = c
             .band
             .iter()
             .map(|p| p.thickness_mm)
-            .filter(|&d| d <= d_max + 0.1 + 1e-9)
+            .filter(|&d| d < d_max - 1e-9)
             .collect();
+        grid.push(d_max);
         let lo: Vec<(f64, f64)> = grid
             .iter()
             .map(|&d| (d, band_at(&c.band, d)))
