@@ -48,6 +48,26 @@ impl Drop for NodeProc {
     }
 }
 
+/// `foisctl monitor --port PORT --log LOG --plain EXTRA...` as a child;
+/// `piped`: capture its stdout/stderr (else discard them).
+fn spawn_monitor(port: &str, log: &Path, extra: &[&str], piped: bool) -> Child {
+    let io = || if piped { Stdio::piped() } else { Stdio::null() };
+    Command::new(BIN)
+        .args([
+            "monitor",
+            "--port",
+            port,
+            "--log",
+            log.to_str().unwrap(),
+            "--plain",
+        ])
+        .args(extra)
+        .stdout(io())
+        .stderr(io())
+        .spawn()
+        .unwrap()
+}
+
 fn foisctl(args: &[&str]) -> (i32, String, String) {
     let out = Command::new(BIN).args(args).output().unwrap();
     (
@@ -200,21 +220,7 @@ fn node_killed_and_restarted_monitor_reconnects_and_logs_the_gap() {
     let ls = link.to_str().unwrap();
     let log = dir.path().join("log.csv");
     let mut node = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--link", ls]);
-    let mon = Command::new(BIN)
-        .args([
-            "monitor",
-            "--port",
-            ls,
-            "--log",
-            log.to_str().unwrap(),
-            "--duration",
-            "4",
-            "--plain",
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mon = spawn_monitor(ls, &log, &["--duration", "4"], true);
     std::thread::sleep(Duration::from_millis(1200));
     node.kill9();
     std::thread::sleep(Duration::from_millis(600));
@@ -256,19 +262,7 @@ fn logger_killed_with_sigkill_keeps_all_but_the_last_second() {
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("log.csv");
     let node = NodeProc::start(&["--speed", "10", "--dry-s", "1000"]);
-    let mut mon = Command::new(BIN)
-        .args([
-            "monitor",
-            "--port",
-            &node.path,
-            "--log",
-            log.to_str().unwrap(),
-            "--plain",
-        ])
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
+    let mut mon = spawn_monitor(&node.path, &log, &[], false);
     std::thread::sleep(Duration::from_millis(2500));
     let killed_at = fois_host::timefmt::unix_ms_now();
     mon.kill().unwrap(); // SIGKILL: no flush, no destructor
@@ -377,19 +371,7 @@ fn ctrl_c_stops_the_monitor_cleanly() {
     let node = NodeProc::start(&["--speed", "10", "--dry-s", "1000"]);
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("log.csv");
-    let mon = Command::new(BIN)
-        .args([
-            "monitor",
-            "--port",
-            &node.path,
-            "--log",
-            log.to_str().unwrap(),
-            "--plain",
-        ])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mon = spawn_monitor(&node.path, &log, &[], true);
     std::thread::sleep(Duration::from_millis(1000));
     // SAFETY: plain kill(2) on our own child.
     let rc = unsafe { libc::kill(mon.id() as libc::pid_t, libc::SIGINT) };
