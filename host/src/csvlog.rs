@@ -155,6 +155,7 @@ impl Row {
     pub fn device(seq: u32, msg: &DeviceMsg) -> Row {
         match msg {
             DeviceMsg::Measurement(m) => Row::measurement(seq, m),
+            DeviceMsg::MeasurementV2(m) => Row::measurement(seq, &m.measurement),
             DeviceMsg::Event(e) => Row::event(seq, e),
             DeviceMsg::Hello(h) => Row {
                 seq: Some(seq),

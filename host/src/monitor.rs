@@ -240,7 +240,11 @@ impl Session<'_> {
                     self.last_uptime_ms = Some(u);
                 }
                 match &f.msg {
-                    DeviceMsg::Measurement(m) => {
+                    DeviceMsg::Measurement(m)
+                    | DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 {
+                        measurement: m,
+                        ..
+                    }) => {
                         self.sum.measurements += 1;
                         self.sum.last = Some(m.clone());
                     }

@@ -20,7 +20,13 @@ pub use messages::*;
 
 /// The protocol version this crate speaks (in [`Hello::protocol_version`]).
 /// Bump it on any breaking change (see `protocol/README.md`, Compatibility).
-pub const PROTOCOL_VERSION: u16 = 1;
+pub const PROTOCOL_VERSION: u16 = 2;
+
+/// The oldest protocol version a host built from this crate still reads.
+/// Every version only adds variants at the end of its enums, so a frame of
+/// an older version decodes with today's types (a fleet is never upgraded
+/// at once).
+pub const OLDEST_READABLE_VERSION: u16 = 1;
 
 /// Baud rate of the node's UART link (ST-LINK virtual COM port), 8N1.
 pub const BAUD_RATE: u32 = 115_200;

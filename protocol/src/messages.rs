@@ -37,6 +37,23 @@ pub enum DeviceMsg {
     Ack(Ack),
     /// A command was refused or could not be read.
     Error(ErrorReply),
+    /// Version 2: one output frame of the synchronous detector with the
+    /// node's ice estimate. A version-2 node streams this instead of
+    /// [`DeviceMsg::Measurement`]; a host reads both.
+    MeasurementV2(MeasurementV2),
+}
+
+impl DeviceMsg {
+    /// The measurement of a [`DeviceMsg::Measurement`] (version 1, no
+    /// estimate) or a [`DeviceMsg::MeasurementV2`], with its estimate if the
+    /// node sent one. `None` for every other message.
+    pub fn measurement(&self) -> Option<(&Measurement, Option<&IceEstimate>)> {
+        match self {
+            DeviceMsg::Measurement(m) => Some((m, None)),
+            DeviceMsg::MeasurementV2(m) => Some((&m.measurement, m.estimate.as_ref())),
+            _ => None,
+        }
+    }
 }
 
 /// Who the node is. Frozen: this shape never changes, whatever the version.
@@ -131,12 +148,20 @@ pub mod flags {
     pub const VDDA_OUT_OF_RANGE: u16 = 1 << 8;
     /// The persisted config or baseline could not be written to flash.
     pub const STORAGE_FAILED: u16 = 1 << 9;
+    /// Version 2: the external clock (HSE, 8 MHz from the ST-LINK) did not
+    /// start: the node runs on its internal RC oscillator, whose drift over
+    /// temperature can exceed what the UART tolerates.
+    pub const CLOCK_FALLBACK: u16 = 1 << 10;
 
     /// Bits that make a frame's currents unusable.
     pub const INVALID_MASK: u16 = SATURATED_CH1 | SATURATED_CH2;
     /// Bits that are faults (raised/cleared by [`EventKind`](crate::EventKind)).
-    pub const FAULT_MASK: u16 =
-        NTC_OPEN | NTC_SHORT | CONFIG_DEFAULTED | VDDA_OUT_OF_RANGE | STORAGE_FAILED;
+    pub const FAULT_MASK: u16 = NTC_OPEN
+        | NTC_SHORT
+        | CONFIG_DEFAULTED
+        | VDDA_OUT_OF_RANGE
+        | STORAGE_FAILED
+        | CLOCK_FALLBACK;
 }
 
 /// One output frame: K LED-on/LED-off cycles averaged.
@@ -168,6 +193,47 @@ impl Measurement {
     pub fn is_valid(&self) -> bool {
         self.flags & flags::INVALID_MASK == 0
     }
+}
+
+/// Version 2: a [`Measurement`] (same fields, same encoding) and the node's
+/// estimate of the accretion on its face.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MeasurementV2 {
+    /// The frame's currents, temperature, flags and detector state.
+    pub measurement: Measurement,
+    /// The ice estimate after this frame; `None` when the node has none
+    /// (estimator not running, e.g. not yet initialised).
+    pub estimate: Option<IceEstimate>,
+}
+
+/// What covers the sensor face, as the node's estimator sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Medium {
+    /// Nothing: a bare, dry face (thickness 0).
+    Dry,
+    /// Liquid water.
+    Water,
+    /// Glazed (clear) ice.
+    Glazed,
+    /// Rime ice (full of air bubbles).
+    Rime,
+}
+
+/// The node's estimate of the accretion: thickness with its uncertainty and
+/// the most likely medium (posterior of the node's Bayes filter).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct IceEstimate {
+    /// Posterior mean thickness, µm (saturates at 65 535 µm).
+    pub thickness_um: u16,
+    /// Posterior standard deviation of the thickness, µm (saturates).
+    pub sigma_um: u16,
+    /// The most likely medium.
+    pub medium: Medium,
+    /// Posterior probability of that medium, ‰ (0–1000).
+    pub probability_permille: u16,
 }
 
 /// A transition of the detector or of a fault.
@@ -279,6 +345,9 @@ pub enum ErrorCode {
     CalibrationFailed,
     /// Writing flash failed; the change holds until the next reset.
     StorageFailed,
+    /// Version 2: dark calibration refused because the detector is not
+    /// `Dry` (water or ice on the face would become the baseline).
+    NotDry,
 }
 
 /// A frame from the host: an id (echoed in the answer) and a command.

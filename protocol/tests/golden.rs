@@ -187,6 +187,62 @@ fn cases() -> Vec<(&'static str, Vec<u8>)> {
                 }),
             ),
         ),
+        // Version 2 additions.
+        (
+            "measurement_v2",
+            device(
+                13,
+                DeviceMsg::MeasurementV2(MeasurementV2 {
+                    measurement: Measurement {
+                        uptime_ms: 1_000,
+                        i1_na: 25_000,
+                        i2_na: -12,
+                        ambient1_na: 40_000,
+                        ambient2_na: 300,
+                        temperature_centi_c: -512,
+                        vdda_mv: 3_300,
+                        flags: flags::ALARM | flags::CLOCK_FALLBACK,
+                        state: DetectorState::Ice,
+                    },
+                    estimate: Some(IceEstimate {
+                        thickness_um: 2_300,
+                        sigma_um: 300,
+                        medium: Medium::Rime,
+                        probability_permille: 970,
+                    }),
+                }),
+            ),
+        ),
+        (
+            "measurement_v2_no_estimate",
+            device(
+                14,
+                DeviceMsg::MeasurementV2(MeasurementV2 {
+                    measurement: Measurement {
+                        uptime_ms: 5,
+                        i1_na: 0,
+                        i2_na: 0,
+                        ambient1_na: 0,
+                        ambient2_na: 0,
+                        temperature_centi_c: 500,
+                        vdda_mv: 3_300,
+                        flags: 0,
+                        state: DetectorState::Dry,
+                    },
+                    estimate: None,
+                }),
+            ),
+        ),
+        (
+            "error_not_dry",
+            device(
+                15,
+                DeviceMsg::Error(ErrorReply {
+                    id: Some(16),
+                    code: ErrorCode::NotDry,
+                }),
+            ),
+        ),
         ("cmd_get_info", host(1, Command::GetInfo)),
         ("cmd_get_config", host(2, Command::GetConfig)),
         ("cmd_set_config", host(3, Command::SetConfig(config()))),
@@ -238,6 +294,16 @@ const GOLDEN: &[(&str, &str)] = &[
     ("ack_reset", "09 0a 03 0d 06 59 5a 72 10 00"),
     ("error_garbled", "03 0b 04 01 05 c1 f0 4c f1 00"),
     ("error_config", "0c 0c 04 01 0e 03 01 02 ab 47 b1 e9 00"),
+    // Version 2 additions (recorded with the bump to version 2).
+    (
+        "measurement_v2",
+        "21 0d 05 e8 07 d0 86 03 17 c0 b8 02 ac 02 ff 07 e4 19 c0 08 02 01 fc 11 ac 02 03 ca 07 66 fc 44 9a 00",
+    ),
+    (
+        "measurement_v2_no_estimate",
+        "04 0e 05 05 01 01 01 05 e8 07 e4 19 01 01 05 86 49 a3 42 00",
+    ),
+    ("error_not_dry", "0a 0f 04 01 10 07 5e 1a 74 1e 00"),
     ("cmd_get_info", "02 01 05 be 23 c2 58 00"),
     ("cmd_get_config", "07 02 01 eb 40 e8 04 00"),
     (
@@ -277,6 +343,10 @@ fn wire_format_matches_golden_bytes() {
 
 #[test]
 fn protocol_version_is_frozen_with_these_bytes() {
-    // The snapshots above belong to version 1. A new version gets new snapshots.
-    assert_eq!(PROTOCOL_VERSION, 1);
+    // The snapshots above belong to version 2: the 21 of version 1 (unchanged:
+    // version 2 only added variants at the ends of its enums, so a version-1
+    // stream decodes with these types) and the version-2 additions. A new
+    // version gets new snapshots.
+    assert_eq!(PROTOCOL_VERSION, 2);
+    assert_eq!(OLDEST_READABLE_VERSION, 1);
 }

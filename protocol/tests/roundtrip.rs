@@ -81,6 +81,21 @@ fn max_frame_bounds_the_widest_messages() {
             state: DetectorState::Ice,
         }),
     };
+    let widest_measurement_v2 = DeviceFrame {
+        seq: u32::MAX,
+        msg: DeviceMsg::MeasurementV2(MeasurementV2 {
+            measurement: match widest_measurement.msg.clone() {
+                DeviceMsg::Measurement(m) => m,
+                _ => unreachable!(),
+            },
+            estimate: Some(IceEstimate {
+                thickness_um: u16::MAX,
+                sigma_um: u16::MAX,
+                medium: Medium::Rime,
+                probability_permille: u16::MAX,
+            }),
+        }),
+    };
     let widest_config = Config {
         frame_period_ms: u32::MAX,
         cycles_per_frame: u16::MAX,
@@ -108,15 +123,17 @@ fn max_frame_bounds_the_widest_messages() {
     };
     let sizes = [
         postcard::to_stdvec(&widest_measurement).unwrap().len(),
+        postcard::to_stdvec(&widest_measurement_v2).unwrap().len(),
         postcard::to_stdvec(&widest_ack).unwrap().len(),
         postcard::to_stdvec(&widest_cmd).unwrap().len(),
     ];
     for s in sizes {
         assert!(s <= MAX_PAYLOAD, "payload {s} > MAX_PAYLOAD {MAX_PAYLOAD}");
     }
-    // The widest Ack(Config) is the largest message: MAX_PAYLOAD is exact.
+    // The widest MeasurementV2 (version 2) is the largest message: MAX_PAYLOAD is exact.
+    assert_eq!(sizes[1], MAX_PAYLOAD);
     assert_eq!(sizes.iter().max().copied(), Some(MAX_PAYLOAD));
-    for f in [&widest_measurement, &widest_ack] {
+    for f in [&widest_measurement, &widest_measurement_v2, &widest_ack] {
         assert!(encode_to_vec(f).len() <= MAX_FRAME);
     }
     println!("MAX_PAYLOAD = {MAX_PAYLOAD} B, MAX_FRAME = {MAX_FRAME} B, sizes {sizes:?}");
@@ -142,4 +159,22 @@ fn typical_measurement_frame_size() {
     let n = encode_to_vec(&m).len();
     // 115200 baud 8N1 = 11520 B/s; at 10 Hz a frame must stay far below 1152 B.
     assert!(n <= 40, "typical measurement frame is {n} B");
+    let DeviceMsg::Measurement(measurement) = m.msg else {
+        unreachable!()
+    };
+    let v2 = DeviceFrame {
+        seq: 123_456,
+        msg: DeviceMsg::MeasurementV2(MeasurementV2 {
+            measurement,
+            estimate: Some(IceEstimate {
+                thickness_um: 2_300,
+                sigma_um: 300,
+                medium: Medium::Rime,
+                probability_permille: 970,
+            }),
+        }),
+    };
+    let n2 = encode_to_vec(&v2).len();
+    assert!(n2 <= 48, "typical version-2 measurement frame is {n2} B");
+    println!("typical measurement frame: v1 {n} B, v2 {n2} B");
 }

@@ -233,7 +233,8 @@ impl Observer {
         self.last_seq = Some(f.seq);
         match f.msg {
             DeviceMsg::Hello(_) => o.hellos += 1,
-            DeviceMsg::Measurement(m) => {
+            DeviceMsg::Measurement(m)
+            | DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 { measurement: m, .. }) => {
                 o.measurements += 1;
                 if !m.is_valid() {
                     o.saturated += 1;

@@ -73,6 +73,35 @@ pub fn measurement() -> impl Strategy<Value = Measurement> {
         )
 }
 
+pub fn medium() -> impl Strategy<Value = Medium> {
+    prop_oneof![
+        Just(Medium::Dry),
+        Just(Medium::Water),
+        Just(Medium::Glazed),
+        Just(Medium::Rime),
+    ]
+}
+
+pub fn ice_estimate() -> impl Strategy<Value = IceEstimate> {
+    (any::<u16>(), any::<u16>(), medium(), any::<u16>()).prop_map(
+        |(thickness_um, sigma_um, medium, probability_permille)| IceEstimate {
+            thickness_um,
+            sigma_um,
+            medium,
+            probability_permille,
+        },
+    )
+}
+
+pub fn measurement_v2() -> impl Strategy<Value = MeasurementV2> {
+    (measurement(), proptest::option::of(ice_estimate())).prop_map(|(measurement, estimate)| {
+        MeasurementV2 {
+            measurement,
+            estimate,
+        }
+    })
+}
+
 pub fn event_kind() -> impl Strategy<Value = EventKind> {
     prop_oneof![
         Just(EventKind::IceOnset),
@@ -168,6 +197,7 @@ pub fn error_code() -> impl Strategy<Value = ErrorCode> {
         Just(ErrorCode::InvalidRate),
         Just(ErrorCode::CalibrationFailed),
         Just(ErrorCode::StorageFailed),
+        Just(ErrorCode::NotDry),
     ]
 }
 
@@ -179,6 +209,7 @@ pub fn device_msg() -> impl Strategy<Value = DeviceMsg> {
         (any::<u16>(), ack_result()).prop_map(|(id, result)| DeviceMsg::Ack(Ack { id, result })),
         (any::<Option<u16>>(), error_code())
             .prop_map(|(id, code)| DeviceMsg::Error(ErrorReply { id, code })),
+        measurement_v2().prop_map(DeviceMsg::MeasurementV2),
     ]
 }
 
