@@ -1,0 +1,559 @@
+//! Golden values: the tracer's output, bit for bit, for fixed seeds.
+//!
+//! The firmware embeds a response table generated from this Monte Carlo, and speed work on
+//! the tracer must not move a single bit of it. Each case below is hashed over every f64 of
+//! its output (FNV-1a over `f64::to_bits`, in a fixed order) and a few values are compared
+//! exactly. A failure prints the whole table as it is now, ready to paste — but only paste
+//! it when the physics was changed on purpose, and say so in the commit.
+//!
+//! The values depend on the platform's libm (`exp`, `ln`, `tan`, `sin_cos`, `sqrt`); they
+//! were taken on x86_64 Linux (glibc), where CI runs.
+
+use fois_sim::montecarlo::{DEFAULT_FIT_HALF_WIDTH_MM, fit_quality};
+use fois_sim::*;
+
+/// FNV-1a, 64 bit, over the bit patterns of a sequence of f64.
+#[derive(Clone, Copy)]
+struct Fnv(u64);
+
+impl Fnv {
+    fn new() -> Self {
+        Fnv(0xcbf2_9ce4_8422_2325)
+    }
+    fn f(&mut self, x: f64) {
+        for b in x.to_bits().to_le_bytes() {
+            self.0 ^= u64::from(b);
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    fn fs(&mut self, xs: &[f64]) {
+        for &x in xs {
+            self.f(x);
+        }
+    }
+}
+
+fn hash_curve(h: &mut Fnv, c: &Curve) {
+    for p in &c.points {
+        h.fs(&[
+            p.thickness_mm,
+            p.i1_ua,
+            p.i2_ua,
+            p.i1_refl_ua,
+            p.i1_scat_ua,
+            p.i2_refl_ua,
+            p.i2_scat_ua,
+        ]);
+    }
+}
+
+fn hash_mc(h: &mut Fnv, pts: &[McPoint]) {
+    for p in pts {
+        h.fs(&[p.thickness_mm, p.mean_ua[0], p.mean_ua[1]]);
+        h.fs(&[
+            p.cov_ua2[0][0],
+            p.cov_ua2[0][1],
+            p.cov_ua2[1][0],
+            p.cov_ua2[1][1],
+        ]);
+    }
+}
+
+fn hash_crlb(h: &mut Fnv, pts: &[CrlbPoint]) {
+    for p in pts {
+        h.fs(&[p.thickness_mm, p.mu_ua[0], p.mu_ua[1]]);
+        h.fs(&[p.dmu_ua_per_mm[0], p.dmu_ua_per_mm[1]]);
+        h.fs(&[p.sigma_ua2[0][0], p.sigma_ua2[0][1], p.sigma_ua2[1][1]]);
+        h.fs(&[
+            p.dsigma_ua2_per_mm[0][0],
+            p.dsigma_ua2_per_mm[0][1],
+            p.dsigma_ua2_per_mm[1][1],
+        ]);
+        h.fs(&[p.crlb_std_mm, p.crlb_no_dsigma_std_mm]);
+        h.fs(&[p.residual_ua[0], p.residual_ua[1]]);
+    }
+}
+
+/// One case as computed now: its hash and a few exact values.
+#[derive(Debug, PartialEq)]
+struct Got {
+    name: &'static str,
+    hash: u64,
+    values: Vec<f64>,
+}
+
+fn cfg(ice: IceKind, sensor: SensorKind) -> SimConfig {
+    SimConfig::new(ice, sensor, Geometry::ThesisCh5)
+}
+
+/// Single accretions: (name, config, seed, run).
+fn curve_cases() -> Vec<(&'static str, SimConfig, u64, u64)> {
+    let mut v = vec![
+        ("rime_b", cfg(IceKind::Rime, SensorKind::B), 1, 0),
+        ("rime_b_run_7", cfg(IceKind::Rime, SensorKind::B), 3, 7),
+        ("glazed_b", cfg(IceKind::Glazed, SensorKind::B), 1, 0),
+        ("glazed_b_run_5", cfg(IceKind::Glazed, SensorKind::B), 42, 5),
+        ("water_b", cfg(IceKind::Water, SensorKind::B), 1, 0),
+        ("flat_b", cfg(IceKind::Flat, SensorKind::B), 1, 0),
+        ("rime_a", cfg(IceKind::Rime, SensorKind::A), 1, 0),
+        ("glazed_a", cfg(IceKind::Glazed, SensorKind::A), 2, 1),
+        ("flat_a", cfg(IceKind::Flat, SensorKind::A), 1, 0),
+    ];
+    let mut c = cfg(IceKind::Glazed, SensorKind::B);
+    c.diffuse_fresnel = DiffuseFresnel::MeanSurface;
+    v.push(("glazed_b_mean_surface_fresnel", c, 1, 0));
+    let mut c = cfg(IceKind::Glazed, SensorKind::B);
+    c.params.diffuse_max_rad = 0.0;
+    v.push(("glazed_b_no_diffuse", c, 1, 0));
+    let mut c = cfg(IceKind::Rime, SensorKind::B);
+    c.params.diffuse_max_rad = 20f64.to_radians();
+    v.push(("rime_b_diffuse_20deg", c, 4, 2));
+    let mut c = cfg(IceKind::Glazed, SensorKind::B);
+    c.coupling = Coupling::AcceptanceCone;
+    v.push(("glazed_b_acceptance", c, 1, 0));
+    let mut c = cfg(IceKind::Rime, SensorKind::B);
+    c.coupling = Coupling::AcceptanceCone;
+    v.push(("rime_b_acceptance", c, 1, 0));
+    let mut c = SimConfig::new(IceKind::Rime, SensorKind::B, Geometry::ThesisCh3);
+    c.step_mm = 0.25;
+    c.max_mm = 12.0;
+    v.push(("rime_b_ch3_step_0_25", c, 5, 3));
+    let mut c = SimConfig::new(IceKind::Flat, SensorKind::B, Geometry::ThesisCh3);
+    c.fibre_spread = false;
+    v.push(("flat_b_ch3_no_spread", c, 1, 0));
+    let mut c = cfg(IceKind::Glazed, SensorKind::B);
+    c.fibre_seed = 99;
+    c.max_mm = 40.0;
+    v.push(("glazed_b_fibre_seed_99_40mm", c, 6, 0));
+    v
+}
+
+fn compute_curve(name: &'static str, c: &SimConfig, seed: u64, run: u64) -> Got {
+    let curve = accretion_curve(c, seed, run);
+    let mut h = Fnv::new();
+    hash_curve(&mut h, &curve);
+    let n = curve.points.len();
+    let mut values = Vec::new();
+    for i in [n / 10, n / 4, n / 2, n - 1] {
+        let p = curve.points[i];
+        values.extend([p.i1_ua, p.i2_ua]);
+    }
+    Got {
+        name,
+        hash: h.0,
+        values,
+    }
+}
+
+fn compute_mc(name: &'static str, c: &SimConfig, runs: u64, seed: u64) -> Got {
+    let mc = monte_carlo(c, runs, seed, &|| {});
+    let bound = crlb(&mc.points, DEFAULT_FIT_HALF_WIDTH_MM);
+    let q = fit_quality(&mc.points, &bound, runs as usize);
+    let mut h = Fnv::new();
+    for r in &mc.runs {
+        hash_curve(&mut h, r);
+    }
+    hash_mc(&mut h, &mc.points);
+    hash_crlb(&mut h, &bound);
+    h.fs(&q.rms_residual_ua);
+    h.fs(&q.rms_std_error_ua);
+    let n = mc.points.len();
+    let mut values = Vec::new();
+    for i in [n / 5, n - 1] {
+        let p = mc.points[i];
+        values.extend([p.mean_ua[0], p.mean_ua[1], p.cov_ua2[0][0], p.cov_ua2[0][1]]);
+        values.extend([p.cov_ua2[1][1], bound[i].crlb_std_mm]);
+    }
+    Got {
+        name,
+        hash: h.0,
+        values,
+    }
+}
+
+/// Bit for bit (NaN equals NaN).
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len()
+        && a.iter()
+            .zip(b)
+            .all(|(x, y)| x.to_bits() == y.to_bits() || (x.is_nan() && y.is_nan()))
+}
+
+/// Compare, and on a mismatch print the whole table as it is now.
+fn check(got: &[Got], want: &[(&str, u64, &[f64])]) {
+    let same = got.len() == want.len()
+        && got
+            .iter()
+            .zip(want)
+            .all(|(g, w)| g.name == w.0 && g.hash == w.1 && same_bits(&g.values, w.2));
+    if !same {
+        let mut table = String::new();
+        for g in got {
+            table += &format!(
+                "    (\n        {:?},\n        {:#018x},\n        &[",
+                g.name, g.hash
+            );
+            for v in &g.values {
+                if v.is_nan() {
+                    table += "f64::NAN, ";
+                } else {
+                    table += &format!("{v:?}, ");
+                }
+            }
+            table += "],\n    ),\n";
+        }
+        for (g, w) in got.iter().zip(want) {
+            if g.name != w.0 || g.hash != w.1 || !same_bits(&g.values, w.2) {
+                eprintln!(
+                    "CHANGED {}: hash {:#018x} (golden {:#018x})",
+                    g.name, g.hash, w.1
+                );
+                for (a, b) in g.values.iter().zip(w.2) {
+                    if !same_bits(&[*a], &[*b]) {
+                        eprintln!("    {a:?} (golden {b:?}, diff {:e})", a - b);
+                    }
+                }
+            }
+        }
+        panic!("output differs from the golden values; now:\n{table}");
+    }
+}
+
+#[test]
+fn single_accretions_are_bit_identical_to_the_golden_values() {
+    let got: Vec<Got> = curve_cases()
+        .iter()
+        .map(|(n, c, s, r)| compute_curve(n, c, *s, *r))
+        .collect();
+    check(&got, GOLDEN_CURVES);
+}
+
+#[test]
+fn monte_carlo_and_crlb_are_bit_identical_to_the_golden_values() {
+    let mut short = cfg(IceKind::Glazed, SensorKind::A);
+    short.max_mm = 6.0;
+    let got = vec![
+        // The thesis Monte Carlo (`foisctl sim crlb --ice rime --runs 1000`, seed 1).
+        compute_mc("rime_b_1000", &cfg(IceKind::Rime, SensorKind::B), 1000, 1),
+        compute_mc("glazed_b_200", &cfg(IceKind::Glazed, SensorKind::B), 200, 1),
+        compute_mc("water_b_20", &cfg(IceKind::Water, SensorKind::B), 20, 3),
+        compute_mc("glazed_a_6mm_50", &short, 50, 11),
+    ];
+    check(&got, GOLDEN_MC);
+}
+
+const GOLDEN_CURVES: &[(&str, u64, &[f64])] = &[
+    (
+        "rime_b",
+        0xe2266ac883d880cc,
+        &[
+            16.912570142674106,
+            1.0950487841431151,
+            24.258807788426132,
+            6.642390550388168,
+            28.061422829995212,
+            10.471770919606612,
+            30.1285116298346,
+            11.781732172723096,
+        ],
+    ),
+    (
+        "rime_b_run_7",
+        0x9d60c6ad2f5f9a99,
+        &[
+            22.9699387228847,
+            2.5484582560549733,
+            23.370600898033224,
+            10.322936425483995,
+            28.00149837963637,
+            10.041553495932238,
+            29.988459068238495,
+            12.255840572242516,
+        ],
+    ),
+    (
+        "glazed_b",
+        0x75bed61d9ea167bc,
+        &[
+            9.642299130859683,
+            1.6003252484851767,
+            3.6509163310654094,
+            4.744886008278293,
+            0.952158480800084,
+            1.6292771146330631,
+            0.2839159037732232,
+            0.3191695117637108,
+        ],
+    ),
+    (
+        "glazed_b_run_5",
+        0xc99f89b264d12988,
+        &[
+            53.699583416611006,
+            23.5341159769998,
+            1.993043108549696,
+            14.641542476891525,
+            0.241766099063573,
+            0.34987482912162265,
+            0.26618437913374493,
+            0.12219705391780392,
+        ],
+    ),
+    (
+        "water_b",
+        0x5b297347accd37d9,
+        &[
+            21.360843426646134,
+            2.909948092543779,
+            3.7477446908023646,
+            11.892160774408959,
+            0.041909769351676895,
+            0.7909626186648964,
+            0.0,
+            0.010650568823997947,
+        ],
+    ),
+    (
+        "flat_b",
+        0x54fb0c568f8d60e1,
+        &[
+            20.01131650815001,
+            3.600337469478727,
+            3.1410668158274375,
+            10.657099276708022,
+            0.030305225381217812,
+            0.6283086853910282,
+            0.0,
+            0.007618260800035039,
+        ],
+    ),
+    (
+        "rime_a",
+        0xa3c95059e7f4f076,
+        &[
+            18.10504358068275,
+            1.3247103351670022,
+            25.451281226434777,
+            6.872052101412054,
+            29.253896268003857,
+            10.7014324706305,
+            31.320985067843246,
+            12.011393723746984,
+        ],
+    ),
+    (
+        "glazed_a",
+        0xfce7afca8966bf1d,
+        &[
+            59.17103917214923,
+            30.629474605137293,
+            3.241433525569955,
+            13.95768504686142,
+            1.467293330204821,
+            0.5963436308872294,
+            1.4699395046973593,
+            0.3922959929212298,
+        ],
+    ),
+    (
+        "flat_a",
+        0xb2e5edce0ebbabf9,
+        &[
+            21.203789946158654,
+            3.829999020502614,
+            4.333540253836082,
+            10.886760827731909,
+            1.2227786633898625,
+            0.8579702364149153,
+            1.1924734380086446,
+            0.23727981182392213,
+        ],
+    ),
+    (
+        "glazed_b_mean_surface_fresnel",
+        0xabc4f354880f20e6,
+        &[
+            5.420149620412759,
+            0.32471016511253564,
+            3.6796052161773556,
+            2.316048943763252,
+            1.0136195616297907,
+            1.695125448790838,
+            0.28486095554799085,
+            0.3275728899953893,
+        ],
+    ),
+    (
+        "glazed_b_no_diffuse",
+        0xef62acb6278bd8e9,
+        &[
+            5.538009346447771,
+            0.27470663854841404,
+            4.6873350448624125,
+            1.9865180874684167,
+            0.6691595479188056,
+            2.5401545966361665,
+            0.2598963921167192,
+            0.23761283817743617,
+        ],
+    ),
+    (
+        "rime_b_diffuse_20deg",
+        0x92013f7e06d8e123,
+        &[
+            65.53238098245083,
+            27.332127792009608,
+            22.337672095634368,
+            14.851667201197344,
+            28.65050049132712,
+            9.786962486569136,
+            30.414778322893714,
+            11.656380428233977,
+        ],
+    ),
+    (
+        "glazed_b_acceptance",
+        0xb95a479ef0f98ca2,
+        &[
+            0.002656472476533698,
+            0.0,
+            0.01647071918405685,
+            0.0,
+            0.029741886381730694,
+            0.0,
+            0.05759462912726134,
+            0.007599604032997021,
+        ],
+    ),
+    (
+        "rime_b_acceptance",
+        0xa805e9610d4f4ccd,
+        &[
+            0.29328119559423516,
+            0.0,
+            0.8764046560870641,
+            0.0,
+            2.0482988012490866,
+            0.04074624390868803,
+            3.2475053762300723,
+            0.43306849065386427,
+        ],
+    ),
+    (
+        "rime_b_ch3_step_0_25",
+        0xbc27ba83e8592fcc,
+        &[
+            38.74333318186135,
+            0.29383001258926184,
+            25.985827846669743,
+            7.411276648470261,
+            29.421892534909826,
+            3.367036825346467,
+            31.532059398704405,
+            4.150900845848547,
+        ],
+    ),
+    (
+        "flat_b_ch3_no_spread",
+        0x066321b7dd825741,
+        &[
+            12.54127242096439,
+            0.0,
+            1.3103254843621348,
+            9.287219222496146,
+            0.0,
+            0.0,
+            0.0,
+            0.0,
+        ],
+    ),
+    (
+        "glazed_b_fibre_seed_99_40mm",
+        0x64a88955f2d260ed,
+        &[
+            1.683243070754487,
+            8.284451301243122,
+            0.2951036347392372,
+            0.23933873654671867,
+            0.2972554807847122,
+            0.16260428085990283,
+            0.30294959040405217,
+            0.16210276319373731,
+        ],
+    ),
+];
+
+const GOLDEN_MC: &[(&str, u64, &[f64])] = &[
+    (
+        "rime_b_1000",
+        0xed5573e727ee5157,
+        &[
+            23.317908476485105,
+            16.63904894349225,
+            1.082639995368874,
+            10.245155846925574,
+            130.08261110010648,
+            0.22190188984945725,
+            30.009344914060208,
+            12.074671587243932,
+            0.13065499201763756,
+            -0.006081883422755072,
+            0.04477029536655071,
+            2.399814878894983,
+        ],
+    ),
+    (
+        "glazed_b_200",
+        0xa901be7072de30c4,
+        &[
+            5.9062093247977145,
+            19.815682238212343,
+            2.076691790769405,
+            8.191387832329816,
+            107.13415576846086,
+            0.19352628933794336,
+            0.33327048799742487,
+            0.24433350156819825,
+            0.0036842076952242624,
+            0.005067562002491139,
+            0.01742199439810151,
+            1.649615973112304,
+        ],
+    ),
+    (
+        "water_b_20",
+        0xef890537e1e43a9b,
+        &[
+            7.631837554901568,
+            14.820686868926453,
+            8.30379900232644e-31,
+            1.660759800465288e-30,
+            3.321519600930576e-30,
+            f64::NAN,
+            0.0,
+            0.01065056882399795,
+            0.0,
+            0.0,
+            1.267059173938971e-35,
+            f64::NAN,
+        ],
+    ),
+    (
+        "glazed_a_6mm_50",
+        0x306521b2107740b4,
+        &[
+            40.79458964592414,
+            9.852781112974919,
+            377.8186203512943,
+            127.8670705039905,
+            47.7473857081108,
+            0.15704292615011922,
+            1.981172414360282,
+            2.0090999486656638,
+            0.28707054880414096,
+            0.34415518581603205,
+            0.5685227004252179,
+            0.6042543214921845,
+        ],
+    ),
+];
