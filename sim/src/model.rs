@@ -349,6 +349,43 @@ const BERNOULLI_ABOVE: f64 = 0.02;
 /// Stream ids: 0 = accretion (slopes); 2 + 2r = bubbles of ray r; 3 + 2r = diffuse of ray r.
 const STREAM_ACCRETION: u64 = 0;
 
+/// The number of bubble layers a ray meets within the output thicknesses: the first layer j
+/// whose q(j) (its thickness in output steps, non-decreasing in j) lies beyond the last
+/// output index, at most `MAX_LAYERS_PER_RAY`. Layer j is frozen in at the first index
+/// i ≥ `first_wet` with i ≥ q(j); j_end is the first layer for which that index is ≥ `nt`.
+fn layers_covered(q_of: &impl Fn(u32) -> f64, first_wet: usize, nt: usize) -> u32 {
+    if first_wet >= nt {
+        return 0;
+    }
+    let last = (nt - 1) as f64;
+    let beyond = |j: u32| q_of(j) > last;
+    // q is linear in j up to rounding: start from the straight-line estimate, then settle
+    // on the exact first j with the same comparisons as a walk layer by layer.
+    let (q0, q1) = (q_of(0), q_of(1));
+    let slope = q1 - q0;
+    let mut j = if slope > 0.0 {
+        ((last - q0) / slope).clamp(0.0, MAX_LAYERS_PER_RAY as f64) as u32
+    } else {
+        0
+    };
+    while j > 0 && beyond(j - 1) {
+        j -= 1;
+    }
+    while j < MAX_LAYERS_PER_RAY && !beyond(j) {
+        j += 1;
+    }
+    j
+}
+
+/// The smallest integer i ≥ 0 with i ≥ q, as an index (q ≤ `usize::MAX`): ceil without a
+/// libm call. Exact: `i as f64 >= q` and `(i - 1) as f64 < q` for every finite q.
+#[inline]
+fn ceil_index(q: f64) -> usize {
+    let t = q as i64; // toward zero: the ceiling for q ≤ 0, the floor for q > 0
+    let t = if (t as f64) < q { t + 1 } else { t };
+    t.max(0) as usize
+}
+
 /// Geometric number of failures before the first success, P(success) = p.
 #[inline]
 fn geometric_gap(rng: &mut Pcg32, ln_q: f64) -> u32 {
@@ -507,49 +544,33 @@ impl SensorModel {
             let slope_xy = DVec2::new(v.x, v.y) / v.z;
             let mut bub = Pcg32::new(key, 2 + 2 * r as u64);
             let mut dif = Pcg32::new(key, 3 + 2 * r as u64);
-            // Dense bubbles (rime): one Bernoulli draw per layer; sparse bubbles (glazed):
-            // geometric gaps between bubbles. Both give P_B per layer, independently.
-            let mut next_layer: u32 = if p.p_bubble <= 0.0 {
-                u32::MAX
-            } else if bernoulli {
-                0
-            } else {
-                geometric_gap(&mut bub, ln_q)
-            };
             // Pass 1, bubbles: layer j (z from jΔ to (j+1)Δ, bubble at its middle) is frozen
             // in once the local surface above the bubble is at least (j+1)Δ high, i.e. from
             // the mean thickness d_j = (j+1)Δ − off(z_b), where off is the plane's local
-            // offset at the bubble. d_j grows with j (the ray is steeper than the plane), so
-            // the forward flux at each thickness is a running product.
+            // offset at the bubble. d_j grows with j (the ray is steeper than the plane:
+            // den > 0), so the forward flux at each thickness is a running product.
             let off1 = tx * slope_xy.x + ty * slope_xy.y;
             let inv_step = 1.0 / cfg.step_mm;
+            // q(j): d_j in output steps; layer j belongs to the first output index ≥ q(j).
+            let q_of = |j: u32| {
+                let z_top = (j as f64 + 1.0) * BUBBLE_LAYER_MM;
+                let z_b = (j as f64 + 0.5) * BUBBLE_LAYER_MM;
+                (z_top - a - off1 * z_b) * inv_step - 1e-9
+            };
+            // The layers that the ice covers within max_mm: j < j_end. Beyond, the bubbles
+            // are not drawn. A ray almost parallel to a tilted surface would walk very many
+            // layers before the surface covers them: at most MAX_LAYERS_PER_RAY (2 m).
+            let j_end = layers_covered(&q_of, first_wet, nt);
             steps.clear();
             let mut fwd = ray.flux_in_w;
-            let mut i_cur = first_wet;
-            let mut i_f = first_wet as f64;
-            while next_layer != u32::MAX {
-                let z_top = (next_layer as f64 + 1.0) * BUBBLE_LAYER_MM;
-                let z_b = (next_layer as f64 + 0.5) * BUBBLE_LAYER_MM;
-                let q = (z_top - a - off1 * z_b) * inv_step - 1e-9;
-                // First output index at or above d_j: q grows with j, so step the index up
-                // (about one step per layer, no float-to-int conversion).
-                while i_f < q && i_cur < nt {
-                    i_f += 1.0;
-                    i_cur += 1;
-                }
-                let i = i_cur;
-                // A ray almost parallel to a tilted surface would walk very many layers
-                // before the surface covers them: stop after MAX_LAYERS_PER_RAY (2 m).
-                if i >= nt || next_layer >= MAX_LAYERS_PER_RAY {
-                    break;
-                }
-                if bernoulli && bub.next_u32() >= p_thr {
-                    next_layer += 1;
-                    continue;
-                }
+            // A bubble in layer j: its scattered light, and the forward flux from then on.
+            let mut bubble = |j: u32, bub: &mut Pcg32| {
+                let z_b = (j as f64 + 0.5) * BUBBLE_LAYER_MM;
+                // First output index at or above d_j (j < j_end: below nt).
+                let i = ceil_index(q_of(j)).max(first_wet);
                 let b = ray.p0 + slope_xy * z_b;
                 // Scattered part: 5 % deflected toward the face (Fig. 3.11).
-                let cos_b = 1.0 - uniform32(&mut bub); // isotropic over the lower hemisphere
+                let cos_b = 1.0 - uniform32(bub); // isotropic over the lower hemisphere
                 let sin2_b = (1.0 - cos_b * cos_b).max(0.0);
                 // Horizontal travel z_b·tan θ_B; beyond the farthest point of the face the
                 // ray misses whatever its azimuth, so the azimuth is not drawn.
@@ -557,7 +578,7 @@ impl SensorModel {
                 let far_y = b.y.abs() + y_hi;
                 let travel2 = z_b * z_b * sin2_b / (cos_b * cos_b);
                 if travel2 <= far_x * far_x + far_y * far_y {
-                    let (c_phi, s_phi) = unit_circle(&mut bub);
+                    let (c_phi, s_phi) = unit_circle(bub);
                     let sin_b = sin2_b.sqrt();
                     let reach = z_b / cos_b;
                     let land = b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
@@ -571,14 +592,27 @@ impl SensorModel {
                 }
                 fwd *= FORWARD_FRACTION;
                 steps.push((i, fwd));
-                let gap = if bernoulli {
-                    0
-                } else {
-                    geometric_gap(&mut bub, ln_q)
-                };
-                next_layer = next_layer.saturating_add(1).saturating_add(gap);
-                if next_layer >= u32::MAX / 2 {
-                    next_layer = u32::MAX;
+            };
+            if p.p_bubble <= 0.0 {
+                // No bubbles.
+            } else if bernoulli {
+                // Dense bubbles (rime): one draw per layer.
+                for j in 0..j_end {
+                    if bub.next_u32() < p_thr {
+                        bubble(j, &mut bub);
+                    }
+                }
+            } else {
+                // Sparse bubbles (glazed): geometric gaps between bubbles. Both give P_B per
+                // layer, independently.
+                let mut j = geometric_gap(&mut bub, ln_q);
+                while j < j_end {
+                    bubble(j, &mut bub);
+                    let gap = geometric_gap(&mut bub, ln_q);
+                    j = j.saturating_add(1).saturating_add(gap);
+                    if j >= u32::MAX / 2 {
+                        break;
+                    }
                 }
             }
 
