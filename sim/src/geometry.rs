@@ -85,6 +85,16 @@ impl Geometry {
         }
     }
 
+    /// The signal bundles as a branch-free test, for the tracer's inner loops.
+    pub(crate) fn bundles(self) -> Bundles {
+        let r = self.radius_mm();
+        Bundles {
+            r,
+            b: self.length_b_mm(),
+            r2: r * r,
+        }
+    }
+
     /// Source fibre positions (x, y) in mm: a uniform square grid of pitch R/40 over the
     /// source half-disc (x ≤ 0, including the x = 0 column). 2553 fibres, close to the
     /// thesis's N = 2546 (§3.3), whose grid convention is not given.
@@ -106,3 +116,71 @@ impl Geometry {
 
 /// Grid steps per radius of the source grid.
 pub const SOURCE_GRID_STEPS: i32 = 40;
+
+/// The two signal bundles of a face: [`Bundles::slot`] answers like [`Geometry::region`]
+/// with the same comparisons, but without branches (a landing point is unpredictable).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Bundles {
+    r: f64,
+    b: f64,
+    r2: f64,
+}
+
+impl Bundles {
+    /// 0 on signal bundle 1, 1 on signal bundle 2, 2 elsewhere (source, outside).
+    #[inline(always)]
+    pub(crate) fn slot(&self, x_mm: f64, y_mm: f64) -> usize {
+        // Exactly the tests of `Geometry::region`, NaN included, combined with `&`.
+        let in_y = !(y_mm.abs() > self.r);
+        let right = !(x_mm < 0.0);
+        let b1 = in_y & right & (x_mm <= self.b);
+        let dx = x_mm - self.b;
+        let b2 = in_y & right & !(x_mm <= self.b) & (dx * dx + y_mm * y_mm <= self.r2);
+        2 - 2 * usize::from(b1) - usize::from(b2)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn slot_of(r: Region) -> usize {
+        match r {
+            Region::Bundle1 => 0,
+            Region::Bundle2 => 1,
+            _ => 2,
+        }
+    }
+
+    #[test]
+    fn bundle_slot_agrees_with_region_on_and_off_the_edges() {
+        for geo in [Geometry::ThesisCh3, Geometry::ThesisCh5] {
+            let bundles = geo.bundles();
+            let (r, b) = (geo.radius_mm(), geo.length_b_mm());
+            // A fine grid, the edges themselves and their neighbouring floats, and NaN.
+            let mut xs: Vec<f64> = (-400..=900).map(|i| i as f64 * 0.0173).collect();
+            let mut ys: Vec<f64> = (-400..=400).map(|i| i as f64 * 0.0131).collect();
+            for e in [0.0, b, b + r, -r] {
+                xs.extend([e, e.next_down(), e.next_up()]);
+            }
+            for e in [r, -r, 0.0] {
+                ys.extend([e, e.next_down(), e.next_up()]);
+            }
+            xs.push(f64::NAN);
+            ys.push(f64::NAN);
+            let mut counts = [0usize; 3];
+            for &x in &xs {
+                for &y in &ys {
+                    let want = slot_of(geo.region(x, y));
+                    assert_eq!(bundles.slot(x, y), want, "{geo:?} ({x}, {y})");
+                    counts[want] += 1;
+                }
+            }
+            // Every answer occurs many times.
+            assert!(counts.iter().all(|&c| c > 10_000), "{counts:?}");
+            // A point on the arc of bundle 2: x² + y² = r² exactly for a 3-4-5 triangle.
+            let (x, y) = (b + 0.6 * r, 0.8 * r);
+            assert_eq!(bundles.slot(x, y), slot_of(geo.region(x, y)));
+        }
+    }
+}

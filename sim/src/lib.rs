@@ -11,6 +11,7 @@ pub mod consts;
 pub mod geometry;
 pub mod laws;
 pub mod model;
+mod rng;
 pub mod montecarlo;
 
 pub use analytic::analytic_curve;

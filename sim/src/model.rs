@@ -1,11 +1,10 @@
 //! The sensor model and the ray tracer of one accretion (thesis §3.2, §5.3).
 
 use glam::{DVec2, DVec3};
-use rand_core::Rng;
-use rand_pcg::Pcg32;
 
 use crate::consts::*;
-use crate::geometry::{Geometry, Region};
+use crate::geometry::Geometry;
+use crate::rng::Pcg32Stream;
 use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
 
 /// The medium that accretes on the face (thesis §3.4, §5.2.3, §5.3).
@@ -302,24 +301,24 @@ pub struct SensorModel {
 
 /// Uniform f64 in [0, 1).
 #[inline]
-fn uniform(rng: &mut Pcg32) -> f64 {
+fn uniform(rng: &mut Pcg32Stream) -> f64 {
     (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
 /// Uniform in (0, 1].
 #[inline]
-fn uniform_open0(rng: &mut Pcg32) -> f64 {
+fn uniform_open0(rng: &mut Pcg32Stream) -> f64 {
     1.0 - uniform(rng)
 }
 
 /// Uniform in [0, 1) with 32 random bits (one PCG output): enough for angles and positions.
 #[inline]
-fn uniform32(rng: &mut Pcg32) -> f64 {
+fn uniform32(rng: &mut Pcg32Stream) -> f64 {
     rng.next_u32() as f64 * (1.0 / 4_294_967_296.0)
 }
 
 /// Standard normal by Box–Muller.
-fn std_normal(rng: &mut Pcg32) -> f64 {
+fn std_normal(rng: &mut Pcg32Stream) -> f64 {
     let u1 = uniform_open0(rng);
     let u2 = uniform(rng);
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
@@ -388,7 +387,7 @@ fn ceil_index(q: f64) -> usize {
 
 /// Geometric number of failures before the first success, P(success) = p.
 #[inline]
-fn geometric_gap(rng: &mut Pcg32, ln_q: f64) -> u32 {
+fn geometric_gap(rng: &mut Pcg32Stream, ln_q: f64) -> u32 {
     if ln_q == f64::NEG_INFINITY {
         return 0;
     }
@@ -416,7 +415,7 @@ impl SensorModel {
         let sigma = th_max / 5.0;
         let grid = cfg.geometry.source_grid_mm();
         let flux_ray = SOURCE_FLUX_W / grid.len() as f64;
-        let mut rng = Pcg32::new(mix64(cfg.fibre_seed), 1);
+        let mut rng = Pcg32Stream::new(mix64(cfg.fibre_seed), 1);
         let incl = INCLINATION_DEG.to_radians();
         let (si, ci) = incl.sin_cos();
         let face_in = DVec3::new(0.0, 0.0, -1.0); // normal on the fibre side
@@ -501,13 +500,15 @@ impl SensorModel {
         let n_med = p.n_medium;
         let alpha = ALPHA_PER_MM;
         let key = accretion_key(seed, run);
-        let mut acc = Pcg32::new(key, STREAM_ACCRETION);
+        let mut acc = Pcg32Stream::new(key, STREAM_ACCRETION);
         let sx = p.slope_max_rad * (2.0 * uniform(&mut acc) - 1.0);
         let sy = p.slope_max_rad * (2.0 * uniform(&mut acc) - 1.0);
         let (tx, ty) = (sx.tan(), sy.tan());
         let normal = DVec3::new(-tx, -ty, 1.0).normalize();
         let nt = self.thick.len();
-        let mut refl = vec![[0.0f64; 2]; nt];
+        // Reflected flux per thickness and bundle; slot 2 takes the rays that miss both
+        // bundles, so the inner loops add without branching.
+        let mut refl = vec![[0.0f64; 3]; nt];
         let mut scat_delta = vec![[0.0f64; 2]; nt];
         let mut leak = vec![0.0f64; nt];
         let ln_q = if p.p_bubble > 0.0 {
@@ -520,6 +521,7 @@ impl SensorModel {
         // P(next_u32 < p_thr) = P_B.
         let p_thr = (p.p_bubble * 4_294_967_296.0).min(u32::MAX as f64) as u32;
         let sensor_a = cfg.sensor == SensorKind::A;
+        let bundles = geo.bundles();
         // Bounding box of the face, for culling scattered rays.
         let (x_lo, x_hi, y_hi) = (
             -geo.radius_mm(),
@@ -527,8 +529,14 @@ impl SensorModel {
             geo.radius_mm(),
         );
         let first_wet = self.thick.iter().position(|&d| d > 0.0).unwrap_or(nt);
+        let inv_step = 1.0 / cfg.step_mm;
 
-        let mut steps: Vec<(usize, f64)> = Vec::with_capacity(256);
+        // Per ray: the forward flux after n bubbles (fwd_after[n]) and the number of
+        // bubbles frozen in at each thickness index. The forward flux at thickness i is
+        // fwd_after[bubbles at indices ≤ i].
+        let mut fwd_after: Vec<f64> = Vec::with_capacity(256);
+        let mut bubbles_at = vec![0u32; nt];
+        let mut drawn: Vec<DrawnBubble> = Vec::with_capacity(256);
         for (r, ray) in self.rays.iter().enumerate() {
             if sensor_a {
                 for l in leak.iter_mut().take(first_wet) {
@@ -542,15 +550,14 @@ impl SensorModel {
                 continue;
             }
             let slope_xy = DVec2::new(v.x, v.y) / v.z;
-            let mut bub = Pcg32::new(key, 2 + 2 * r as u64);
-            let mut dif = Pcg32::new(key, 3 + 2 * r as u64);
+            let mut bub = Pcg32Stream::new(key, 2 + 2 * r as u64);
+            let mut dif = Pcg32Stream::new(key, 3 + 2 * r as u64);
             // Pass 1, bubbles: layer j (z from jΔ to (j+1)Δ, bubble at its middle) is frozen
             // in once the local surface above the bubble is at least (j+1)Δ high, i.e. from
             // the mean thickness d_j = (j+1)Δ − off(z_b), where off is the plane's local
             // offset at the bubble. d_j grows with j (the ray is steeper than the plane:
             // den > 0), so the forward flux at each thickness is a running product.
             let off1 = tx * slope_xy.x + ty * slope_xy.y;
-            let inv_step = 1.0 / cfg.step_mm;
             // q(j): d_j in output steps; layer j belongs to the first output index ≥ q(j).
             let q_of = |j: u32| {
                 let z_top = (j as f64 + 1.0) * BUBBLE_LAYER_MM;
@@ -561,60 +568,81 @@ impl SensorModel {
             // are not drawn. A ray almost parallel to a tilted surface would walk very many
             // layers before the surface covers them: at most MAX_LAYERS_PER_RAY (2 m).
             let j_end = layers_covered(&q_of, first_wet, nt);
-            steps.clear();
+            fwd_after.clear();
+            fwd_after.push(ray.flux_in_w);
+            drawn.clear();
             let mut fwd = ray.flux_in_w;
-            // A bubble in layer j: its scattered light, and the forward flux from then on.
-            let mut bubble = |j: u32, bub: &mut Pcg32| {
+            // Pass 1a, the random walk: which layers hold a bubble, and the random angles
+            // of their scattered rays. Only what decides the next draw is computed here.
+            // Dense bubbles (rime): one draw per layer, P_B each. Sparse bubbles (glazed):
+            // geometric gaps between bubbles, P_B per layer too.
+            let mut j: u32 = match (p.p_bubble > 0.0, bernoulli) {
+                (false, _) => j_end,
+                (true, true) => 0,
+                (true, false) => geometric_gap(&mut bub, ln_q),
+            };
+            loop {
+                if bernoulli {
+                    j += bub.draws_until_below(p_thr, j_end - j);
+                }
+                if j >= j_end {
+                    break;
+                }
                 let z_b = (j as f64 + 0.5) * BUBBLE_LAYER_MM;
                 // First output index at or above d_j (j < j_end: below nt).
                 let i = ceil_index(q_of(j)).max(first_wet);
                 let b = ray.p0 + slope_xy * z_b;
                 // Scattered part: 5 % deflected toward the face (Fig. 3.11).
-                let cos_b = 1.0 - uniform32(bub); // isotropic over the lower hemisphere
+                let cos_b = 1.0 - uniform32(&mut bub); // isotropic over the lower hemisphere
                 let sin2_b = (1.0 - cos_b * cos_b).max(0.0);
                 // Horizontal travel z_b·tan θ_B; beyond the farthest point of the face the
                 // ray misses whatever its azimuth, so the azimuth is not drawn.
                 let far_x = (b.x - x_lo).abs().max((b.x - x_hi).abs());
                 let far_y = b.y.abs() + y_hi;
                 let travel2 = z_b * z_b * sin2_b / (cos_b * cos_b);
-                if travel2 <= far_x * far_x + far_y * far_y {
-                    let (c_phi, s_phi) = unit_circle(bub);
-                    let sin_b = sin2_b.sqrt();
-                    let reach = z_b / cos_b;
-                    let land = b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
-                    let k = bundle_index(geo.region(land.x, land.y));
-                    if k < 2 {
-                        let s = DVec3::new(sin_b * c_phi, sin_b * s_phi, -cos_b);
-                        let path = z_b / v.z + reach;
-                        scat_delta[i][k] +=
-                            fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
-                    }
-                }
+                let azimuth = if travel2 <= far_x * far_x + far_y * far_y {
+                    Some(unit_circle_unnormalised(&mut bub))
+                } else {
+                    None
+                };
+                drawn.push(DrawnBubble {
+                    i,
+                    z_b,
+                    b,
+                    cos_b,
+                    sin2_b,
+                    azimuth,
+                });
                 fwd *= FORWARD_FRACTION;
-                steps.push((i, fwd));
-            };
-            if p.p_bubble <= 0.0 {
-                // No bubbles.
-            } else if bernoulli {
-                // Dense bubbles (rime): one draw per layer.
-                for j in 0..j_end {
-                    if bub.next_u32() < p_thr {
-                        bubble(j, &mut bub);
-                    }
-                }
-            } else {
-                // Sparse bubbles (glazed): geometric gaps between bubbles. Both give P_B per
-                // layer, independently.
-                let mut j = geometric_gap(&mut bub, ln_q);
-                while j < j_end {
-                    bubble(j, &mut bub);
+                fwd_after.push(fwd);
+                bubbles_at[i] += 1;
+                if bernoulli {
+                    j += 1;
+                } else {
                     let gap = geometric_gap(&mut bub, ln_q);
                     j = j.saturating_add(1).saturating_add(gap);
-                    if j >= u32::MAX / 2 {
-                        break;
-                    }
                 }
             }
+            // Pass 1b, the scattered light of each bubble that lands on a bundle, added in
+            // the order of the walk.
+            for (d, &fwd) in drawn.iter().zip(&fwd_after) {
+                let Some((ua, ub, uq)) = d.azimuth else {
+                    continue;
+                };
+                let norm = uq.sqrt().recip();
+                let (c_phi, s_phi) = (ua * norm, ub * norm);
+                let sin_b = d.sin2_b.sqrt();
+                let reach = d.z_b / d.cos_b;
+                let land = d.b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
+                let k = bundles.slot(land.x, land.y);
+                if k < 2 {
+                    let s = DVec3::new(sin_b * c_phi, sin_b * s_phi, -d.cos_b);
+                    let path = d.z_b / v.z + reach;
+                    scat_delta[d.i][k] +=
+                        fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
+                }
+            }
+            let had_bubbles = fwd_after.len() > 1;
 
             // Pass 2, the surface at every thickness.
             if sensor_a {
@@ -626,14 +654,11 @@ impl SensorModel {
                     };
                 }
             }
-            let mut fwd = ray.flux_in_w;
-            let mut next_step = 0;
             if diffuse {
+                let mut n_bub = 0usize;
                 for i in first_wet..nt {
-                    while next_step < steps.len() && steps[next_step].0 <= i {
-                        fwd = steps[next_step].1;
-                        next_step += 1;
-                    }
+                    n_bub += bubbles_at[i] as usize;
+                    let fwd = fwd_after[n_bub];
                     let h0 = self.thick[i] + a;
                     if h0 <= 0.0 {
                         continue;
@@ -662,7 +687,7 @@ impl SensorModel {
                     let t_down = z_hit / -rd.z;
                     let land =
                         ray.p0 + DVec2::new(v.x, v.y) * t_up + DVec2::new(rd.x, rd.y) * t_down;
-                    let k = bundle_index(geo.region(land.x, land.y));
+                    let k = bundles.slot(land.x, land.y);
                     if k < 2 {
                         let cos_f = match cfg.diffuse_fresnel {
                             DiffuseFresnel::Facet => cos_i,
@@ -678,60 +703,68 @@ impl SensorModel {
                 // line, land(d) = p0 + w·(d + a), so only the thicknesses whose landing
                 // point lies in the face's bounding box are visited (the bundles are convex,
                 // their union too): cost per ray O(visited), not O(thicknesses).
-                let cpl = self.couple(rd);
-                if cpl <= 0.0 {
-                    continue;
-                }
-                let back = v.z / -rd.z;
-                let w = (DVec2::new(v.x, v.y) + DVec2::new(rd.x, rd.y) * back) / den;
-                let base = ray.p0 + w * a;
-                let (mut d_lo, mut d_hi) = (-a, f64::INFINITY); // h0 = d + a > 0
-                for (p0, w0, lo, hi) in [(base.x, w.x, 0.0, x_hi), (base.y, w.y, -y_hi, y_hi)] {
-                    if w0.abs() < 1e-12 {
-                        if p0 < lo || p0 > hi {
-                            d_hi = f64::NEG_INFINITY;
+                'specular: {
+                    let cpl = self.couple(rd);
+                    if cpl <= 0.0 {
+                        break 'specular;
+                    }
+                    let back = v.z / -rd.z;
+                    let w = (DVec2::new(v.x, v.y) + DVec2::new(rd.x, rd.y) * back) / den;
+                    let base = ray.p0 + w * a;
+                    let (mut d_lo, mut d_hi) = (-a, f64::INFINITY); // h0 = d + a > 0
+                    for (p0, w0, lo, hi) in
+                        [(base.x, w.x, 0.0, x_hi), (base.y, w.y, -y_hi, y_hi)]
+                    {
+                        if w0.abs() < 1e-12 {
+                            if p0 < lo || p0 > hi {
+                                d_hi = f64::NEG_INFINITY;
+                            }
+                        } else {
+                            let (u, t) = ((lo - p0) / w0, (hi - p0) / w0);
+                            d_lo = d_lo.max(u.min(t));
+                            d_hi = d_hi.min(u.max(t));
                         }
-                    } else {
-                        let (u, t) = ((lo - p0) / w0, (hi - p0) / w0);
-                        d_lo = d_lo.max(u.min(t));
-                        d_hi = d_hi.min(u.max(t));
                     }
-                }
-                if d_hi.is_nan() || d_lo.is_nan() || d_hi < d_lo {
-                    continue;
-                }
-                // One index of margin each side; the exact test is region() below.
-                let i_lo = ((d_lo * inv_step).max(0.0).min(nt as f64) as usize)
-                    .saturating_sub(1)
-                    .max(first_wet);
-                let i_hi = ((d_hi * inv_step).max(0.0).min(nt as f64) as usize + 2).min(nt);
-                if i_lo >= i_hi {
-                    continue;
-                }
-                // Up and back: path (d + a)·k_path, absorbed by the same ratio every step.
-                let k_path = (1.0 + back) / den;
-                let mut att = (-alpha * k_path * (self.thick[i_lo] + a)).exp();
-                let att_step = (-alpha * k_path * cfg.step_mm).exp();
-                for i in i_lo..i_hi {
-                    let att_i = att;
-                    att *= att_step;
-                    while next_step < steps.len() && steps[next_step].0 <= i {
-                        fwd = steps[next_step].1;
-                        next_step += 1;
+                    if d_hi.is_nan() || d_lo.is_nan() || d_hi < d_lo {
+                        break 'specular;
                     }
-                    let h0 = self.thick[i] + a;
-                    if h0 <= 0.0 {
-                        continue;
+                    // One index of margin each side; the exact test is the bundle slot below.
+                    let i_lo = ((d_lo * inv_step).max(0.0).min(nt as f64) as usize)
+                        .saturating_sub(1)
+                        .max(first_wet);
+                    let i_hi = ((d_hi * inv_step).max(0.0).min(nt as f64) as usize + 2).min(nt);
+                    if i_lo >= i_hi {
+                        break 'specular;
                     }
-                    let land = ray.p0 + w * h0;
-                    let k = bundle_index(geo.region(land.x, land.y));
-                    if k < 2 {
+                    // Up and back: path (d + a)·k_path, absorbed by the same ratio every step.
+                    let k_path = (1.0 + back) / den;
+                    let mut att = (-alpha * k_path * (self.thick[i_lo] + a)).exp();
+                    let att_step = (-alpha * k_path * cfg.step_mm).exp();
+                    let mut n_bub: usize = bubbles_at[first_wet..i_lo]
+                        .iter()
+                        .map(|&c| c as usize)
+                        .sum();
+                    for i in i_lo..i_hi {
+                        let att_i = att;
+                        att *= att_step;
+                        n_bub += bubbles_at[i] as usize;
+                        let fwd = fwd_after[n_bub];
+                        let h0 = self.thick[i] + a;
+                        let land = ray.p0 + w * h0;
+                        // Dry under the tilted surface (h0 ≤ 0) or off the bundles: slot 2.
+                        let k = if h0 <= 0.0 {
+                            2
+                        } else {
+                            bundles.slot(land.x, land.y)
+                        };
                         refl[i][k] += fwd * rfl * cpl * att_i;
                     }
                 }
             }
+            if had_bubbles {
+                bubbles_at[first_wet..].fill(0);
+            }
         }
-
         // Flux to current.
         let ua = RESPONSIVITY_A_PER_W * 1e6;
         let mut points = Vec::with_capacity(nt);
@@ -793,26 +826,44 @@ fn small_sin_cos(x: f64) -> (f64, f64) {
 }
 
 /// A uniformly distributed point on the unit circle, by rejection (no trigonometry).
+#[cfg(test)]
+fn unit_circle(rng: &mut Pcg32Stream) -> (f64, f64) {
+    let (a, b, q) = unit_circle_unnormalised(rng);
+    let s = q.sqrt().recip();
+    (a * s, b * s)
+}
+
+/// The draws of a uniform point on the unit circle by rejection: (a, b, q = a² + b²) with
+/// 0 < q ≤ 1; the point is (a, b)/√q.
 #[inline]
-fn unit_circle(rng: &mut Pcg32) -> (f64, f64) {
+fn unit_circle_unnormalised(rng: &mut Pcg32Stream) -> (f64, f64, f64) {
     loop {
         let a = 2.0 * uniform32(rng) - 1.0;
         let b = 2.0 * uniform32(rng) - 1.0;
         let q = a * a + b * b;
         if q > 1e-12 && q <= 1.0 {
-            let s = q.sqrt().recip();
-            return (a * s, b * s);
+            return (a, b, q);
         }
     }
 }
 
-#[inline]
-fn bundle_index(r: Region) -> usize {
-    match r {
-        Region::Bundle1 => 0,
-        Region::Bundle2 => 1,
-        _ => 2,
-    }
+/// A bubble as the random walk drew it (pass 1a), before its scattered light is traced
+/// (pass 1b).
+#[derive(Clone, Copy, Debug)]
+struct DrawnBubble {
+    /// Output index from which the bubble is frozen in.
+    i: usize,
+    /// Height of the bubble above the face, mm.
+    z_b: f64,
+    /// Position of the bubble over the face, mm.
+    b: DVec2,
+    /// cos θ_B of the scattered ray (toward the face).
+    cos_b: f64,
+    /// sin² θ_B.
+    sin2_b: f64,
+    /// The azimuth draws `unit_circle_unnormalised`; `None` if the scattered ray cannot
+    /// reach the face (not drawn).
+    azimuth: Option<(f64, f64, f64)>,
 }
 
 /// One physical accretion of `cfg`, deterministic in (seed, run).
@@ -841,7 +892,7 @@ mod tests {
     fn geometric_gap_has_mean_q_over_p() {
         let p: f64 = 0.0015;
         let ln_q = (1.0 - p).ln();
-        let mut rng = Pcg32::new(1, 1);
+        let mut rng = Pcg32Stream::new(1, 1);
         let n = 20_000;
         let mean = (0..n)
             .map(|_| geometric_gap(&mut rng, ln_q) as f64)
@@ -853,7 +904,7 @@ mod tests {
 
     #[test]
     fn unit_circle_is_uniform_and_unit() {
-        let mut rng = Pcg32::new(2, 3);
+        let mut rng = Pcg32Stream::new(2, 3);
         let mut quad = [0usize; 4];
         for _ in 0..40_000 {
             let (c, s) = unit_circle(&mut rng);
