@@ -128,6 +128,8 @@ pub(crate) struct Bundles {
 
 impl Bundles {
     /// 0 on signal bundle 1, 1 on signal bundle 2, 2 elsewhere (source, outside).
+    // The negated comparisons keep `region`'s answer for NaN coordinates too.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     #[inline(always)]
     pub(crate) fn slot(&self, x_mm: f64, y_mm: f64) -> usize {
         // Exactly the tests of `Geometry::region`, NaN included, combined with `&`.

@@ -11,7 +11,6 @@ pub mod consts;
 pub mod geometry;
 pub mod laws;
 pub mod model;
-mod rng;
 pub mod montecarlo;
 
 pub use analytic::analytic_curve;

@@ -1,10 +1,11 @@
 //! The sensor model and the ray tracer of one accretion (thesis §3.2, §5.3).
 
 use glam::{DVec2, DVec3};
+use rand_core::Rng;
+use rand_pcg::Pcg32;
 
 use crate::consts::*;
-use crate::geometry::Geometry;
-use crate::rng::Pcg32Stream;
+use crate::geometry::{Geometry, Region};
 use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
 
 /// The medium that accretes on the face (thesis §3.4, §5.2.3, §5.3).
@@ -301,24 +302,24 @@ pub struct SensorModel {
 
 /// Uniform f64 in [0, 1).
 #[inline]
-fn uniform(rng: &mut Pcg32Stream) -> f64 {
+fn uniform(rng: &mut Pcg32) -> f64 {
     (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
 }
 
 /// Uniform in (0, 1].
 #[inline]
-fn uniform_open0(rng: &mut Pcg32Stream) -> f64 {
+fn uniform_open0(rng: &mut Pcg32) -> f64 {
     1.0 - uniform(rng)
 }
 
 /// Uniform in [0, 1) with 32 random bits (one PCG output): enough for angles and positions.
 #[inline]
-fn uniform32(rng: &mut Pcg32Stream) -> f64 {
+fn uniform32(rng: &mut Pcg32) -> f64 {
     rng.next_u32() as f64 * (1.0 / 4_294_967_296.0)
 }
 
 /// Standard normal by Box–Muller.
-fn std_normal(rng: &mut Pcg32Stream) -> f64 {
+fn std_normal(rng: &mut Pcg32) -> f64 {
     let u1 = uniform_open0(rng);
     let u2 = uniform(rng);
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
@@ -385,9 +386,23 @@ fn ceil_index(q: f64) -> usize {
     t.max(0) as usize
 }
 
+/// Draw until a draw is below `threshold`, at most `max` draws: the number of draws at or
+/// above it before that one (which is consumed too), or `max` if none is below.
+#[inline(always)]
+fn draws_until_below(rng: &mut Pcg32, threshold: u32, max: u32) -> u32 {
+    let mut n = 0u32;
+    while n < max {
+        if rng.next_u32() < threshold {
+            return n;
+        }
+        n += 1;
+    }
+    max
+}
+
 /// Geometric number of failures before the first success, P(success) = p.
 #[inline]
-fn geometric_gap(rng: &mut Pcg32Stream, ln_q: f64) -> u32 {
+fn geometric_gap(rng: &mut Pcg32, ln_q: f64) -> u32 {
     if ln_q == f64::NEG_INFINITY {
         return 0;
     }
@@ -415,7 +430,7 @@ impl SensorModel {
         let sigma = th_max / 5.0;
         let grid = cfg.geometry.source_grid_mm();
         let flux_ray = SOURCE_FLUX_W / grid.len() as f64;
-        let mut rng = Pcg32Stream::new(mix64(cfg.fibre_seed), 1);
+        let mut rng = Pcg32::new(mix64(cfg.fibre_seed), 1);
         let incl = INCLINATION_DEG.to_radians();
         let (si, ci) = incl.sin_cos();
         let face_in = DVec3::new(0.0, 0.0, -1.0); // normal on the fibre side
@@ -500,7 +515,7 @@ impl SensorModel {
         let n_med = p.n_medium;
         let alpha = ALPHA_PER_MM;
         let key = accretion_key(seed, run);
-        let mut acc = Pcg32Stream::new(key, STREAM_ACCRETION);
+        let mut acc = Pcg32::new(key, STREAM_ACCRETION);
         let sx = p.slope_max_rad * (2.0 * uniform(&mut acc) - 1.0);
         let sy = p.slope_max_rad * (2.0 * uniform(&mut acc) - 1.0);
         let (tx, ty) = (sx.tan(), sy.tan());
@@ -550,8 +565,8 @@ impl SensorModel {
                 continue;
             }
             let slope_xy = DVec2::new(v.x, v.y) / v.z;
-            let mut bub = Pcg32Stream::new(key, 2 + 2 * r as u64);
-            let mut dif = Pcg32Stream::new(key, 3 + 2 * r as u64);
+            let mut bub = Pcg32::new(key, 2 + 2 * r as u64);
+            let mut dif = Pcg32::new(key, 3 + 2 * r as u64);
             // Pass 1, bubbles: layer j (z from jΔ to (j+1)Δ, bubble at its middle) is frozen
             // in once the local surface above the bubble is at least (j+1)Δ high, i.e. from
             // the mean thickness d_j = (j+1)Δ − off(z_b), where off is the plane's local
@@ -583,7 +598,7 @@ impl SensorModel {
             };
             loop {
                 if bernoulli {
-                    j += bub.draws_until_below(p_thr, j_end - j);
+                    j += draws_until_below(&mut bub, p_thr, j_end - j);
                 }
                 if j >= j_end {
                     break;
@@ -712,9 +727,7 @@ impl SensorModel {
                     let w = (DVec2::new(v.x, v.y) + DVec2::new(rd.x, rd.y) * back) / den;
                     let base = ray.p0 + w * a;
                     let (mut d_lo, mut d_hi) = (-a, f64::INFINITY); // h0 = d + a > 0
-                    for (p0, w0, lo, hi) in
-                        [(base.x, w.x, 0.0, x_hi), (base.y, w.y, -y_hi, y_hi)]
-                    {
+                    for (p0, w0, lo, hi) in [(base.x, w.x, 0.0, x_hi), (base.y, w.y, -y_hi, y_hi)] {
                         if w0.abs() < 1e-12 {
                             if p0 < lo || p0 > hi {
                                 d_hi = f64::NEG_INFINITY;
@@ -750,12 +763,15 @@ impl SensorModel {
                         n_bub += bubbles_at[i] as usize;
                         let fwd = fwd_after[n_bub];
                         let h0 = self.thick[i] + a;
+                        if h0 <= 0.0 {
+                            continue;
+                        }
                         let land = ray.p0 + w * h0;
-                        // Dry under the tilted surface (h0 ≤ 0) or off the bundles: slot 2.
-                        let k = if h0 <= 0.0 {
-                            2
-                        } else {
-                            bundles.slot(land.x, land.y)
+                        // Along the line the bundle changes rarely: a branch predicts well.
+                        let k = match geo.region(land.x, land.y) {
+                            Region::Bundle1 => 0,
+                            Region::Bundle2 => 1,
+                            _ => continue,
                         };
                         refl[i][k] += fwd * rfl * cpl * att_i;
                     }
@@ -827,7 +843,7 @@ fn small_sin_cos(x: f64) -> (f64, f64) {
 
 /// A uniformly distributed point on the unit circle, by rejection (no trigonometry).
 #[cfg(test)]
-fn unit_circle(rng: &mut Pcg32Stream) -> (f64, f64) {
+fn unit_circle(rng: &mut Pcg32) -> (f64, f64) {
     let (a, b, q) = unit_circle_unnormalised(rng);
     let s = q.sqrt().recip();
     (a * s, b * s)
@@ -836,7 +852,7 @@ fn unit_circle(rng: &mut Pcg32Stream) -> (f64, f64) {
 /// The draws of a uniform point on the unit circle by rejection: (a, b, q = a² + b²) with
 /// 0 < q ≤ 1; the point is (a, b)/√q.
 #[inline]
-fn unit_circle_unnormalised(rng: &mut Pcg32Stream) -> (f64, f64, f64) {
+fn unit_circle_unnormalised(rng: &mut Pcg32) -> (f64, f64, f64) {
     loop {
         let a = 2.0 * uniform32(rng) - 1.0;
         let b = 2.0 * uniform32(rng) - 1.0;
@@ -892,7 +908,7 @@ mod tests {
     fn geometric_gap_has_mean_q_over_p() {
         let p: f64 = 0.0015;
         let ln_q = (1.0 - p).ln();
-        let mut rng = Pcg32Stream::new(1, 1);
+        let mut rng = Pcg32::new(1, 1);
         let n = 20_000;
         let mean = (0..n)
             .map(|_| geometric_gap(&mut rng, ln_q) as f64)
@@ -904,7 +920,7 @@ mod tests {
 
     #[test]
     fn unit_circle_is_uniform_and_unit() {
-        let mut rng = Pcg32Stream::new(2, 3);
+        let mut rng = Pcg32::new(2, 3);
         let mut quad = [0usize; 4];
         for _ in 0..40_000 {
             let (c, s) = unit_circle(&mut rng);
