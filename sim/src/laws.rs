@@ -66,18 +66,19 @@ pub fn fresnel_amplitudes(cos_i: f64, n_i: f64, n_t: f64) -> Option<(f64, f64, f
 /// Reflectance of a dielectric interface for unpolarised light, thesis eqs. 3.8, 3.9, 3.12:
 /// R = (r_⊥² + r_∥²) / 2; 1 on total internal reflection (§3.1.5). Like pbrt-v4's
 /// `FrDielectric`, written with the cosines only.
+/// Written without a branch (both outcomes computed, one selected) so that loops over many
+/// rays vectorise.
 #[inline]
 pub fn fr_dielectric(cos_i: f64, n_i: f64, n_t: f64) -> f64 {
     let cos_i = cos_i.clamp(0.0, 1.0);
     let eta = n_i / n_t;
     let sin2_t = eta * eta * (1.0 - cos_i * cos_i);
-    if sin2_t >= 1.0 {
-        return 1.0;
-    }
-    let cos_t = (1.0 - sin2_t).sqrt();
+    let total = sin2_t >= 1.0;
+    let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
     let r_perp = (n_i * cos_i - n_t * cos_t) / (n_i * cos_i + n_t * cos_t);
     let r_par = (n_t * cos_i - n_i * cos_t) / (n_i * cos_t + n_t * cos_i);
-    0.5 * (r_perp * r_perp + r_par * r_par)
+    let r = 0.5 * (r_perp * r_perp + r_par * r_par);
+    if total { 1.0 } else { r }
 }
 
 /// Transmittance for unpolarised light, thesis eq. 3.13: T = 1 − R.

@@ -9,6 +9,7 @@
 pub mod analytic;
 pub mod consts;
 pub mod geometry;
+mod kernels;
 pub mod laws;
 pub mod model;
 pub mod montecarlo;

@@ -6,6 +6,7 @@ use rand_pcg::Pcg32;
 
 use crate::consts::*;
 use crate::geometry::{Geometry, Region};
+use crate::kernels::{DiffuseLanes, DiffuseRay, reflect_diffuse};
 use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
 
 /// The medium that accretes on the face (thesis §3.4, §5.2.3, §5.3).
@@ -496,10 +497,17 @@ impl SensorModel {
         let t = fresnel_transmittance(cos_i, n_med, N_FIBRE);
         match self.cfg.coupling {
             Coupling::ThesisLiteral => t,
-            Coupling::AcceptanceCone => match refract(s, DVec3::Z, n_med, N_FIBRE) {
-                Some(tr) if tr.dot(-self.fibre_axis) >= self.cos_accept => t,
-                _ => 0.0,
-            },
+            Coupling::AcceptanceCone if self.in_acceptance_cone(s) => t,
+            Coupling::AcceptanceCone => 0.0,
+        }
+    }
+
+    /// Whether a downward ray `s` refracted into a signal fibre lies inside its guided cone
+    /// (θ_max,f, eq. 3.18, around the fibre axis): `Coupling::AcceptanceCone`.
+    fn in_acceptance_cone(&self, s: DVec3) -> bool {
+        match refract(s, DVec3::Z, self.cfg.params.n_medium, N_FIBRE) {
+            Some(tr) => tr.dot(-self.fibre_axis) >= self.cos_accept,
+            None => false,
         }
     }
 
@@ -552,6 +560,8 @@ impl SensorModel {
         let mut fwd_after: Vec<f64> = Vec::with_capacity(256);
         let mut bubbles_at = vec![0u32; nt];
         let mut drawn: Vec<DrawnBubble> = Vec::with_capacity(256);
+        let mut diffuse_draws: Vec<u32> = Vec::with_capacity(nt);
+        let mut diffuse_out = DiffuseLanes::default();
         for (r, ray) in self.rays.iter().enumerate() {
             if sensor_a {
                 for l in leak.iter_mut().take(first_wet) {
@@ -670,47 +680,51 @@ impl SensorModel {
                 }
             }
             if diffuse {
-                let mut n_bub = 0usize;
-                for i in first_wet..nt {
+                // The surface is above the fibre (h0 = d + a > 0) from index i0 on: one
+                // diffuse angle is drawn per such thickness, in order. The reflected rays of
+                // all of them are traced at once, then added in order.
+                let i0 = (first_wet..nt)
+                    .find(|&i| self.thick[i] + a > 0.0)
+                    .unwrap_or(nt);
+                diffuse_draws.clear();
+                diffuse_draws.extend((i0..nt).map(|_| dif.next_u32()));
+                let dray = DiffuseRay {
+                    v,
+                    normal,
+                    p0: [ray.p0.x, ray.p0.y],
+                    a,
+                    den,
+                    diffuse_max_rad: p.diffuse_max_rad,
+                    facet_fresnel: cfg.diffuse_fresnel == DiffuseFresnel::Facet,
+                    n_medium: n_med,
+                    n_air: N_AIR,
+                    n_fibre: N_FIBRE,
+                };
+                reflect_diffuse(
+                    &dray,
+                    &bundles,
+                    &self.thick[i0..nt],
+                    &diffuse_draws,
+                    &mut diffuse_out,
+                );
+                let mut n_bub: usize = bubbles_at[first_wet..i0].iter().map(|&c| c as usize).sum();
+                for (n, i) in (i0..nt).enumerate() {
                     n_bub += bubbles_at[i] as usize;
-                    let fwd = fwd_after[n_bub];
-                    let h0 = self.thick[i] + a;
-                    if h0 <= 0.0 {
-                        continue;
-                    }
-                    // Reflection at the ice/air surface.
-                    let t_up = h0 / den;
-                    let z_hit = v.z * t_up;
-                    let dr = p.diffuse_max_rad * (2.0 * uniform32(&mut dif) - 1.0);
-                    // δ_R deflects the reflected ray by δ_R (eq. 3.22): micro-facet normal
-                    // turned by δ_R/2 about the y axis.
-                    // Same as `laws::facet_normal(normal, dr)`, without the libm call.
-                    let (sh, ch) = small_sin_cos(0.5 * dr);
-                    let nrm = DVec3::new(
-                        normal.x * ch + normal.z * sh,
-                        normal.y,
-                        -normal.x * sh + normal.z * ch,
-                    );
-                    let cos_i = v.dot(nrm);
-                    if cos_i <= 0.0 {
-                        continue;
-                    }
-                    let rd = crate::laws::reflect(v, nrm);
-                    if rd.z >= -1e-9 {
-                        continue;
-                    }
-                    let t_down = z_hit / -rd.z;
-                    let land =
-                        ray.p0 + DVec2::new(v.x, v.y) * t_up + DVec2::new(rd.x, rd.y) * t_down;
-                    let k = bundles.slot(land.x, land.y);
+                    let k = diffuse_out.slot[n] as usize;
                     if k < 2 {
-                        let cos_f = match cfg.diffuse_fresnel {
-                            DiffuseFresnel::Facet => cos_i,
-                            DiffuseFresnel::MeanSurface => v.dot(normal),
+                        let fwd = fwd_after[n_bub];
+                        let couple = match cfg.coupling {
+                            Coupling::ThesisLiteral => diffuse_out.couple[n],
+                            Coupling::AcceptanceCone => {
+                                if self.in_acceptance_cone(DVec3::from(diffuse_out.dir[n])) {
+                                    diffuse_out.couple[n]
+                                } else {
+                                    0.0
+                                }
+                            }
                         };
-                        let rfl = fr_dielectric(cos_f, n_med, N_AIR);
-                        let att = (-alpha * (t_up + t_down)).exp();
-                        refl[i][k] += fwd * rfl * self.couple(rd) * att;
+                        let att = (-alpha * diffuse_out.path_mm[n]).exp();
+                        refl[i][k] += fwd * diffuse_out.reflectance[n] * couple * att;
                     }
                 }
             } else if let Some((rfl, rd)) = reflect_setup(v, normal, n_med) {
@@ -822,25 +836,6 @@ fn reflect_setup(v: DVec3, nrm: DVec3, n_med: f64) -> Option<(f64, DVec3)> {
     Some((fr_dielectric(cos_i, n_med, N_AIR), rd))
 }
 
-/// sin and cos of a small angle (|x| ≤ 0.53 rad, i.e. δ_R/2 ≤ 30°) by Taylor series to x¹¹:
-/// error below 1e-13, without a libm call.
-#[inline]
-fn small_sin_cos(x: f64) -> (f64, f64) {
-    debug_assert!(x.abs() <= 0.53);
-    let x2 = x * x;
-    let s = x
-        * (1.0
-            - x2 / 6.0
-                * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0 * (1.0 - x2 / 110.0)))));
-    let c = 1.0
-        - x2 / 2.0
-            * (1.0
-                - x2 / 12.0
-                    * (1.0
-                        - x2 / 30.0 * (1.0 - x2 / 56.0 * (1.0 - x2 / 90.0 * (1.0 - x2 / 132.0)))));
-    (s, c)
-}
-
 /// A uniformly distributed point on the unit circle, by rejection (no trigonometry).
 #[cfg(test)]
 fn unit_circle(rng: &mut Pcg32) -> (f64, f64) {
@@ -896,6 +891,7 @@ mod tests {
 
     #[test]
     fn small_sin_cos_matches_libm() {
+        use crate::kernels::small_sin_cos;
         for k in -530..=530 {
             let x = k as f64 * 1e-3;
             let (s, c) = small_sin_cos(x);
