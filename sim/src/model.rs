@@ -529,9 +529,8 @@ impl SensorModel {
         let (tx, ty) = (sx.tan(), sy.tan());
         let normal = DVec3::new(-tx, -ty, 1.0).normalize();
         let nt = self.thick.len();
-        // Reflected flux per thickness and bundle; slot 2 takes the rays that miss both
-        // bundles, so the inner loops add without branching.
-        let mut refl = vec![[0.0f64; 3]; nt];
+        // Reflected flux per thickness and bundle.
+        let mut refl = vec![[0.0f64; 2]; nt];
         let mut scat_delta = vec![[0.0f64; 2]; nt];
         let mut leak = vec![0.0f64; nt];
         let ln_q = if p.p_bubble > 0.0 {
@@ -581,7 +580,8 @@ impl SensorModel {
             // in once the local surface above the bubble is at least (j+1)Δ high, i.e. from
             // the mean thickness d_j = (j+1)Δ − off(z_b), where off is the plane's local
             // offset at the bubble. d_j grows with j (the ray is steeper than the plane:
-            // den > 0), so the forward flux at each thickness is a running product.
+            // den > 0), so the forward flux at each thickness is a running product, stored
+            // as fwd_after[n] and the count of bubbles per index.
             let off1 = tx * slope_xy.x + ty * slope_xy.y;
             // q(j): d_j in output steps; layer j belongs to the first output index ≥ q(j).
             let q_of = |j: u32| {
@@ -598,9 +598,9 @@ impl SensorModel {
             drawn.clear();
             let mut fwd = ray.flux_in_w;
             // Pass 1a, the random walk: which layers hold a bubble, and the random angles
-            // of their scattered rays. Only what decides the next draw is computed here.
-            // Dense bubbles (rime): one draw per layer, P_B each. Sparse bubbles (glazed):
-            // geometric gaps between bubbles, P_B per layer too.
+            // of their scattered rays. Dense bubbles (rime): one draw per layer, P_B each.
+            // Sparse bubbles (glazed): geometric gaps between bubbles, P_B per layer too.
+            // The landing points (square roots, divisions) wait for pass 1b.
             let mut j: u32 = match (p.p_bubble > 0.0, bernoulli) {
                 (false, _) => j_end,
                 (true, true) => 0,
