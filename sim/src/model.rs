@@ -558,7 +558,6 @@ impl SensorModel {
         // fwd_after[bubbles at indices ≤ i].
         let mut fwd_after: Vec<f64> = Vec::with_capacity(256);
         let mut bubbles_at = vec![0u32; nt];
-        let mut drawn: Vec<DrawnBubble> = Vec::with_capacity(256);
         let mut diffuse_draws: Vec<u32> = Vec::with_capacity(nt);
         let mut diffuse_out = DiffuseLanes::default();
         for (r, ray) in self.rays.iter().enumerate() {
@@ -595,12 +594,12 @@ impl SensorModel {
             let j_end = layers_covered(&q_of, first_wet, nt);
             fwd_after.clear();
             fwd_after.push(ray.flux_in_w);
-            drawn.clear();
             let mut fwd = ray.flux_in_w;
-            // Pass 1a, the random walk: which layers hold a bubble, and the random angles
-            // of their scattered rays. Dense bubbles (rime): one draw per layer, P_B each.
-            // Sparse bubbles (glazed): geometric gaps between bubbles, P_B per layer too.
-            // The landing points (square roots, divisions) wait for pass 1b.
+            // The random walk: which layers hold a bubble, and the scattered light of each.
+            // Dense bubbles (rime): one draw per layer, P_B each. Sparse bubbles (glazed):
+            // geometric gaps between bubbles, P_B per layer too. The walk is as fast as its
+            // chain of draws; the arithmetic of each bubble runs alongside, which is why it
+            // stays here rather than in a separate (vectorised) pass.
             let mut j: u32 = match (p.p_bubble > 0.0, bernoulli) {
                 (false, _) => j_end,
                 (true, true) => 0,
@@ -625,19 +624,24 @@ impl SensorModel {
                 let far_x = (b.x - x_lo).abs().max((b.x - x_hi).abs());
                 let far_y = b.y.abs() + y_hi;
                 let travel2 = z_b * z_b * sin2_b / (cos_b * cos_b);
-                let azimuth = if travel2 <= far_x * far_x + far_y * far_y {
-                    Some(unit_circle_unnormalised(&mut bub))
+                // Where the scattered ray lands, if it can reach the face at all.
+                let (k, reach, c_phi, s_phi, sin_b) = if travel2 <= far_x * far_x + far_y * far_y {
+                    let (ua, ub, uq) = unit_circle_unnormalised(&mut bub);
+                    let norm = uq.sqrt().recip();
+                    let (c_phi, s_phi) = (ua * norm, ub * norm);
+                    let sin_b = sin2_b.sqrt();
+                    let reach = z_b / cos_b;
+                    let land = b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
+                    (bundles.slot(land.x, land.y), reach, c_phi, s_phi, sin_b)
                 } else {
-                    None
+                    (2, 0.0, 0.0, 0.0, 0.0)
                 };
-                drawn.push(DrawnBubble {
-                    i,
-                    z_b,
-                    b,
-                    cos_b,
-                    sin2_b,
-                    azimuth,
-                });
+                if k < 2 {
+                    let s = DVec3::new(sin_b * c_phi, sin_b * s_phi, -cos_b);
+                    let path = z_b / v.z + reach;
+                    scat_delta[i][k] +=
+                        fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
+                }
                 fwd *= FORWARD_FRACTION;
                 fwd_after.push(fwd);
                 bubbles_at[i] += 1;
@@ -646,25 +650,6 @@ impl SensorModel {
                 } else {
                     let gap = geometric_gap(&mut bub, ln_q);
                     j = j.saturating_add(1).saturating_add(gap);
-                }
-            }
-            // Pass 1b, the scattered light of each bubble that lands on a bundle, added in
-            // the order of the walk.
-            for (d, &fwd) in drawn.iter().zip(&fwd_after) {
-                let Some((ua, ub, uq)) = d.azimuth else {
-                    continue;
-                };
-                let norm = uq.sqrt().recip();
-                let (c_phi, s_phi) = (ua * norm, ub * norm);
-                let sin_b = d.sin2_b.sqrt();
-                let reach = d.z_b / d.cos_b;
-                let land = d.b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
-                let k = bundles.slot(land.x, land.y);
-                if k < 2 {
-                    let s = DVec3::new(sin_b * c_phi, sin_b * s_phi, -d.cos_b);
-                    let path = d.z_b / v.z + reach;
-                    scat_delta[d.i][k] +=
-                        fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
                 }
             }
             let had_bubbles = fwd_after.len() > 1;
@@ -856,25 +841,6 @@ fn unit_circle_unnormalised(rng: &mut Pcg32) -> (f64, f64, f64) {
             return (a, b, q);
         }
     }
-}
-
-/// A bubble as the random walk drew it (pass 1a), before its scattered light is traced
-/// (pass 1b).
-#[derive(Clone, Copy, Debug)]
-struct DrawnBubble {
-    /// Output index from which the bubble is frozen in.
-    i: usize,
-    /// Height of the bubble above the face, mm.
-    z_b: f64,
-    /// Position of the bubble over the face, mm.
-    b: DVec2,
-    /// cos θ_B of the scattered ray (toward the face).
-    cos_b: f64,
-    /// sin² θ_B.
-    sin2_b: f64,
-    /// The azimuth draws `unit_circle_unnormalised`; `None` if the scattered ray cannot
-    /// reach the face (not drawn).
-    azimuth: Option<(f64, f64, f64)>,
 }
 
 /// One physical accretion of `cfg`, deterministic in (seed, run).
