@@ -591,7 +591,11 @@ impl SensorModel {
             // The layers that the ice covers within max_mm: j < j_end. Beyond, the bubbles
             // are not drawn. A ray almost parallel to a tilted surface would walk very many
             // layers before the surface covers them: at most MAX_LAYERS_PER_RAY (2 m).
-            let j_end = layers_covered(&q_of, first_wet, nt);
+            let j_end = if p.p_bubble > 0.0 {
+                layers_covered(&q_of, first_wet, nt)
+            } else {
+                0
+            };
             fwd_after.clear();
             fwd_after.push(ray.flux_in_w);
             let mut fwd = ray.flux_in_w;
