@@ -299,8 +299,6 @@ pub struct SensorModel {
     /// Unit vector along the signal fibres' axis (pointing into the medium).
     fibre_axis: DVec3,
     cos_accept: f64,
-    /// (cos, sin) of the centres of the `AZIMUTH_SECTORS` sectors of the circle.
-    sectors: Vec<(f64, f64)>,
 }
 
 /// Uniform f64 in [0, 1).
@@ -352,15 +350,6 @@ const BERNOULLI_ABOVE: f64 = 0.02;
 /// Stream ids: 0 = accretion (slopes); 2 + 2r = bubbles of ray r; 3 + 2r = diffuse of ray r.
 const STREAM_ACCRETION: u64 = 0;
 
-/// Stream of the bubble angles of ray r in dense ice: `STREAM_BUBBLE_ANGLES` + r (far above
-/// the 2 + 2r and 3 + 2r of any ray count).
-const STREAM_BUBBLE_ANGLES: u64 = 1 << 40;
-
-/// An azimuth draw u (32 bits) is φ = 2π (u + ½)/2³²: its top `AZIMUTH_SECTOR_BITS` bits pick
-/// a sector of the circle, the others the angle within it.
-const AZIMUTH_SECTOR_BITS: u32 = 8;
-const AZIMUTH_SECTORS: usize = 1 << AZIMUTH_SECTOR_BITS;
-
 /// The number of bubble layers a ray meets within the output thicknesses: the first layer j
 /// whose q(j) (its thickness in output steps, non-decreasing in j) lies beyond the last
 /// output index, at most `MAX_LAYERS_PER_RAY`. Layer j is frozen in at the first index
@@ -396,6 +385,20 @@ fn ceil_index(q: f64) -> usize {
     let t = q as i64; // toward zero: the ceiling for q ≤ 0, the floor for q > 0
     let t = if (t as f64) < q { t + 1 } else { t };
     t.max(0) as usize
+}
+
+/// Draw until a draw is below `threshold`, at most `max` draws: the number of draws at or
+/// above it before that one (which is consumed too), or `max` if none is below.
+#[inline(always)]
+fn draws_until_below(rng: &mut Pcg32, threshold: u32, max: u32) -> u32 {
+    let mut n = 0u32;
+    while n < max {
+        if rng.next_u32() < threshold {
+            return n;
+        }
+        n += 1;
+    }
+    max
 }
 
 /// Geometric number of failures before the first success, P(success) = p.
@@ -467,14 +470,6 @@ impl SensorModel {
             thick: cfg.thicknesses_mm(),
             fibre_axis: DVec3::new(si, 0.0, ci),
             cos_accept: th_max_f.cos(),
-            sectors: (0..AZIMUTH_SECTORS)
-                .map(|s| {
-                    let (sin, cos) =
-                        (std::f64::consts::TAU * (s as f64 + 0.5) / AZIMUTH_SECTORS as f64)
-                            .sin_cos();
-                    (cos, sin)
-                })
-                .collect(),
         }
     }
 
@@ -505,22 +500,6 @@ impl SensorModel {
             Coupling::AcceptanceCone if self.in_acceptance_cone(s) => t,
             Coupling::AcceptanceCone => 0.0,
         }
-    }
-
-    /// (cos φ, sin φ) of the azimuth φ = 2π (u + ½)/2³² (uniform on the circle): the centre
-    /// of u's sector turned by the small angle to φ (sum formulas, a Taylor series for the
-    /// small angle: no libm call per bubble, no rejection loop).
-    #[inline(always)]
-    fn azimuth(&self, u: u32) -> (f64, f64) {
-        let low_bits = 32 - AZIMUTH_SECTOR_BITS;
-        let (ct, st) = self.sectors[(u >> low_bits) as usize];
-        let frac = ((u & ((1 << low_bits) - 1)) as f64 + 0.5) * (1.0 / (1u64 << low_bits) as f64);
-        let delta = (frac - 0.5) * (std::f64::consts::TAU / AZIMUTH_SECTORS as f64);
-        // |δ| ≤ π/256: Taylor to δ⁵ (sin) and δ⁶ (cos), error below 1e-16.
-        let d2 = delta * delta;
-        let sd = delta * (1.0 - d2 * (1.0 / 6.0) * (1.0 - d2 * (1.0 / 20.0)));
-        let cd = 1.0 - d2 * 0.5 * (1.0 - d2 * (1.0 / 12.0) * (1.0 - d2 * (1.0 / 30.0)));
-        (ct * cd - st * sd, st * cd + ct * sd)
     }
 
     /// Whether a downward ray `s` refracted into a signal fibre lies inside its guided cone
@@ -579,9 +558,6 @@ impl SensorModel {
         // fwd_after[bubbles at indices ≤ i].
         let mut fwd_after: Vec<f64> = Vec::with_capacity(256);
         let mut bubbles_at = vec![0u32; nt];
-        // Dense bubbles, per ray: the draw of each layer, the layers that hold a bubble.
-        let mut layer_draws: Vec<u32> = Vec::with_capacity(256);
-        let mut bubble_masks: Vec<u64> = Vec::with_capacity(8);
         let mut diffuse_draws: Vec<u32> = Vec::with_capacity(nt);
         let mut diffuse_out = DiffuseLanes::default();
         for (r, ray) in self.rays.iter().enumerate() {
@@ -628,77 +604,15 @@ impl SensorModel {
             // geometric gaps between bubbles, P_B per layer too. The walk is as fast as its
             // chain of draws; the arithmetic of each bubble runs alongside, which is why it
             // stays here rather than in a separate (vectorised) pass.
-            if bernoulli {
-                // Dense bubbles: which layers hold one, from one draw per layer of stream
-                // 2 + 2r, drawn as four interleaved quarters (jump-ahead: the same draws as
-                // one by one, without waiting for each other), kept as bit masks ...
-                let n_layers = j_end as usize;
-                layer_draws.clear();
-                layer_draws.resize(n_layers.next_multiple_of(4 * 64), u32::MAX);
-                let quarter = n_layers.div_ceil(4 * 64) * 64;
-                let mut lanes = [bub.clone(), bub.clone(), bub.clone(), bub.clone()];
-                for (q, lane) in lanes.iter_mut().enumerate() {
-                    lane.advance((q * quarter) as u64);
-                }
-                let (q01, q23) = layer_draws.split_at_mut(2 * quarter);
-                let (q0, q1) = q01.split_at_mut(quarter);
-                let (q2, q3) = q23.split_at_mut(quarter);
-                for (t, (((d0, d1), d2), d3)) in
-                    q0.iter_mut().zip(q1).zip(q2).zip(q3).enumerate()
-                {
-                    *d0 = lanes[0].next_u32();
-                    *d1 = lanes[1].next_u32();
-                    *d2 = lanes[2].next_u32();
-                    *d3 = lanes[3].next_u32();
-                    let _ = t;
-                }
-                // The draws beyond the last layer are not used: no bubble there.
-                layer_draws[n_layers..].fill(u32::MAX);
-                bubble_masks.clear();
-                bubble_masks.extend(layer_draws.chunks_exact(64).map(|c| {
-                    c.iter()
-                        .enumerate()
-                        .fold(0u64, |m, (k, &u)| m | (u64::from(u < p_thr) << k))
-                }));
-                // ... and the angles of its bubbles from stream `STREAM_BUBBLE_ANGLES` + r,
-                // a fixed two draws per bubble (cos θ_B, azimuth): no draw depends on a
-                // landing point, so nothing waits for one.
-                let mut ang = Pcg32::new(key, STREAM_BUBBLE_ANGLES + r as u64);
-                let layers = bubble_masks.iter().enumerate().flat_map(|(w, &m)| {
-                    std::iter::successors((m != 0).then_some(m), |&m| {
-                        let rest = m & (m - 1);
-                        (rest != 0).then_some(rest)
-                    })
-                    .map(move |m| (w * 64) as u32 + m.trailing_zeros())
-                });
-                for j in layers {
-                    let cos_b = 1.0 - uniform32(&mut ang); // isotropic over the lower hemisphere
-                    let (c_phi, s_phi) = self.azimuth(ang.next_u32());
-                    let z_b = (j as f64 + 0.5) * BUBBLE_LAYER_MM;
-                    // First output index at or above d_j (j < j_end: below nt).
-                    let i = ceil_index(q_of(j)).max(first_wet);
-                    let b = ray.p0 + slope_xy * z_b;
-                    let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
-                    let reach = z_b / cos_b;
-                    let land = b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
-                    let k = bundles.slot(land.x, land.y);
-                    if k < 2 {
-                        let s = DVec3::new(sin_b * c_phi, sin_b * s_phi, -cos_b);
-                        let path = z_b / v.z + reach;
-                        scat_delta[i][k] +=
-                            fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
-                    }
-                    fwd *= FORWARD_FRACTION;
-                    fwd_after.push(fwd);
-                    bubbles_at[i] += 1;
-                }
-            }
-            let mut j: u32 = if p.p_bubble > 0.0 && !bernoulli {
-                geometric_gap(&mut bub, ln_q)
-            } else {
-                j_end
+            let mut j: u32 = match (p.p_bubble > 0.0, bernoulli) {
+                (false, _) => j_end,
+                (true, true) => 0,
+                (true, false) => geometric_gap(&mut bub, ln_q),
             };
             loop {
+                if bernoulli {
+                    j += draws_until_below(&mut bub, p_thr, j_end - j);
+                }
                 if j >= j_end {
                     break;
                 }
@@ -735,8 +649,12 @@ impl SensorModel {
                 fwd *= FORWARD_FRACTION;
                 fwd_after.push(fwd);
                 bubbles_at[i] += 1;
-                let gap = geometric_gap(&mut bub, ln_q);
-                j = j.saturating_add(1).saturating_add(gap);
+                if bernoulli {
+                    j += 1;
+                } else {
+                    let gap = geometric_gap(&mut bub, ln_q);
+                    j = j.saturating_add(1).saturating_add(gap);
+                }
             }
             let had_bubbles = fwd_after.len() > 1;
 
@@ -964,24 +882,6 @@ mod tests {
             / n as f64;
         let want = (1.0 - p) / p; // 665.7
         assert!((mean - want).abs() < 0.03 * want, "{mean}");
-    }
-
-    #[test]
-    fn azimuth_is_the_angle_of_the_draw() {
-        let model = SensorModel::new(&SimConfig::new(
-            IceKind::Rime,
-            SensorKind::B,
-            Geometry::ThesisCh5,
-        ));
-        let mut rng = Pcg32::new(5, 6);
-        let draws = (0..20_000).map(|_| rng.next_u32());
-        let edges = [0, 1, (1 << 24) - 1, 1 << 24, u32::MAX / 2, u32::MAX - 1, u32::MAX];
-        for u in draws.chain(edges) {
-            let (c, s) = model.azimuth(u);
-            let phi = std::f64::consts::TAU * (u as f64 + 0.5) / 4_294_967_296.0;
-            assert!((c - phi.cos()).abs() < 1e-14, "{u}");
-            assert!((s - phi.sin()).abs() < 1e-14, "{u}");
-        }
     }
 
     #[test]
