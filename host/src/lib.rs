@@ -6,6 +6,7 @@ pub mod commands;
 pub mod compare;
 pub mod csvlog;
 pub mod exit;
+pub mod gateway;
 pub mod link;
 pub mod monitor;
 pub mod plot;

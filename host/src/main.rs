@@ -182,6 +182,11 @@ enum Cmd {
     },
     /// Ray-trace simulator of the sensor (thesis chapters 3 and 5).
     Sim(fois_host::sim_cmd::SimArgs),
+    /// Fleet gateway: read many nodes at once and publish them to an MQTT
+    /// broker (state, measurements, events, availability, Home Assistant
+    /// discovery), with a bounded on-disk queue while the broker is away.
+    #[command(after_help = exit::TABLE)]
+    Gateway(fois_host::gateway::GatewayArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -242,6 +247,10 @@ fn install_ctrlc() {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.cmd {
         Cmd::Sim(args) => fois_host::sim_cmd::run(args),
+        Cmd::Gateway(args) => {
+            install_ctrlc();
+            fois_host::gateway::run(&args, &STOP)
+        }
         Cmd::Monitor {
             port,
             log,
