@@ -72,8 +72,6 @@ pub enum NodeUpdate {
     Up(Hello),
     /// A decoded frame and what its sequence number says.
     Frame(DeviceFrame, SeqEvent),
-    /// The node reset in place (a `Hello` while streaming).
-    Restarted(Hello),
     /// A frame the decoder rejected.
     Rejected,
     /// The link was lost (port gone, silent, handshake failed after it was up).
@@ -249,6 +247,7 @@ fn stream<P: Read + Write, S: Sink>(
         return Some(Some(e.to_string()));
     }
     let mut last_frame = Instant::now();
+    let mut last_start = Instant::now();
     let mut pending: Vec<(u16, NodeCommand, Instant)> = Vec::new();
     loop {
         if stop.load(Ordering::Relaxed) {
@@ -304,13 +303,15 @@ fn stream<P: Read + Write, S: Sink>(
                             return None;
                         }
                     }
-                    if let DeviceMsg::Hello(h) = &f.msg {
-                        // A reset in place: streaming stopped with it.
+                    // A node sends `Hello` only while it does not stream:
+                    // it reset in place (watchdog, brown-out) or missed the
+                    // request. Ask again, at most twice a second.
+                    if matches!(f.msg, DeviceMsg::Hello(_))
+                        && last_start.elapsed() >= Duration::from_millis(500)
+                    {
+                        last_start = Instant::now();
                         if let Err(e) = link.send(start.clone()) {
                             return Some(Some(e.to_string()));
-                        }
-                        if !rep.send(NodeUpdate::Restarted(h.clone())) {
-                            return None;
                         }
                     }
                     NodeUpdate::Frame(f, ev)

@@ -579,6 +579,10 @@ impl Gateway {
             })
             .unwrap_or_else(|| text.clone());
         let shown: String = word.trim().chars().take(40).collect();
+        if shown.is_empty() {
+            // An empty message deletes a retained one: not a command.
+            return;
+        }
         let refuse = |me: &mut Gateway, detail: String| {
             me.log
                 .say(&format!("command `{shown}` for {name} refused: {detail}"));
@@ -688,15 +692,6 @@ impl Gateway {
                 )?;
                 self.announce_node(k);
             }
-            NodeUpdate::Restarted(h) => {
-                let name = self.node_name(k).unwrap_or_default().to_string();
-                self.log.say(&format!(
-                    "node {name} restarted in place ({:?}); streaming asked again",
-                    h.reset_reason
-                ));
-                self.nodes[k].hello = Some(h);
-                self.announce_node(k);
-            }
             NodeUpdate::Down(reason) => {
                 let name = self.node_name(k).unwrap_or_default().to_string();
                 self.log.say(&format!(
@@ -768,7 +763,16 @@ impl Gateway {
                             DeviceMsg::Hello(h) => format!("reset reason {:?}", h.reset_reason),
                             _ => "sequence number went back".into(),
                         };
+                        let name = self.node_name(k).unwrap_or_default().to_string();
+                        self.log.say(&format!(
+                            "node {name} restarted ({detail}) at seq {}",
+                            f.seq
+                        ));
                         self.link_event(k, "node_restart", detail, Some(f.seq), None, t)?;
+                        if let DeviceMsg::Hello(h) = &f.msg {
+                            self.nodes[k].hello = Some(h.clone());
+                            self.announce_node(k);
+                        }
                     }
                     _ => {}
                 }
