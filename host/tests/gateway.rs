@@ -311,8 +311,7 @@ fn broker_stopped_for_30_s_and_restarted_nothing_is_lost() {
     // The reconnection after the outage (the first "sending" is the start).
     let queued_line = out
         .lines()
-        .filter(|l| l.contains("sending"))
-        .next_back()
+        .rfind(|l| l.contains("sending"))
         .unwrap()
         .to_string();
     println!("{queued_line}");
@@ -466,8 +465,7 @@ fn unplugged_node_is_offline_within_5_s_and_back_online_when_it_returns() {
     let _a2 = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--link", ls]);
     sub.wait_for("a back online", Duration::from_secs(10), |m| {
         m.iter()
-            .filter(|m| m.topic == "fois/gw/a/availability")
-            .next_back()
+            .rfind(|m| m.topic == "fois/gw/a/availability")
             .is_some_and(|m| m.payload == b"online")
     });
     std::thread::sleep(Duration::from_millis(300));
@@ -508,8 +506,7 @@ fn wait_alarm(sub: &Subscriber) {
 /// The last state of n1 says the alarm was acknowledged.
 fn acked_in(msgs: &[Msg]) -> bool {
     msgs.iter()
-        .filter(|m| m.topic == "fois/gw/n1/state")
-        .next_back()
+        .rfind(|m| m.topic == "fois/gw/n1/state")
         .is_some_and(|m| m.json()["alarm_acked"] == true)
 }
 
