@@ -148,13 +148,14 @@ pub fn run(args: &GatewayArgs, stop: &'static AtomicBool) -> anyhow::Result<()> 
     let log = publisher::Log { quiet: args.quiet };
     let sum = publisher::run(cfg, stop, duration, Duration::from_secs_f64(s), log)?;
     println!(
-        "gateway: {} frame(s) received, {} lost on the serial links, {} record(s) queued, {} acknowledged by the broker, {} left in the queue, {} dropped by its bound, {} broker connection(s)",
+        "gateway: {} frame(s) received, {} lost on the serial links, {} record(s) queued, {} acknowledged by the broker, {} left in the queue, {} dropped by its bound, {} published without it (disk failure), {} broker connection(s)",
         sum.frames,
         sum.frames_lost,
         sum.records_queued,
         sum.records_acked,
         sum.records_pending,
         sum.records_dropped,
+        sum.records_unqueued,
         sum.broker_connects
     );
     Ok(())

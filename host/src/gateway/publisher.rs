@@ -87,6 +87,8 @@ pub struct GatewaySummary {
     pub broker_connects: u64,
     /// Frames lost on the serial links.
     pub frames_lost: u64,
+    /// Records the disk queue could not take (published live instead).
+    pub records_unqueued: u64,
 }
 
 struct NodeSlot {
@@ -288,6 +290,7 @@ pub struct Gateway {
     log: Log,
     started: Instant,
     last_status: Instant,
+    queue_error_said: Option<Instant>,
     sum: GatewaySummary,
 }
 
@@ -336,6 +339,7 @@ impl Gateway {
             log,
             started: Instant::now(),
             last_status: Instant::now(),
+            queue_error_said: None,
             sum: GatewaySummary::default(),
         }
     }
@@ -370,8 +374,27 @@ impl Gateway {
     }
 
     fn queue_record(&mut self, topic: String, payload: Vec<u8>) -> anyhow::Result<()> {
-        self.queue.push(Record { topic, payload })?;
-        self.sum.records_queued += 1;
+        let rec = Record { topic, payload };
+        match self.queue.push(rec.clone()) {
+            Ok(_) => self.sum.records_queued += 1,
+            Err(e) => {
+                // Disk full or gone: keep the fleet visible. Publish live
+                // (not stored: lost if the broker is away too) and say so,
+                // at most once a minute.
+                self.sum.records_unqueued += 1;
+                if self
+                    .queue_error_said
+                    .is_none_or(|t| t.elapsed() >= Duration::from_secs(60))
+                {
+                    self.queue_error_said = Some(Instant::now());
+                    self.log.say(&format!(
+                        "the disk queue failed ({e:#}); publishing without it ({} record(s) so far)",
+                        self.sum.records_unqueued
+                    ));
+                }
+                self.publish_now(rec.topic, rec.payload, false, QoS::AtLeastOnce);
+            }
+        }
         Ok(())
     }
 
@@ -826,7 +849,15 @@ impl Gateway {
 
     /// Housekeeping: flush the queue, publish the status when due.
     pub fn tick(&mut self, status_every: Duration) -> anyhow::Result<()> {
-        self.queue.tick()?;
+        if let Err(e) = self.queue.tick()
+            && self
+                .queue_error_said
+                .is_none_or(|t| t.elapsed() >= Duration::from_secs(60))
+        {
+            self.queue_error_said = Some(Instant::now());
+            self.log
+                .say(&format!("the disk queue cannot be written: {e:#}"));
+        }
         if self.last_status.elapsed() >= status_every {
             self.last_status = Instant::now();
             self.publish_status();
