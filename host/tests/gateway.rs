@@ -965,3 +965,41 @@ fn a_node_with_an_ice_estimate_gets_a_thickness_entity() {
     assert!(r.holes().len() <= ACKS_PER_CONNECTION, "{:?}", r.holes());
     assert_eq!(r.duplicates(), 0);
 }
+
+#[test]
+fn bad_configs_are_refused_with_exit_2_and_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = |args: &[&str]| {
+        let out = std::process::Command::new(BIN)
+            .arg("gateway")
+            .args(args)
+            .output()
+            .unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, err) = run(&[]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("no nodes"), "{err}");
+    let missing = dir.path().join("nope.toml");
+    let (code, err) = run(&["--config", missing.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("cannot read the config"), "{err}");
+    let bad = write(
+        dir.path(),
+        "bad.toml",
+        "[broker]\nprot = 1883\n[[node]]\nport = \"/dev/x\"\n",
+    );
+    let (code, err) = run(&["--config", bad.to_str().unwrap()]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("unknown field `prot`"), "{err}");
+    let (code, err) = run(&["--node", "/dev/x=a/b"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not usable in topics"), "{err}");
+    let (code, err) = run(&["--node", "/dev/x", "--broker", "host:notaport"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(err.contains("not a port number"), "{err}");
+    assert!(!err.contains("panicked"));
+}

@@ -85,7 +85,7 @@ pub struct GatewayArgs {
     /// Do not publish Home Assistant discovery configs.
     #[arg(long)]
     pub no_homeassistant: bool,
-    /// Print a status line every this many seconds [default: 10].
+    /// Print a status line every this many seconds.
     #[arg(long, default_value_t = 10.0, value_name = "SECONDS")]
     pub status_interval_s: f64,
     /// Stop after this many seconds [default: run until Ctrl-C].
