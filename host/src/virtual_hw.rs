@@ -2,7 +2,7 @@
 //! pins, an environment model (ice, light, air temperature over time), the
 //! analog front end and a simulated ADC implementing
 //! [`fois_firmware::PhotoAdc`]. The virtual node (`foisctl virtual-node`,
-//! `foisctl demo`) and the hardware-in-loop suite in `tests/` build on it.
+//! `foisctl demo`) and the hardware-in-loop suite in `hil/` build on it.
 //!
 //! ```
 //! use std::sync::Arc;

@@ -4,7 +4,7 @@
 //! decoded frames checked against each scenario file's expectations, with
 //! the environment's truth (thickness at each instant) beside them.
 //!
-//! - [`scenario`]: the TOML format (`tests/scenarios/*.toml`) → a timeline.
+//! - [`scenario`]: the TOML format (`hil/scenarios/*.toml`) → a timeline.
 //! - [`run`]: one scenario → an [`run::Outcome`] (decoded frames only).
 //! - [`check`]: the file's expectations against the outcome.
 //! - [`report`]: the results table and the goals.

@@ -9,7 +9,7 @@
 //!
 //! Every table is `deny_unknown_fields`: a misspelt key is an error naming
 //! the file and the key. The format is documented key by key in
-//! `tests/README.md`.
+//! `hil/README.md`.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -325,7 +325,7 @@ pub fn load_dir(dir: &Path) -> anyhow::Result<Vec<Scenario>> {
     Ok(out)
 }
 
-/// The scenarios shipped with the suite: `tests/scenarios`.
+/// The scenarios shipped with the suite: `hil/scenarios`.
 pub fn default_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios")
 }

@@ -1,4 +1,4 @@
-//! Every scenario file in `tests/scenarios/` must meet its expectations.
+//! Every scenario file in `hil/scenarios/` must meet its expectations.
 
 use std::path::Path;
 use std::time::Instant;
