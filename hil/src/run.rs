@@ -7,12 +7,11 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
-use fois_host::virtual_hw::{Cover, Environment, Truth};
-use fois_host::virtual_node::{NodeOptions, VirtualNode};
 use fois_protocol::{
     AckResult, Command, DetectorState, DeviceFrame, DeviceMsg, ErrorCode, EventKind, FrameDecoder,
     HostFrame, MAX_FRAME, encode_to_vec, flags,
 };
+use fois_vnode::{Cover, Environment, NodeOptions, Truth, VirtualNode};
 
 use crate::scenario::{Class, Scenario, Send, ice_start_s};
 

@@ -2,7 +2,7 @@
 //! into a [`Timeline`] of the virtual hardware.
 //!
 //! The timeline keys (`sensor`, `seed`, `[[segment]]`) are the host's
-//! scenario format (`fois_host::virtual_hw::scenario`, also read by
+//! scenario format (`fois_vnode::scenario`, also read by
 //! `foisctl virtual-node --scenario`): the segment tables are the host's own
 //! `SegmentSpec`, checked by its `timeline`; this module adds the name, class, config, overlays, commands,
 //! sweep, lossy link and expectations.
@@ -15,8 +15,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail, ensure};
-use fois_host::virtual_hw::scenario::{self, SegmentSpec};
-use fois_host::virtual_hw::{Cover, Segment, Timeline};
+use fois_vnode::scenario::{self, SegmentSpec};
+use fois_vnode::{Cover, Segment, Timeline};
 
 use fois_protocol::Config;
 use serde::Deserialize;
@@ -508,8 +508,8 @@ fn validate_expect(e: &Expect) -> anyhow::Result<()> {
 }
 
 /// The timeline part of the file, checked and built by the host's scenario code.
-fn host_scenario(f: &ScenarioFile) -> anyhow::Result<fois_host::virtual_hw::Scenario> {
-    Ok(fois_host::virtual_hw::Scenario {
+fn host_scenario(f: &ScenarioFile) -> anyhow::Result<fois_vnode::Scenario> {
+    Ok(fois_vnode::Scenario {
         timeline: scenario::timeline(f.segments.clone())
             .map_err(|e| anyhow::anyhow!("[[segment]] {e}"))?,
         sensor: scenario::sensor_named(f.sensor.as_deref()).map_err(anyhow::Error::msg)?,

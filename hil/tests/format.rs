@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use fois_hil::scenario::{self, ice_start_s};
-use fois_host::virtual_hw::Cover;
+use fois_vnode::Cover;
 
 const BASE: &str = r#"
 class = "rime"
@@ -130,7 +130,7 @@ fn config_sweep_and_overlays_build_the_expected_timeline() {
     assert!((segs[2].air_temp_end_c.unwrap() - -3.2).abs() < 1e-12);
     assert!((segs[5].air_temp_end_c.unwrap() - -6.0).abs() < 1e-12);
     // Thickness stays continuous across the cuts: 3.6 mm/h = 1 µm/s.
-    let env = fois_host::virtual_hw::Environment::with_curves(tl.clone(), [], [0.0; 2]);
+    let env = fois_vnode::Environment::with_curves(tl.clone(), [], [0.0; 2]);
     let t = env.truth(205_000_000_000);
     assert_eq!(t.cover, Cover::Rime);
     assert!((t.thickness_mm - 0.105).abs() < 1e-9, "{}", t.thickness_mm);

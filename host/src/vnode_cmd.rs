@@ -1,5 +1,5 @@
 //! `foisctl virtual-node` and `foisctl demo`: command-line front ends of
-//! [`crate::virtual_node`].
+//! [`fois_vnode::VirtualNode`] ([`crate::serve`] puts it on a pseudo-terminal).
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -11,8 +11,8 @@ use clap::Args;
 use fois_sim::SensorKind;
 
 use crate::monitor::{self, MonitorOptions};
-use crate::virtual_hw::{Cover, Environment, Segment, Timeline};
-use crate::virtual_node::{self, NodeOptions, Pty, ServeOptions, VirtualNode};
+use crate::serve::{self, Pty, ServeOptions};
+use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
 
 /// The simulated conditions and the node's pace.
 #[derive(Debug, Clone, Args)]
@@ -146,7 +146,7 @@ impl SceneArgs {
     /// Resolve against defaults; refuses nonsense values.
     pub fn resolve(&self, d: SceneDefaults) -> anyhow::Result<Scene> {
         if let Some(path) = &self.scenario {
-            let sc = crate::virtual_hw::scenario::load(path)?;
+            let sc = fois_vnode::scenario::load(path)?;
             let speed = self.speed.unwrap_or(d.speed);
             if !(speed.is_finite() && speed > 0.0 && speed <= 10_000.0) {
                 anyhow::bail!("--speed must be in (0, 10000]");
@@ -286,13 +286,13 @@ pub fn run_virtual_node(
 ) -> anyhow::Result<()> {
     let scene = args.resolve(VIRTUAL_NODE_DEFAULTS)?;
     if let Some(p) = &state {
-        crate::virtual_node::SharedStorage::with_file(p)
+        fois_vnode::SharedStorage::with_file(p)
             .with_context(|| format!("cannot read the node state {}", p.display()))?;
     }
     let mut node = build_node_with_state(&scene, state);
     let mut pty = Pty::open()?;
     let _guard = match &link {
-        Some(l) => Some(virtual_node::make_link(l, pty.path())?),
+        Some(l) => Some(serve::make_link(l, pty.path())?),
         None => None,
     };
     println!("{}", pty.path().display());
@@ -311,7 +311,7 @@ pub fn run_virtual_node(
         speed: scene.speed,
         duration: scene.duration,
     };
-    let stats = virtual_node::serve(&mut node, &mut pty, &opts, stop)?;
+    let stats = serve::serve(&mut node, &mut pty, &opts, stop)?;
     eprintln!(
         "virtual node stopped at virtual t = {:.1} s: {} frames run, {} sent, {} dropped (no reader)",
         node.clock().now_s(),
@@ -351,7 +351,7 @@ pub fn run_demo(
     };
     let ns = node_stop.clone();
     let server = std::thread::spawn(move || {
-        let r = virtual_node::serve(&mut node, &mut pty, &serve_opts, &ns);
+        let r = serve::serve(&mut node, &mut pty, &serve_opts, &ns);
         (node, r)
     });
     let mut opts = MonitorOptions::new(path);

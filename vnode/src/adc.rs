@@ -85,7 +85,7 @@ impl PhotoAdc for SimAdc {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::virtual_hw::environment::{Cover, Segment, Timeline};
+    use crate::environment::{Cover, Segment, Timeline};
     use embedded_hal::digital::OutputPin;
 
     #[test]

@@ -1,13 +1,13 @@
 //! Virtual hardware for the firmware's own `Node`: a virtual clock, output
 //! pins, an environment model (ice, light, air temperature over time), the
 //! analog front end and a simulated ADC implementing
-//! [`fois_firmware::PhotoAdc`]. The virtual node (`foisctl virtual-node`,
-//! `foisctl demo`) and the hardware-in-loop suite in `hil/` build on it.
+//! [`fois_firmware::PhotoAdc`]; and the virtual node, the firmware's own
+//! `Node` on them in virtual time. `foisctl virtual-node` / `foisctl demo`
+//! and the hardware-in-loop suite in `hil/` build on it.
 //!
 //! ```
 //! use std::sync::Arc;
-//! use fois_host::virtual_hw::{Cover, Environment, Segment, Timeline};
-//! use fois_host::virtual_node::{NodeOptions, VirtualNode};
+//! use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
 //!
 //! let timeline = Timeline::new(vec![
 //!     Segment::new(60.0, Cover::Dry).temp(-5.0),
@@ -24,10 +24,12 @@ pub mod adc;
 pub mod clock;
 pub mod environment;
 pub mod frontend;
+pub mod node;
 pub mod scenario;
 
 pub use adc::SimAdc;
 pub use clock::{VirtualClock, VirtualDelay, VirtualPin};
 pub use environment::{Cover, Environment, Segment, Timeline, Truth};
 pub use frontend::FrontEnd;
+pub use node::{FirmwareNode, NodeOptions, SharedStorage, VirtualNode};
 pub use scenario::Scenario;
