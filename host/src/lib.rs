@@ -2,7 +2,7 @@
 //! hardware-in-loop suite and the benchmarks can drive the same code.
 
 pub mod bench;
-pub mod commands;
+pub mod cmd;
 pub mod compare;
 pub mod csvlog;
 pub mod exit;
@@ -10,6 +10,4 @@ pub mod link;
 pub mod monitor;
 pub mod plot;
 pub mod serve;
-pub mod sim_cmd;
 pub mod timefmt;
-pub mod vnode_cmd;

@@ -5,7 +5,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
 use clap::{Args, Parser, Subcommand};
-use fois_host::{commands, exit, monitor, vnode_cmd};
+use fois_host::cmd::{config as commands, scene as vnode_cmd};
+use fois_host::{exit, monitor};
 
 /// Monitor, log and configure a FOIS ice-sensor node; run a virtual node; run
 /// the thesis ray tracer.
@@ -181,7 +182,7 @@ enum Cmd {
         frames: u32,
     },
     /// Ray-trace simulator of the sensor (thesis chapters 3 and 5).
-    Sim(fois_host::sim_cmd::SimArgs),
+    Sim(fois_host::cmd::sim::SimArgs),
 }
 
 #[derive(Debug, Subcommand)]
@@ -241,7 +242,7 @@ fn install_ctrlc() {
 
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.cmd {
-        Cmd::Sim(args) => fois_host::sim_cmd::run(args),
+        Cmd::Sim(args) => fois_host::cmd::sim::run(args),
         Cmd::Monitor {
             port,
             log,

@@ -3,8 +3,6 @@
 //! Subcommands: `curve`, `analytic`, `montecarlo`, `crlb`, `bench`, `gallery`. Every CSV is
 //! written with a header line; currents in µA, variances in µA², thicknesses in mm.
 
-pub mod plot;
-
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
@@ -19,6 +17,7 @@ use fois_sim::{
 };
 use indicatif::{ProgressBar, ProgressStyle};
 
+use crate::plot::series as plot;
 use plot::{C_I1, C_I1_MEAN, C_I2, C_I2_MEAN, ErrBar, Kind, Series};
 
 /// Arguments of `foisctl sim`.

@@ -1,0 +1,5 @@
+//! The `foisctl` commands.
+
+pub mod config;
+pub mod scene;
+pub mod sim;

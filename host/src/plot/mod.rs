@@ -1,0 +1,6 @@
+//! The figures `foisctl` draws.
+
+pub mod log;
+pub mod series;
+
+pub use log::*;
