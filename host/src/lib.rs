@@ -10,4 +10,5 @@ pub mod link;
 pub mod monitor;
 pub mod plot;
 pub mod serve;
+pub mod text;
 pub mod timefmt;

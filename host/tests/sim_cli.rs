@@ -184,67 +184,58 @@ fn analytic_montecarlo_and_crlb_write_their_headers() {
 fn bad_input_exits_with_an_error_not_a_panic() {
     let out = tmp("bad.csv");
     let o = out.to_str().unwrap();
-    for args in [
-        vec![
-            "sim",
-            "curve",
-            "--ice",
-            "rime",
-            "--step-mm",
-            "0",
-            "--out",
-            o,
-        ],
-        vec![
-            "sim",
-            "curve",
-            "--ice",
-            "rime",
-            "--step-mm",
-            "-0.1",
-            "--out",
-            o,
-        ],
-        vec!["sim", "curve", "--ice", "rime", "--runs", "-3", "--out", o],
-        vec!["sim", "curve", "--ice", "rime", "--runs", "0", "--out", o],
-        vec!["sim", "curve", "--ice", "snow", "--out", o],
-        vec![
-            "sim", "curve", "--ice", "rime", "--max-mm", "nan", "--out", o,
-        ],
-        vec![
-            "sim",
-            "curve",
-            "--ice",
-            "rime",
-            "--out",
-            "/nonexistent/dir/x.csv",
-        ],
-        vec!["sim", "montecarlo", "--runs", "1", "--out", o],
-        vec![
-            "sim",
-            "crlb",
-            "--runs",
-            "10",
-            "--fit-half-width-mm",
-            "0",
-            "--out",
-            o,
-        ],
-        vec!["sim", "analytic", "--ice", "rime", "--out", o],
-        vec![
-            "sim",
-            "curve",
-            "--ice",
-            "rime",
-            "--threads",
-            "0",
-            "--out",
-            o,
-        ],
+    let curve = |extra: &[&'static str]| {
+        let mut v = vec!["sim", "curve", "--ice", "rime", "--out", o];
+        v.extend_from_slice(extra);
+        v
+    };
+    // (arguments, exit code): 2 for a bad command line, 1 for an I/O failure.
+    for (args, code) in [
+        (curve(&["--step-mm", "0"]), 2),
+        (curve(&["--step-mm", "-0.1"]), 2),
+        (curve(&["--runs", "-3"]), 2),
+        (curve(&["--runs", "0"]), 2),
+        (vec!["sim", "curve", "--ice", "snow", "--out", o], 2),
+        (curve(&["--max-mm", "nan"]), 2),
+        (curve(&["--max-mm", "101"]), 2),
+        (curve(&["--max-mm", "15", "--step-mm", "0.0001"]), 2),
+        (curve(&["--diffuse-deg", "61"]), 2),
+        (curve(&["--threads", "0"]), 2),
+        (curve(&["--sensor", "c"]), 2),
+        (curve(&["--geometry", "thesis-ch4"]), 2),
+        (
+            vec![
+                "sim",
+                "curve",
+                "--ice",
+                "rime",
+                "--out",
+                "/nonexistent/dir/x.csv",
+            ],
+            1,
+        ),
+        (vec!["sim", "montecarlo", "--runs", "1", "--out", o], 2),
+        (
+            vec![
+                "sim",
+                "crlb",
+                "--runs",
+                "10",
+                "--fit-half-width-mm",
+                "0",
+                "--out",
+                o,
+            ],
+            2,
+        ),
+        (vec!["sim", "analytic", "--ice", "rime", "--out", o], 2),
+        (vec!["sim", "bench", "--runs", "0"], 2),
+        (vec!["sim", "bench", "--threads", "0"], 2),
+        (vec!["sim", "gallery", "--runs", "1"], 2),
     ] {
         let r = foisctl(&args);
-        assert!(!r.status.success(), "{args:?} should fail");
         let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(code), "{args:?}: {err}");
         assert!(!err.contains("panicked"), "{args:?}: {err}");
         assert!(!err.trim().is_empty(), "{args:?}: no message");
     }

@@ -1,23 +1,44 @@
-//! `foisctl config get|set`, `calibrate-dark`, `ack`: send one command,
-//! wait for the node's `Ack` or `Error`, print it, map it to an exit code.
+//! `foisctl config get|set`: read the node's config, or change fields
+//! checked on the host with the node's own rule before anything is sent.
 
-use std::time::Duration;
-
+use clap::{Args, Subcommand};
 use fois_protocol::{AckResult, Command, Config, ConfigError, FIELDS};
 
-use crate::csvlog::{ack_text, error_text};
+use super::request::{RequestArgs, expect_ack};
 use crate::exit::{self, Exit};
-use crate::link::{Link, Reply, open_port};
+use crate::link::Reply;
 
-/// Where and how long.
-#[derive(Debug, Clone)]
-pub struct Target {
-    /// Serial port path.
-    pub port: String,
-    /// Baud rate.
-    pub baud: u32,
-    /// How long to wait for each answer.
-    pub timeout: Duration,
+/// `foisctl config`.
+#[derive(Debug, Args)]
+pub struct ConfigArgs {
+    #[command(subcommand)]
+    pub cmd: ConfigCmd,
+}
+
+/// `config get` / `config set`.
+#[derive(Debug, Subcommand)]
+pub enum ConfigCmd {
+    /// Print every config field with its value, unit and allowed range.
+    #[command(after_help = exit::TABLE)]
+    Get(RequestArgs),
+    /// Change fields: KEY=VALUE ... (integers in the field's unit, see `config
+    /// get`). Checked on the host with the node's own rule before sending.
+    #[command(after_help = exit::TABLE)]
+    Set {
+        #[command(flatten)]
+        args: RequestArgs,
+        /// KEY=VALUE pairs, e.g. onset_rise_na=1500 frame_period_ms=200.
+        #[arg(value_name = "KEY=VALUE", required = true)]
+        pairs: Vec<String>,
+    },
+}
+
+/// Run `foisctl config ...`.
+pub fn run(args: ConfigArgs) -> anyhow::Result<()> {
+    match args.cmd {
+        ConfigCmd::Get(a) => config_get(&a).map(|_| ()),
+        ConfigCmd::Set { args, pairs } => config_set(&args, &pairs).map(|_| ()),
+    }
 }
 
 /// A parsed `KEY=VALUE`.
@@ -106,32 +127,10 @@ pub fn config_table(c: &Config) -> String {
     s
 }
 
-fn connect(t: &Target) -> anyhow::Result<Link<Box<dyn serialport::SerialPort>>> {
-    let port = open_port(&t.port, t.baud)?;
-    let mut link = Link::new(port, t.port.clone());
-    let _ = link.port_mut().clear(serialport::ClearBuffer::Input);
-    link.handshake(t.timeout)?;
-    Ok(link)
-}
-
-fn expect_ack(reply: Reply) -> anyhow::Result<AckResult> {
-    match reply {
-        Reply::Ack(a) => {
-            println!("ack: {}", ack_text(&a));
-            Ok(a.result)
-        }
-        Reply::Error(e) => Err(Exit::new(
-            exit::REFUSED,
-            format!("the node refused the command: {}", error_text(&e)),
-        )
-        .into()),
-    }
-}
-
 /// `config get`: print the node's config.
-pub fn config_get(t: &Target) -> anyhow::Result<Config> {
-    let mut link = connect(t)?;
-    let reply = link.request(Command::GetConfig, t.timeout)?;
+pub fn config_get(t: &RequestArgs) -> anyhow::Result<Config> {
+    let mut link = t.connect()?;
+    let reply = link.request(Command::GetConfig, t.timeout())?;
     match reply {
         Reply::Ack(fois_protocol::Ack {
             result: AckResult::Config(c),
@@ -152,10 +151,10 @@ pub fn config_get(t: &Target) -> anyhow::Result<Config> {
 }
 
 /// `config set`: check on the host, send, print what the node now uses.
-pub fn config_set(t: &Target, args: &[String]) -> anyhow::Result<Config> {
+pub fn config_set(t: &RequestArgs, args: &[String]) -> anyhow::Result<Config> {
     let sets = parse_assignments(args)?;
-    let mut link = connect(t)?;
-    let current = match link.request(Command::GetConfig, t.timeout)? {
+    let mut link = t.connect()?;
+    let current = match link.request(Command::GetConfig, t.timeout())? {
         Reply::Ack(fois_protocol::Ack {
             result: AckResult::Config(c),
             ..
@@ -166,7 +165,7 @@ pub fn config_set(t: &Target, args: &[String]) -> anyhow::Result<Config> {
         }
     };
     let wanted = apply(&current, &sets)?;
-    let reply = link.request(Command::SetConfig(wanted.clone()), t.timeout)?;
+    let reply = link.request(Command::SetConfig(wanted.clone()), t.timeout())?;
     match expect_ack(reply)? {
         AckResult::Config(now) => {
             for f in FIELDS.iter() {
@@ -186,20 +185,6 @@ pub fn config_set(t: &Target, args: &[String]) -> anyhow::Result<Config> {
         }
         _ => Err(Exit::new(exit::FAILURE, "unexpected answer to SetConfig").into()),
     }
-}
-
-/// `calibrate-dark`.
-pub fn calibrate_dark(t: &Target) -> anyhow::Result<AckResult> {
-    let mut link = connect(t)?;
-    let r = link.request(Command::CalibrateDark, t.timeout)?;
-    expect_ack(r)
-}
-
-/// `ack`: acknowledge the alarm.
-pub fn ack_alarm(t: &Target) -> anyhow::Result<AckResult> {
-    let mut link = connect(t)?;
-    let r = link.request(Command::AckAlarm, t.timeout)?;
-    expect_ack(r)
 }
 
 #[cfg(test)]
