@@ -16,12 +16,19 @@ fn tmp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
+/// The header line and every record of a CSV file, as text.
+fn records(path: &PathBuf) -> (String, Vec<csv::StringRecord>) {
+    let mut rd = csv::Reader::from_path(path).unwrap();
+    let header = rd.headers().unwrap().iter().collect::<Vec<_>>().join(",");
+    let data = rd.records().map(Result::unwrap).collect();
+    (header, data)
+}
+
 fn rows(path: &PathBuf) -> (String, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header = lines.next().unwrap().to_owned();
-    let data = lines
-        .map(|l| l.split(',').map(|v| v.parse::<f64>().unwrap()).collect())
+    let (header, recs) = records(path);
+    let data = recs
+        .iter()
+        .map(|r| r.iter().map(|v| v.parse::<f64>().unwrap()).collect())
         .collect();
     (header, data)
 }
@@ -165,17 +172,10 @@ fn analytic_montecarlo_and_crlb_write_their_headers() {
         c.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let text = std::fs::read_to_string(&c).unwrap();
-    let mut lines = text.lines();
-    assert_eq!(
-        lines.next().unwrap(),
-        "thickness_mm,crlb_std_mm,crlb_no_dsigma_std_mm"
-    );
-    let vals: Vec<Vec<String>> = lines
-        .map(|l| l.split(',').map(str::to_owned).collect())
-        .collect();
+    let (h, vals) = records(&c);
+    assert_eq!(h, "thickness_mm,crlb_std_mm,crlb_no_dsigma_std_mm");
     assert_eq!(vals.len(), 51);
-    assert_eq!(vals[0][1], "NaN"); // dry face: Σ singular
+    assert_eq!(&vals[0][1], "NaN"); // dry face: Σ singular
     let v: f64 = vals[40][1].parse().unwrap();
     assert!(v > 0.0 && v < 5.0, "{v}");
 }
