@@ -15,7 +15,10 @@ fn main() {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
-    if let Err(e) = Cli::parse().run() {
+    let cli = Cli::parse();
+    // The figures' font is embedded: register it once, before any drawing.
+    fois_host::plot::register_fonts();
+    if let Err(e) = cli.run() {
         eprintln!("foisctl: error: {e:#}");
         std::process::exit(exit::code_of(&e));
     }

@@ -11,6 +11,7 @@ use crate::compare::{Comparison, band_at};
 /// The figure of `foisctl compare`: per channel, the band μ ± kσ, μ, and
 /// the logged samples against thickness.
 pub fn plot_comparison(c: &Comparison, ice: &str, out: &Path) -> anyhow::Result<()> {
+    super::register_fonts();
     let root = BitMapBackend::new(out, WIDE).into_drawing_area();
     root.fill(&WHITE).map_err(draw_err)?;
     let panels = root.split_evenly((1, 2));

@@ -167,6 +167,7 @@ pub fn plot_log(log: &Path, out: &Path, axis: TimeAxis) -> anyhow::Result<usize>
     }
     let pad = 0.05 * (y_max - y_min);
     let (y_lo, y_hi) = (y_min - pad, y_max + pad);
+    super::register_fonts();
     let root = BitMapBackend::new(out, WIDE).into_drawing_area();
     root.fill(&WHITE).map_err(draw_err)?;
     let mut chart = ChartBuilder::on(&root)

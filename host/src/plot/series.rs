@@ -113,6 +113,7 @@ fn draw(
         y_max = y_min + 1.0;
     }
     let y_top = y_max + 0.08 * (y_max - y_min);
+    super::register_fonts();
     let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE)?;
     let mut chart = ChartBuilder::on(&root)
