@@ -1,25 +1,45 @@
-//! `cargo run --release -p fois-hil --bin hil-report [-- FILE_OR_DIR...]`:
-//! run scenarios and print the results table, the goals and notes.
-//! Exit code 1 if an asserted expectation fails.
+//! `cargo run --release -p fois-hil-report [-- FILE_OR_DIR...]`: run
+//! hardware-in-loop scenarios and print the results table, the goals and
+//! notes. Exit code 1 if an asserted expectation fails, 2 for a bad command
+//! line or an invalid scenario file.
 
 use std::path::PathBuf;
 use std::time::Instant;
 
+use clap::Parser;
 use fois_hil::{report, run, scenario};
 
+/// Run hardware-in-loop scenarios (the firmware's own Node on the virtual
+/// hardware, in virtual time) on all cores and print a Markdown table of the
+/// results, the goals (met or missed, by how much) and one line of notes per
+/// run.
+#[derive(Debug, Parser)]
+#[command(
+    name = "hil-report",
+    version,
+    after_help = "Exit codes: 0 every expectation met; 1 an asserted expectation failed; \
+                  2 bad command line or invalid scenario file."
+)]
+struct Args {
+    /// Scenario files (.toml) and directories of them [default: the
+    /// scenarios shipped in hil/scenarios].
+    #[arg(value_name = "FILE_OR_DIR")]
+    paths: Vec<PathBuf>,
+}
+
 fn main() {
-    if let Err(e) = report() {
+    let args = Args::parse();
+    if let Err(e) = report(args) {
         eprintln!("error: {e:#}");
         std::process::exit(2);
     }
 }
 
-fn report() -> anyhow::Result<()> {
-    let args: Vec<PathBuf> = std::env::args_os().skip(1).map(PathBuf::from).collect();
-    let paths = if args.is_empty() {
+fn report(args: Args) -> anyhow::Result<()> {
+    let paths = if args.paths.is_empty() {
         vec![scenario::default_dir()]
     } else {
-        args
+        args.paths
     };
     let mut scenarios = Vec::new();
     for p in &paths {
