@@ -8,7 +8,6 @@
 //! - [`run`]: one scenario → an [`run::Outcome`] (decoded frames only).
 //! - [`check`]: the file's expectations against the outcome.
 //! - [`report`]: the results table and the goals.
-#![warn(missing_docs)]
 
 pub mod check;
 pub mod report;

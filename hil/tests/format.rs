@@ -1,5 +1,7 @@
 //! The scenario format is strict: a misspelt key or a bad value is an error
 //! that names the file and the key; overlays split the timeline correctly.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::Path;
 

@@ -1,4 +1,6 @@
 //! Every scenario file in `hil/scenarios/` must meet its expectations.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::Path;
 use std::time::Instant;

@@ -1,5 +1,7 @@
 //! End to end over pseudo-terminals: `foisctl virtual-node` ↔ `foisctl
 //! monitor` / commands as separate processes, and an in-process lossy link.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};

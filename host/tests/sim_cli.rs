@@ -1,4 +1,6 @@
 //! `foisctl sim ...` end to end: the real binary on small runs.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::PathBuf;
 use std::process::{Command, Output};

@@ -1,5 +1,7 @@
 //! Every bad command line exits with code 2 (clap refuses it before any
 //! port, file or simulation is touched), with a message and no panic.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::process::Command;
 

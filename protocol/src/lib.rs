@@ -4,7 +4,6 @@
 //! (adds [`framing::encode_to_vec`]) and `defmt` for `defmt::Format` derives.
 //! The wire format and the compatibility rules are in `protocol/README.md`.
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
-#![deny(missing_docs)]
 
 pub mod config;
 pub mod framing;

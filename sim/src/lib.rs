@@ -4,7 +4,6 @@
 //! * [`accretion_curve`]: one physical accretion, currents I1(d), I2(d) in µA.
 //! * [`analytic`]: the conventional overlap model (thesis §2.1, §3.3).
 //! * [`montecarlo`]: mean μ(d), covariance Σ(d), fits and the Cramér–Rao bound (§5.4).
-#![warn(missing_docs)]
 
 pub mod analytic;
 pub mod consts;

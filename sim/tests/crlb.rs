@@ -1,4 +1,6 @@
 //! Fits and the Cramér–Rao bound (thesis §5.4) against closed forms.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use fois_sim::montecarlo::*;
 use fois_sim::*;

@@ -103,7 +103,7 @@ impl Default for NodeOptions {
 
 /// A node + its virtual hardware.
 pub struct VirtualNode {
-    node: Option<FirmwareNode>,
+    node: FirmwareNode,
     clock: VirtualClock,
     led: VirtualPin,
     alarm: VirtualPin,
@@ -120,6 +120,46 @@ pub struct VirtualNode {
 
 const NS_PER_MS: u64 = 1_000_000;
 
+/// The virtual hardware a node is built on.
+struct Hardware<'a> {
+    clock: &'a VirtualClock,
+    led: &'a VirtualPin,
+    alarm: &'a VirtualPin,
+    indicator: &'a VirtualPin,
+    env: &'a Arc<Environment>,
+}
+
+impl Hardware<'_> {
+    /// The firmware node on this hardware after its `resets`-th reset (the
+    /// ADC noise stream differs per boot).
+    fn node(
+        &self,
+        opts: &NodeOptions,
+        resets: u32,
+        reason: ResetReason,
+        storage: SharedStorage,
+    ) -> FirmwareNode {
+        let adc = SimAdc::new(
+            self.clock.clone(),
+            self.led.clone(),
+            self.env.clone(),
+            opts.seed.wrapping_add(u64::from(resets)),
+        );
+        let mut info = BoardInfo::simulated(opts.board);
+        info.reset_reason = reason;
+        info.unique_id = *b"FOIS-VIRTUAL";
+        Node::new(
+            adc,
+            self.led.clone(),
+            self.alarm.clone(),
+            self.indicator.clone(),
+            VirtualDelay::new(self.clock.clone()),
+            storage,
+            info,
+        )
+    }
+}
+
 impl VirtualNode {
     /// Build a node at virtual time 0 in `env`.
     pub fn new(env: Arc<Environment>, opts: NodeOptions) -> Self {
@@ -127,8 +167,26 @@ impl VirtualNode {
         let led = VirtualPin::with_clock(clock.clone());
         let alarm = VirtualPin::with_clock(clock.clone());
         let indicator = VirtualPin::with_clock(clock.clone());
-        let mut vn = VirtualNode {
-            node: None,
+        let storage = match &opts.state_file {
+            Some(p) => SharedStorage::with_file(p).unwrap_or_else(|_| {
+                // Unreadable state: start empty, writes will report failure.
+                SharedStorage {
+                    mem: Arc::new(Mutex::new(MemStorage::new())),
+                    file: Some(p.clone()),
+                }
+            }),
+            None => SharedStorage::new(opts.storage.clone()),
+        };
+        let hw = Hardware {
+            clock: &clock,
+            led: &led,
+            alarm: &alarm,
+            indicator: &indicator,
+            env: &env,
+        };
+        let node = hw.node(&opts, 0, ResetReason::PowerOn, storage.clone());
+        VirtualNode {
+            node,
             clock,
             led,
             alarm,
@@ -140,53 +198,17 @@ impl VirtualNode {
             booted: false,
             resets: 0,
             frames: 0,
-            storage: SharedStorage::new(MemStorage::new()),
-        };
-        let storage = match &vn.opts.state_file {
-            Some(p) => SharedStorage::with_file(p).unwrap_or_else(|_| {
-                // Unreadable state: start empty, writes will report failure.
-                SharedStorage {
-                    mem: Arc::new(Mutex::new(MemStorage::new())),
-                    file: Some(p.clone()),
-                }
-            }),
-            None => SharedStorage::new(vn.opts.storage.clone()),
-        };
-        vn.build(ResetReason::PowerOn, storage);
-        vn
-    }
-
-    fn build(&mut self, reason: ResetReason, storage: SharedStorage) {
-        self.storage = storage.clone();
-        let adc = SimAdc::new(
-            self.clock.clone(),
-            self.led.clone(),
-            self.env.clone(),
-            self.opts.seed.wrapping_add(u64::from(self.resets)),
-        );
-        let mut info = BoardInfo::simulated(self.opts.board);
-        info.reset_reason = reason;
-        info.unique_id = *b"FOIS-VIRTUAL";
-        self.node = Some(Node::new(
-            adc,
-            self.led.clone(),
-            self.alarm.clone(),
-            self.indicator.clone(),
-            VirtualDelay::new(self.clock.clone()),
             storage,
-            info,
-        ));
-        self.booted = false;
+        }
     }
 
     fn node_mut(&mut self) -> &mut FirmwareNode {
-        // Always Some outside `reset`.
-        self.node.as_mut().expect("virtual node present")
+        &mut self.node
     }
 
     /// The firmware node.
     pub fn node(&self) -> &FirmwareNode {
-        self.node.as_ref().expect("virtual node present")
+        &self.node
     }
 
     /// Shared virtual clock.
@@ -271,10 +293,22 @@ impl VirtualNode {
 
     fn after_commands(&mut self, tx: &mut impl FnMut(&[u8])) {
         if self.node_mut().take_reset_request() {
-            let node = self.node.take().expect("virtual node present");
-            let (_, _, _, _, _, storage) = node.into_parts();
+            // A fresh node on the same (shared) storage, as after a reset.
             self.resets += 1;
-            self.build(ResetReason::Software, storage);
+            let hw = Hardware {
+                clock: &self.clock,
+                led: &self.led,
+                alarm: &self.alarm,
+                indicator: &self.indicator,
+                env: &self.env,
+            };
+            self.node = hw.node(
+                &self.opts,
+                self.resets,
+                ResetReason::Software,
+                self.storage.clone(),
+            );
+            self.booted = false;
             self.boot(tx);
         }
     }

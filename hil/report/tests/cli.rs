@@ -1,4 +1,6 @@
 //! `hil-report`'s command line: help, and the exit code of mistakes.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::process::Command;
 

@@ -11,6 +11,7 @@ use crate::link::Reply;
 /// `foisctl config`.
 #[derive(Debug, Args)]
 pub struct ConfigArgs {
+    /// `get` or `set`.
     #[command(subcommand)]
     pub cmd: ConfigCmd,
 }
@@ -25,6 +26,7 @@ pub enum ConfigCmd {
     /// get`). Checked on the host with the node's own rule before sending.
     #[command(after_help = exit::TABLE)]
     Set {
+        /// The port and the answer timeout.
         #[command(flatten)]
         args: RequestArgs,
         /// KEY=VALUE pairs, e.g. onset_rise_na=1500 frame_period_ms=200.

@@ -15,6 +15,7 @@ use crate::serve::{self, Pty, ServeOptions};
 /// `foisctl demo`.
 #[derive(Debug, Args)]
 pub struct DemoArgs {
+    /// The simulated scene.
     #[command(flatten)]
     pub scene: SceneArgs,
     /// Also log to this CSV file.

@@ -12,6 +12,7 @@ use crate::monitor::{self, MonitorOptions};
 /// `foisctl monitor`.
 #[derive(Debug, Args)]
 pub struct MonitorArgs {
+    /// The serial port of the node.
     #[command(flatten)]
     pub port: PortArgs,
     /// Append every measurement, event, gap and error to this CSV file

@@ -15,6 +15,7 @@ use crate::text::ack_text;
 /// The port and how long to wait for each answer.
 #[derive(Debug, Clone, Args)]
 pub struct RequestArgs {
+    /// The serial port of the node.
     #[command(flatten)]
     pub port: PortArgs,
     /// How long to wait for the node's answer, ms.

@@ -192,7 +192,10 @@ pub fn describe(scene: &Scene) -> String {
             scene.speed
         );
     }
-    let last = segs.last().expect("a timeline has a segment");
+    // A timeline always has a segment (an empty one is an endless dry face).
+    let Some(last) = segs.last() else {
+        return "dry face".into();
+    };
     let dry = if segs.len() > 1 {
         format!("dry face for {:.0} s, then ", segs[0].duration_s)
     } else {

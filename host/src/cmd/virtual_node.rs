@@ -13,6 +13,7 @@ use crate::serve::{self, Pty, ServeOptions};
 /// `foisctl virtual-node`.
 #[derive(Debug, Args)]
 pub struct VirtualNodeArgs {
+    /// The simulated scene.
     #[command(flatten)]
     pub scene: SceneArgs,
     /// Also create this symlink to the pty: a stable name across restarts

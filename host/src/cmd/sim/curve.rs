@@ -20,6 +20,7 @@ pub struct CurveArgs {
     /// Number of accretions (runs 0..N of the seed), >= 1.
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
     pub runs: u64,
+    /// The model options.
     #[command(flatten)]
     pub model: ModelOpts,
     /// Output CSV file.

@@ -21,6 +21,7 @@ pub struct MontecarloArgs {
     /// Number of accretions M, >= 2.
     #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(2..))]
     pub runs: u64,
+    /// The model options.
     #[command(flatten)]
     pub model: ModelOpts,
     /// Output CSV file.
