@@ -15,6 +15,8 @@ pub mod node;
 pub mod ntc;
 pub mod persist;
 pub mod rule;
+#[cfg(feature = "sim-board")]
+pub mod sim_board;
 pub mod vref;
 
 pub use hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc, Storage, StorageError};
