@@ -2,22 +2,16 @@
 //! the V_DDA reference, 12-bit quantisation with saturation at full scale,
 //! Gaussian noise from a seeded stream; the NTC divider (10 kΩ NTC, B = 3950,
 //! to GND; 10 kΩ to 3V3 on PA4; ratiometric), VREFINT and the internal
-//! temperature sensor (from the factory calibration).
+//! temperature sensor (from the factory calibration). The conversions are
+//! the firmware's own (`fois_firmware::sim_board::codes`, also behind its
+//! tests' simulated board); this adds the noise and the die temperature.
 
 use fois_firmware::FactoryCal;
+use fois_firmware::sim_board::codes;
 use rand_core::Rng;
 use rand_pcg::Pcg32;
 
-/// Full-scale code.
-pub const ADC_MAX: u16 = 4095;
-/// NTC resistance at 25 °C, Ω.
-pub const NTC_R25_OHM: f64 = 10_000.0;
-/// NTC beta, K.
-pub const NTC_BETA_K: f64 = 3_950.0;
-/// Fixed divider resistor to 3V3, Ω.
-pub const NTC_FIXED_OHM: f64 = 10_000.0;
-/// V_DDA at which the factory values were taken, V.
-pub const CAL_VDDA_V: f64 = 3.3;
+pub use codes::CAL_VDDA_V;
 
 /// The front end's parameters and noise stream.
 #[derive(Debug, Clone)]
@@ -61,14 +55,11 @@ impl FrontEnd {
     /// Quantise a voltage to a 12-bit code (plus `noise_lsb` rms noise),
     /// clamped to 0..=4095.
     pub fn quantise(&mut self, volts: f64, noise_lsb: f64) -> u16 {
-        let mut x = volts / self.vdda_v * f64::from(ADC_MAX);
+        let mut x = codes::lsb(volts, self.vdda_v);
         if noise_lsb > 0.0 {
             x += noise_lsb * self.gaussian();
         }
-        if x.is_nan() {
-            return 0;
-        }
-        x.round().clamp(0.0, f64::from(ADC_MAX)) as u16
+        codes::code(x)
     }
 
     /// Codes of the two phototransistor channels for these currents, µA.
@@ -79,36 +70,23 @@ impl FrontEnd {
         })
     }
 
-    /// NTC resistance at `temp_c`, Ω (beta equation).
-    pub fn ntc_ohm(temp_c: f64) -> f64 {
-        let t = temp_c + 273.15;
-        NTC_R25_OHM * (NTC_BETA_K * (1.0 / t - 1.0 / 298.15)).exp()
-    }
-
     /// NTC divider code at `air_temp_c` (ratiometric: independent of V_DDA).
     pub fn ntc_code(&mut self, air_temp_c: f64) -> u16 {
-        if let Some(c) = self.ntc_code_override {
-            return c.min(ADC_MAX);
+        match self.ntc_code_override {
+            Some(c) => c.min(fois_firmware::hal::ADC_MAX),
+            None => codes::ntc_code(air_temp_c),
         }
-        let r = Self::ntc_ohm(air_temp_c);
-        let x = f64::from(ADC_MAX) * r / (r + NTC_FIXED_OHM);
-        x.round().clamp(0.0, f64::from(ADC_MAX)) as u16
     }
 
     /// VREFINT code: VREFINT_CAL · 3.3 V / V_DDA.
     pub fn vrefint_code(&self) -> u16 {
-        let x = f64::from(self.cal.vrefint_cal) * CAL_VDDA_V / self.vdda_v;
-        x.round().clamp(0.0, f64::from(ADC_MAX)) as u16
+        codes::vrefint_code(&self.cal, self.vdda_v)
     }
 
     /// Internal temperature sensor code at air temperature `air_temp_c`
     /// (linear between TS_CAL1 at 30 °C and TS_CAL2 at 110 °C, at 3.3 V).
     pub fn internal_temp_code(&self, air_temp_c: f64) -> u16 {
-        let (c1, c2) = (f64::from(self.cal.ts_cal1), f64::from(self.cal.ts_cal2));
-        let t = air_temp_c + self.die_above_air_c;
-        let at_cal = c1 + (t - 30.0) * (c2 - c1) / 80.0;
-        let x = at_cal * CAL_VDDA_V / self.vdda_v;
-        x.round().clamp(0.0, f64::from(ADC_MAX)) as u16
+        codes::internal_temp_code(&self.cal, air_temp_c + self.die_above_air_c, self.vdda_v)
     }
 }
 
