@@ -36,7 +36,7 @@ fn rows(path: &PathBuf) -> (String, Vec<Vec<f64>>) {
 }
 
 #[test]
-fn curve_writes_the_issue_header_and_values() {
+fn curve_writes_its_header_and_values() {
     let out = tmp("curve.csv");
     let png = tmp("curve.png");
     let o = foisctl(&[
