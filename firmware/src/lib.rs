@@ -1,11 +1,12 @@
-//! FOIS node logic, free of any HAL: measurement maths, the ice rule, config
-//! handling and command dispatch. Runs on the board, in host tests, in the
-//! host's virtual node, in the hardware-in-loop suite and on an emulated
-//! Cortex-M4F (`firmware/qemu-test`).
+#![doc = include_str!("../README.md")]
+//!
+//! ## Modules
 //!
 //! - [`hal`]: the hardware seams ([`hal::PhotoAdc`], [`hal::Storage`], board info).
 //! - [`node::Node`]: the whole node behind them.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
+//! - `sim_board` (feature `sim-board`): a scripted simulated board for tests.
+
 #![cfg_attr(not(test), no_std)]
 
 pub mod dispatch;

@@ -1,8 +1,6 @@
-//! Hardware-in-loop scenario runner: the firmware's own `Node` on the host's
-//! virtual hardware (sim curves → analog front end → simulated ADC), in
-//! virtual time; its UART bytes decoded by the host's `FrameDecoder`; the
-//! decoded frames checked against each scenario file's expectations, with
-//! the environment's truth (thickness at each instant) beside them.
+#![doc = include_str!("../README.md")]
+//!
+//! ## Modules
 //!
 //! - [`scenario`]: the TOML format (`hil/scenarios/*.toml`) → a timeline.
 //! - [`run`]: one scenario → an [`run::Outcome`] (decoded frames only).

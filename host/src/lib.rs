@@ -1,5 +1,13 @@
-//! `foisctl` as a library: every subcommand lives in its own module so the
-//! hardware-in-loop suite and the benchmarks can drive the same code.
+#![doc = include_str!("../README.md")]
+//!
+//! ## Modules
+//!
+//! - [`cmd`]: one module per command, each owning its arguments and its `run`.
+//! - [`link`]: the serial link (handshake, commands, sequence tracking).
+//! - [`monitor`]: the live session behind `monitor` and `demo`; [`csvlog`] its durable CSV log.
+//! - [`serve`]: a virtual node on a pseudo-terminal.
+//! - [`compare`]: a log against the simulator's band; [`plot`]: every figure.
+//! - [`exit`]: the exit codes; [`text`], [`timefmt`], [`bench`]: helpers.
 
 pub mod bench;
 pub mod cmd;

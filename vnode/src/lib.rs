@@ -1,24 +1,13 @@
-//! Virtual hardware for the firmware's own `Node`: a virtual clock, output
-//! pins, an environment model (ice, light, air temperature over time), the
-//! analog front end and a simulated ADC implementing
-//! [`fois_firmware::PhotoAdc`]; and the virtual node, the firmware's own
-//! `Node` on them in virtual time. `foisctl virtual-node` / `foisctl demo`
-//! and the hardware-in-loop suite in `hil/` build on it.
+#![doc = include_str!("../README.md")]
 //!
-//! ```
-//! use std::sync::Arc;
-//! use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
+//! ## Modules
 //!
-//! let timeline = Timeline::new(vec![
-//!     Segment::new(60.0, Cover::Dry).temp(-5.0),
-//!     Segment::new(600.0, Cover::Rime).rate(6.0).temp(-5.0).ambient([20.0, 10.0]),
-//! ]);
-//! let env = Arc::new(Environment::new(timeline, fois_sim::SensorKind::B, 1));
-//! let mut node = VirtualNode::new(env, NodeOptions::default());
-//! let mut frames = Vec::new();
-//! node.run_until_s(120.0, &mut |b: &[u8]| frames.extend_from_slice(b));
-//! assert!(node.alarm_on());
-//! ```
+//! - [`clock`]: virtual time, the delay, output pins that record their edges.
+//! - [`environment`]: segments, the timeline, what the face sees at each instant.
+//! - [`frontend`]: light and temperature → ADC codes, with noise.
+//! - [`adc`]: the simulated ADC ([`fois_firmware::PhotoAdc`]).
+//! - [`node`]: the virtual node, its options and its storage.
+//! - [`scenario`]: the TOML scenario format.
 
 pub mod adc;
 pub mod clock;
