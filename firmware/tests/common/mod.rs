@@ -9,8 +9,6 @@ use fois_firmware::hal::MemStorage;
 use fois_firmware::sim_board::{self, SimBoard};
 use fois_protocol::{DeviceFrame, FrameDecoder, HostFrame, encode_to_vec};
 
-pub use fois_firmware::sim_board::Scene;
-
 /// The board a test drives: clock, output levels, scene.
 pub type World = Rc<SimBoard>;
 
