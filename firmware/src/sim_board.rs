@@ -196,16 +196,9 @@ impl SimBoard {
     /// Run one frame of `node` now, then move the clock to the end of its
     /// frame period (or of the frame, if that took longer): as the board's
     /// ticker runs the node.
-    pub fn run_frame<A, L, AL, IND, D, S>(
-        &self,
-        node: &mut Node<A, L, AL, IND, D, S>,
-        tx: &mut impl FnMut(&[u8]),
-    ) where
-        A: PhotoAdc,
-        L: OutputPin,
-        AL: OutputPin,
-        IND: OutputPin,
-        D: DelayNs,
+    pub fn run_frame<B, S>(&self, node: &mut SimNode<B, S>, tx: &mut impl FnMut(&[u8]))
+    where
+        B: Deref<Target = SimBoard>,
         S: Storage,
     {
         let start = self.t_ns.get();

@@ -39,19 +39,26 @@ fn rows(path: &PathBuf) -> (String, Vec<Vec<f64>>) {
 fn curve_writes_its_header_and_values() {
     let out = tmp("curve.csv");
     let png = tmp("curve.png");
-    let o = foisctl(&[
-        "sim",
-        "curve",
-        "--ice",
-        "rime",
-        "--runs",
-        "2",
-        "--max-mm",
-        "3",
-        "--step-mm",
-        "0.5",
-        "--seed",
-        "4",
+    // Two rime accretions of seed 4, 0–3 mm in 0.5 mm steps.
+    let small_rime = |extra: &[&str]| {
+        let mut v = vec![
+            "sim",
+            "curve",
+            "--ice",
+            "rime",
+            "--runs",
+            "2",
+            "--max-mm",
+            "3",
+            "--step-mm",
+            "0.5",
+            "--seed",
+            "4",
+        ];
+        v.extend_from_slice(extra);
+        foisctl(&v)
+    };
+    let o = small_rime(&[
         "--out",
         out.to_str().unwrap(),
         "--plot",
@@ -77,24 +84,7 @@ fn curve_writes_its_header_and_values() {
     assert_eq!(&png_bytes[1..4], b"PNG");
     // Same seed → same file.
     let out2 = tmp("curve2.csv");
-    let o = foisctl(&[
-        "sim",
-        "curve",
-        "--ice",
-        "rime",
-        "--runs",
-        "2",
-        "--max-mm",
-        "3",
-        "--step-mm",
-        "0.5",
-        "--seed",
-        "4",
-        "--threads",
-        "1",
-        "--out",
-        out2.to_str().unwrap(),
-    ]);
+    let o = small_rime(&["--threads", "1", "--out", out2.to_str().unwrap()]);
     assert!(o.status.success());
     assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&out2).unwrap());
 }
@@ -119,6 +109,22 @@ fn sensor_a_shows_the_dry_offset() {
     assert!((d[0][2] - 13.0).abs() < 1.0, "{:?}", d[0]);
 }
 
+/// `foisctl sim CMD` over 20 rime accretions, 0–5 mm, into `out`.
+fn small_mc(cmd: &str, out: &std::path::Path) -> Output {
+    foisctl(&[
+        "sim",
+        cmd,
+        "--ice",
+        "rime",
+        "--runs",
+        "20",
+        "--max-mm",
+        "5",
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
 #[test]
 fn analytic_montecarlo_and_crlb_write_their_headers() {
     let a = tmp("an.csv");
@@ -137,18 +143,7 @@ fn analytic_montecarlo_and_crlb_write_their_headers() {
     assert!(d.iter().any(|r| r[1] > 5.0));
 
     let m = tmp("mc.csv");
-    let o = foisctl(&[
-        "sim",
-        "montecarlo",
-        "--ice",
-        "rime",
-        "--runs",
-        "20",
-        "--max-mm",
-        "5",
-        "--out",
-        m.to_str().unwrap(),
-    ]);
+    let o = small_mc("montecarlo", &m);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (h, d) = rows(&m);
     assert_eq!(
@@ -161,18 +156,7 @@ fn analytic_montecarlo_and_crlb_write_their_headers() {
     }
 
     let c = tmp("crlb.csv");
-    let o = foisctl(&[
-        "sim",
-        "crlb",
-        "--ice",
-        "rime",
-        "--runs",
-        "20",
-        "--max-mm",
-        "5",
-        "--out",
-        c.to_str().unwrap(),
-    ]);
+    let o = small_mc("crlb", &c);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (h, vals) = records(&c);
     assert_eq!(h, "thickness_mm,crlb_std_mm,crlb_no_dsigma_std_mm");

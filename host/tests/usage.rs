@@ -16,14 +16,30 @@ fn foisctl(args: &[&str]) -> (Option<i32>, String) {
     )
 }
 
+/// `a` then `b`.
+fn cat(a: &[&'static str], b: &[&'static str]) -> Vec<&'static str> {
+    [a, b].concat()
+}
+
 #[test]
 fn usage_errors_exit_2() {
-    let p = ["--port", "/dev/does-not-exist"];
-    let with_port = |extra: &[&'static str]| {
-        let mut v = extra.to_vec();
-        v.extend_from_slice(&p);
-        v
+    let with_port = |extra: &[&'static str]| cat(extra, &["--port", "/dev/does-not-exist"]);
+    // A valid compare command line plus `extra`.
+    let compare = |extra: &[&'static str]| {
+        cat(
+            &[
+                "compare",
+                "--log",
+                "x.csv",
+                "--ice",
+                "rime",
+                "--rate-mm-per-h",
+                "1",
+            ],
+            extra,
+        )
     };
+    let vnode = |extra: &[&'static str]| cat(&["virtual-node"], extra);
     let cases: Vec<Vec<&str>> = vec![
         vec![],
         vec!["no-such-command"],
@@ -36,20 +52,20 @@ fn usage_errors_exit_2() {
         with_port(&["config", "set"]),
         with_port(&["calibrate-dark", "--timeout-ms", "-5"]),
         with_port(&["ack", "--baud", "fast"]),
-        vec!["virtual-node", "--ice", "slush"],
-        vec!["virtual-node", "--speed", "0"],
-        vec!["virtual-node", "--speed", "20000"],
-        vec!["virtual-node", "--duration", "-1"],
-        vec!["virtual-node", "--dry-s", "-1"],
-        vec!["virtual-node", "--temp-c", "-61"],
-        vec!["virtual-node", "--rate-mm-per-h", "1001"],
-        vec!["virtual-node", "--ambient", "1,-2"],
-        vec!["virtual-node", "--flicker", "-1"],
-        vec!["virtual-node", "--led-factor", "11"],
-        vec!["virtual-node", "--noise-lsb", "-0.5"],
-        vec!["virtual-node", "--sensor", "c"],
-        vec!["virtual-node", "--seed", "-1"],
-        vec!["virtual-node", "--scenario", "x.toml", "--ice", "rime"],
+        vnode(&["--ice", "slush"]),
+        vnode(&["--speed", "0"]),
+        vnode(&["--speed", "20000"]),
+        vnode(&["--duration", "-1"]),
+        vnode(&["--dry-s", "-1"]),
+        vnode(&["--temp-c", "-61"]),
+        vnode(&["--rate-mm-per-h", "1001"]),
+        vnode(&["--ambient", "1,-2"]),
+        vnode(&["--flicker", "-1"]),
+        vnode(&["--led-factor", "11"]),
+        vnode(&["--noise-lsb", "-0.5"]),
+        vnode(&["--sensor", "c"]),
+        vnode(&["--seed", "-1"]),
+        vnode(&["--scenario", "x.toml", "--ice", "rime"]),
         vec!["demo", "--duration", "-3"],
         vec!["demo", "--speed", "-1"],
         vec![
@@ -62,70 +78,12 @@ fn usage_errors_exit_2() {
             "1",
         ],
         vec!["compare", "--log", "x.csv", "--ice", "rime"],
-        vec![
-            "compare",
-            "--log",
-            "x.csv",
-            "--ice",
-            "rime",
-            "--rate-mm-per-h",
-            "0",
-        ],
-        vec![
-            "compare",
-            "--log",
-            "x.csv",
-            "--ice",
-            "rime",
-            "--rate-mm-per-h",
-            "1",
-            "--runs",
-            "0",
-        ],
-        vec![
-            "compare",
-            "--log",
-            "x.csv",
-            "--ice",
-            "rime",
-            "--rate-mm-per-h",
-            "1",
-            "--k-sigma",
-            "0",
-        ],
-        vec![
-            "compare",
-            "--log",
-            "x.csv",
-            "--ice",
-            "rime",
-            "--rate-mm-per-h",
-            "1",
-            "--noise-ua",
-            "-1",
-        ],
-        vec![
-            "compare",
-            "--log",
-            "x.csv",
-            "--ice",
-            "rime",
-            "--rate-mm-per-h",
-            "1",
-            "--start-s",
-            "-1",
-        ],
-        vec![
-            "compare",
-            "--log",
-            "x.csv",
-            "--ice",
-            "rime",
-            "--thickness-col",
-            "d",
-            "--rate-mm-per-h",
-            "1",
-        ],
+        compare(&["--rate-mm-per-h", "0"]),
+        compare(&["--runs", "0"]),
+        compare(&["--k-sigma", "0"]),
+        compare(&["--noise-ua", "-1"]),
+        compare(&["--start-s", "-1"]),
+        compare(&["--thickness-col", "d"]),
         vec!["plot", "--log", "x.csv", "--out", "x.png", "--time", "wall"],
         vec!["bench-decode", "--frames", "0"],
     ];

@@ -122,6 +122,27 @@ impl Default for ModelOpts {
     }
 }
 
+/// The Monte Carlo's arguments (`montecarlo`, `crlb`).
+#[derive(Debug, Args, Clone)]
+pub struct McArgs {
+    /// Medium.
+    #[arg(long, value_enum, default_value = "rime")]
+    pub ice: IceArg,
+    /// Number of accretions M, >= 2.
+    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(2..))]
+    pub runs: u64,
+    /// The model options.
+    #[command(flatten)]
+    pub model: ModelOpts,
+}
+
+impl McArgs {
+    /// The simulator configuration.
+    pub fn config(&self) -> anyhow::Result<SimConfig> {
+        make_config(self.ice, &self.model)
+    }
+}
+
 /// Build and validate the simulator configuration. A combination the
 /// simulator refuses (e.g. more than 100 000 thickness steps) is a usage
 /// error (exit code 2).

@@ -33,40 +33,17 @@ pub fn run(args: BenchArgs) -> Result<()> {
         cfg.thicknesses_mm().len(),
         evals
     );
-    // One thread.
-    let pb = bar(runs, "1 thread");
-    let t0 = Instant::now();
-    let mut sink = 0.0;
-    for r in 0..runs {
-        sink += model.accretion(7, r).points.last().map_or(0.0, |p| p.i1_ua);
-        pb.inc(1);
-    }
-    let t1 = t0.elapsed().as_secs_f64();
-    pb.finish_and_clear();
+    // One thread, then all of them.
+    let (t1, sink) = time_accretions(&model, runs, &pool(Some(1))?, "1 thread")?;
     let single = evals * runs as f64 / t1;
     println!(
         "1 thread:  {:.3e} ray evaluations/s ({:.2} ms per accretion)",
         single,
         1e3 * t1 / runs as f64
     );
-    // All threads.
     let pool = pool(threads)?;
     let n = pool.current_num_threads();
-    let pb = bar(runs, "all threads");
-    let t0 = Instant::now();
-    let par: f64 = pool.install(|| {
-        use rayon::prelude::*;
-        (0..runs)
-            .into_par_iter()
-            .map(|r| {
-                let v = model.accretion(7, r).points.last().map_or(0.0, |p| p.i1_ua);
-                pb.inc(1);
-                v
-            })
-            .sum()
-    });
-    let tp = t0.elapsed().as_secs_f64();
-    pb.finish_and_clear();
+    let (tp, par) = time_accretions(&model, runs, &pool, "all threads")?;
     let total = evals * runs as f64 / tp;
     println!(
         "{n} threads: {:.3e} ray evaluations/s total, {:.3e} per thread",
@@ -81,4 +58,30 @@ pub fn run(args: BenchArgs) -> Result<()> {
         bail!("non-finite currents");
     }
     Ok(())
+}
+
+/// Trace accretions `0..runs` of seed 7 on `pool` behind a progress bar:
+/// (wall seconds, the sum of the last I1 of each, so nothing is optimised away).
+fn time_accretions(
+    model: &SensorModel,
+    runs: u64,
+    pool: &rayon::ThreadPool,
+    what: &str,
+) -> Result<(f64, f64)> {
+    let pb = bar(runs, what);
+    let t0 = Instant::now();
+    let sum: f64 = pool.install(|| {
+        use rayon::prelude::*;
+        (0..runs)
+            .into_par_iter()
+            .map(|r| {
+                let v = model.accretion(7, r).points.last().map_or(0.0, |p| p.i1_ua);
+                pb.inc(1);
+                v
+            })
+            .sum()
+    });
+    let secs = t0.elapsed().as_secs_f64();
+    pb.finish_and_clear();
+    Ok((secs, sum))
 }

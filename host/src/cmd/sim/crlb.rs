@@ -9,24 +9,18 @@ use clap::Args;
 use fois_sim::crlb;
 use fois_sim::montecarlo::{DEFAULT_FIT_HALF_WIDTH_MM, fit_quality};
 
-use super::args::{ModelOpts, make_config};
+use super::args::McArgs;
 use super::figures::plot_crlb;
 use super::output::{CRLB_HEADER, CsvOut, check_writable, write_crlb};
 use super::runs::{report_fit, run_mc};
-use crate::cmd::args::{IceArg, positive};
+use crate::cmd::args::positive;
 
 /// `foisctl sim crlb`.
 #[derive(Debug, Args)]
 pub struct CrlbArgs {
-    /// Medium.
-    #[arg(long, value_enum, default_value = "rime")]
-    pub ice: IceArg,
-    /// Number of accretions M, >= 2.
-    #[arg(long, default_value_t = 1000, value_parser = clap::value_parser!(u64).range(2..))]
-    pub runs: u64,
-    /// The model options.
+    /// Medium, accretions, model.
     #[command(flatten)]
-    pub model: ModelOpts,
+    pub mc: McArgs,
     /// Half-width of the local fits of μ(d) and Σ(d), mm (> 0).
     #[arg(long, default_value_t = DEFAULT_FIT_HALF_WIDTH_MM, value_parser = positive)]
     pub fit_half_width_mm: f64,
@@ -40,18 +34,21 @@ pub struct CrlbArgs {
 
 /// Run `foisctl sim crlb`.
 pub fn run(args: CrlbArgs) -> Result<()> {
-    let cfg = make_config(args.ice, &args.model)?;
+    let McArgs {
+        runs, ref model, ..
+    } = args.mc;
+    let cfg = args.mc.config()?;
     let out = CsvOut::create(&args.out, &CRLB_HEADER)?;
     check_writable(args.plot.as_deref())?;
     let t0 = Instant::now();
-    let mc = run_mc(&cfg, args.runs, args.model.seed, args.model.threads)?;
+    let mc = run_mc(&cfg, runs, model.seed, model.threads)?;
     let bound = crlb(&mc.points, args.fit_half_width_mm);
-    let q = fit_quality(&mc.points, &bound, args.runs as usize);
+    let q = fit_quality(&mc.points, &bound, runs as usize);
     let dt = t0.elapsed();
     write_crlb(out, &bound)?;
-    report_fit(&q, dt.as_secs_f64(), args.runs);
+    report_fit(&q, dt.as_secs_f64(), runs);
     if let Some(p) = &args.plot {
-        let title = format!("CRLB: {} ice, {} accretions", cfg.ice.name(), args.runs);
+        let title = format!("CRLB: {} ice, {} accretions", cfg.ice.name(), runs);
         plot_crlb(p, &title, &bound)?;
     }
     Ok(())
