@@ -3,7 +3,7 @@
 //! ## Modules
 //!
 //! - [`scenario`]: the TOML format (`hil/scenarios/*.toml`) → a timeline.
-//! - [`run`]: one scenario → an [`run::Outcome`] (decoded frames only).
+//! - [`mod@run`]: one scenario → an [`run::Outcome`] (decoded frames only).
 //! - [`check`]: the file's expectations against the outcome.
 //! - [`report`]: the results table and the goals.
 

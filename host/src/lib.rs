@@ -7,7 +7,7 @@
 //! - [`monitor`]: the live session behind `monitor` and `demo`; [`csvlog`] its durable CSV log.
 //! - [`serve`]: a virtual node on a pseudo-terminal.
 //! - [`compare`]: a log against the simulator's band; [`plot`]: every figure.
-//! - [`exit`]: the exit codes; [`text`], [`timefmt`], [`bench`]: helpers.
+//! - [`exit`]: the exit codes; [`text`], [`timefmt`], [`mod@bench`]: helpers.
 
 pub mod bench;
 pub mod cmd;
