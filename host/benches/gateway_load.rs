@@ -18,6 +18,9 @@
 //! the gateway's CPU time and RSS come from /proc. Not a timed unit test:
 //! it prints a table.
 
+// The gateway tests' helpers: test code, where a failed setup panics with
+// its reason (unwrap and expect are assertions there).
+#[allow(clippy::unwrap_used, clippy::expect_used)]
 #[path = "../tests/gateway_support/mod.rs"]
 mod gateway_support;
 
@@ -27,9 +30,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use fois_host::virtual_hw::{Cover, Environment, Segment, Timeline};
-use fois_host::virtual_node::{NodeOptions, VirtualNode};
+use anyhow::Context;
 use fois_protocol::{DeviceFrame, DeviceMsg, FrameDecoder, MAX_FRAME};
+use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
 use gateway_support::*;
 use serialport::SerialPort;
 
@@ -101,7 +104,8 @@ fn feed(
                 if off < out.len() {
                     decoder.reset();
                 }
-                written.lock().unwrap()[k].extend(seqs);
+                // A poisoned lock still holds the seqs recorded so far.
+                written.lock().unwrap_or_else(|e| e.into_inner())[k].extend(seqs);
             }
         }
         std::thread::sleep(Duration::from_millis(2));
@@ -147,8 +151,8 @@ struct Row {
     incomplete: u64,
 }
 
-fn run(env: &Arc<Environment>, n: usize, window_s: f64) -> Row {
-    let dir = tempfile::tempdir().unwrap();
+fn run(env: &Arc<Environment>, n: usize, window_s: f64) -> anyhow::Result<Row> {
+    let dir = tempfile::tempdir()?;
     let broker = Broker::start(dir.path(), "");
     let broker_pid = std::fs::read_dir("/proc")
         .ok()
@@ -173,9 +177,9 @@ fn run(env: &Arc<Environment>, n: usize, window_s: f64) -> Row {
     );
     let mut fed = Vec::new();
     for k in 0..n {
-        let (mut master, slave) = serialport::TTYPort::pair().unwrap();
-        master.set_timeout(Duration::ZERO).unwrap();
-        let path = slave.name().unwrap();
+        let (mut master, slave) = serialport::TTYPort::pair().context("open a pty pair")?;
+        master.set_timeout(Duration::ZERO)?;
+        let path = slave.name().context("the pty has no name")?;
         let node = VirtualNode::new(
             env.clone(),
             NodeOptions {
@@ -206,8 +210,7 @@ fn run(env: &Arc<Environment>, n: usize, window_s: f64) -> Row {
             &nodes,
             "[homeassistant]\nenabled = false\n",
         ),
-    )
-    .unwrap();
+    )?;
     let window = Arc::new(AtomicBool::new(false));
     let stop = Arc::new(AtomicBool::new(false));
     let written: Written = Arc::new(Mutex::new(vec![Vec::new(); n]));
@@ -217,7 +220,7 @@ fn run(env: &Arc<Environment>, n: usize, window_s: f64) -> Row {
     // All nodes online.
     let t0 = Instant::now();
     while gw.output().matches(": connected (").count() < n {
-        assert!(
+        anyhow::ensure!(
             t0.elapsed() < Duration::from_secs(60),
             "only {} of {n} nodes connected",
             gw.output().matches(": connected (").count()
@@ -247,10 +250,12 @@ fn run(env: &Arc<Environment>, n: usize, window_s: f64) -> Row {
     std::thread::sleep(Duration::from_secs(2));
     sub.settle(Duration::from_millis(800), Duration::from_secs(30));
     stop.store(true, Ordering::Relaxed);
-    let (_frames, incomplete) = feeder.join().unwrap();
+    let (_frames, incomplete) = feeder
+        .join()
+        .map_err(|_| anyhow::anyhow!("the feeder thread panicked"))?;
     let _ = gw.interrupt();
     let msgs = sub.messages();
-    let written = written.lock().unwrap();
+    let written = written.lock().unwrap_or_else(|e| e.into_inner());
     let (mut total_w, mut total_r, mut lost, mut dups) = (0, 0, 0, 0);
     for (k, name) in names.iter().enumerate() {
         let r = NodeRecords::of(&msgs, name);
@@ -262,7 +267,7 @@ fn run(env: &Arc<Environment>, n: usize, window_s: f64) -> Row {
         dups += r.duplicates();
     }
     eprintln!("  {n} nodes: gateway {threads} threads");
-    Row {
+    Ok(Row {
         nodes: n,
         window_s: secs,
         written: total_w,
@@ -274,10 +279,10 @@ fn run(env: &Arc<Environment>, n: usize, window_s: f64) -> Row {
         rss_mib: rss,
         hwm_mib: hwm,
         incomplete,
-    }
+    })
 }
 
-fn main() {
+fn main() -> anyhow::Result<()> {
     let counts: Vec<usize> = std::env::var("FOIS_GW_BENCH_NODES")
         .unwrap_or_else(|_| "50,100,200,400".into())
         .split(',')
@@ -298,7 +303,7 @@ fn main() {
     );
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for n in counts {
-        let r = run(&env, n, window_s);
+        let r = run(&env, n, window_s)?;
         println!(
             "| {} | {:.1} | {} | {} | {} | {} | {:.0} | {:.1} | {:.1} | {:.1} ({:.1}) |",
             r.nodes,
@@ -321,4 +326,5 @@ fn main() {
         }
         let _ = std::io::stdout().flush();
     }
+    Ok(())
 }

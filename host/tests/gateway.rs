@@ -7,6 +7,8 @@
 //! the last seq the subscriber saw; the only seqs allowed to be missing in
 //! that range are the node's answers to the gateway's handshake (`GetInfo`,
 //! `StartStream`: at most 3 per connection), which are not published.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod gateway_support;
 

@@ -173,8 +173,8 @@ pub struct NodeFile {
 pub struct Overrides {
     /// Gateway name.
     pub name: Option<String>,
-    /// `HOST[:PORT]`.
-    pub broker: Option<String>,
+    /// The broker's host and port.
+    pub broker: Option<BrokerAddr>,
     /// User name.
     pub username: Option<String>,
     /// Password file.
@@ -185,8 +185,8 @@ pub struct Overrides {
     pub client_cert_file: Option<PathBuf>,
     /// Client key.
     pub client_key_file: Option<PathBuf>,
-    /// Extra nodes, `PATH[=NAME]`.
-    pub nodes: Vec<String>,
+    /// Extra nodes (`--node PATH[=NAME]`), after the file's.
+    pub nodes: Vec<NodeSpec>,
     /// Measurement interval, ms.
     pub measurement_interval_ms: Option<u64>,
     /// Offline measurement interval, ms.
@@ -272,6 +272,8 @@ pub struct GatewayConfig {
 pub const DEFAULT_QUEUE_MAX_BYTES: u64 = 256 * 1024 * 1024;
 /// The smallest queue bound accepted.
 pub const MIN_QUEUE_MAX_BYTES: u64 = 64 * 1024;
+/// The longest publishing interval accepted, ms: one day.
+pub const MAX_INTERVAL_MS: u64 = 86_400_000;
 
 /// True for a name usable as one topic level and in Home Assistant ids.
 pub fn is_valid_name(s: &str) -> bool {
@@ -331,20 +333,61 @@ fn default_queue_dir(name: &str) -> PathBuf {
     base.join("fois").join(format!("gateway-{name}"))
 }
 
-/// Parse a `PATH[=NAME]` node flag.
-pub fn parse_node_flag(s: &str) -> anyhow::Result<NodeSpec> {
-    let (port, name) = match s.rsplit_once('=') {
-        Some((p, n)) => (p, Some(n.to_string())),
-        None => (s, None),
-    };
-    if port.is_empty() {
-        anyhow::bail!("--node `{s}`: give PATH or PATH=NAME");
+impl NodeSpec {
+    /// Parse a `--node PATH[=NAME]` flag (the name checked as a topic
+    /// level; the baud rate the node's 115200).
+    pub fn parse_flag(s: &str) -> anyhow::Result<NodeSpec> {
+        let (port, name) = match s.rsplit_once('=') {
+            Some((p, n)) => (p, Some(n.to_string())),
+            None => (s, None),
+        };
+        if port.is_empty() {
+            anyhow::bail!("--node `{s}`: give PATH or PATH=NAME");
+        }
+        if let Some(n) = &name {
+            check_name("node name", n)?;
+        }
+        Ok(NodeSpec {
+            port: port.to_string(),
+            name,
+            baud: fois_protocol::BAUD_RATE,
+        })
     }
-    Ok(NodeSpec {
-        port: port.to_string(),
-        name,
-        baud: fois_protocol::BAUD_RATE,
-    })
+}
+
+/// A broker address from the command line: `HOST`, `HOST:PORT`, or
+/// `[IPv6]:PORT` (a bare IPv6 address has no port).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct BrokerAddr {
+    /// Host name or address.
+    pub host: String,
+    /// TCP port, if given.
+    pub port: Option<u16>,
+}
+
+impl BrokerAddr {
+    /// Parse `HOST[:PORT]`; refuses an empty host and a port outside 1..=65535.
+    pub fn parse(s: &str) -> anyhow::Result<BrokerAddr> {
+        let (host, port) = match s.rsplit_once(':') {
+            Some((h, p)) if !h.contains(':') || h.starts_with('[') => {
+                let port = match p.parse::<u16>() {
+                    Ok(0) | Err(_) => {
+                        anyhow::bail!("`{s}`: `{p}` is not a port number (1..=65535)")
+                    }
+                    Ok(n) => n,
+                };
+                (h.trim_matches(['[', ']']), Some(port))
+            }
+            _ => (s, None),
+        };
+        if host.is_empty() {
+            anyhow::bail!("`{s}`: the broker host is empty");
+        }
+        Ok(BrokerAddr {
+            host: host.to_string(),
+            port,
+        })
+    }
 }
 
 fn read_password_file(p: &Path) -> anyhow::Result<Secret> {
@@ -385,16 +428,9 @@ impl FileConfig {
 
         let b = self.broker;
         let (mut host, mut port) = (b.host.unwrap_or_else(|| "127.0.0.1".into()), b.port);
-        if let Some(hp) = &o.broker {
-            match hp.rsplit_once(':') {
-                Some((h, p)) if !h.contains(':') || h.starts_with('[') => {
-                    host = h.trim_matches(['[', ']']).to_string();
-                    port = Some(p.parse().map_err(|_| {
-                        anyhow::anyhow!("--broker `{hp}`: `{p}` is not a port number")
-                    })?);
-                }
-                _ => host = hp.clone(),
-            }
+        if let Some(addr) = &o.broker {
+            host = addr.host.clone();
+            port = addr.port.or(port);
         }
         if host.is_empty() {
             anyhow::bail!("the broker host is empty");
@@ -462,8 +498,8 @@ impl FileConfig {
             ),
             ("state_interval_ms", state_interval_ms),
         ] {
-            if v > 86_400_000 {
-                anyhow::bail!("{what} must be at most one day (86400000)");
+            if v > MAX_INTERVAL_MS {
+                anyhow::bail!("{what} must be at most one day ({MAX_INTERVAL_MS})");
             }
         }
 
@@ -521,9 +557,7 @@ impl FileConfig {
                 baud: n.baud.unwrap_or(fois_protocol::BAUD_RATE),
             })
             .collect();
-        for f in &o.nodes {
-            nodes.push(parse_node_flag(f)?);
-        }
+        nodes.extend(o.nodes.iter().cloned());
         if nodes.is_empty() {
             anyhow::bail!("no nodes: add [[node]] tables to the config or --node PATH[=NAME]");
         }
@@ -660,8 +694,8 @@ baud = 57600
     fn flags_override_the_file() {
         let o = Overrides {
             name: Some("gw2".into()),
-            broker: Some("10.0.0.5:1999".into()),
-            nodes: vec!["/dev/pts/9=extra".into()],
+            broker: Some(BrokerAddr::parse("10.0.0.5:1999").unwrap()),
+            nodes: vec![NodeSpec::parse_flag("/dev/pts/9=extra").unwrap()],
             measurement_interval_ms: Some(0),
             no_homeassistant: true,
             ..Overrides::default()
@@ -679,7 +713,7 @@ baud = 57600
     #[test]
     fn defaults_without_a_file() {
         let o = Overrides {
-            nodes: vec!["/dev/ttyACM0".into()],
+            nodes: vec![NodeSpec::parse_flag("/dev/ttyACM0").unwrap()],
             ..Overrides::default()
         };
         let c = FileConfig::default().resolve(&o).unwrap();
@@ -734,6 +768,31 @@ baud = 57600
             "[[node]]\nport = \"/a\"\nname = \"n\"\n[[node]]\nport = \"/b\"\nname = \"n\"\n",
             "used twice",
         );
+    }
+
+    #[test]
+    fn broker_and_node_flags_parse_or_say_why() {
+        let b = |s: &str| BrokerAddr::parse(s).map(|a| (a.host, a.port));
+        assert_eq!(b("10.0.0.5").unwrap(), ("10.0.0.5".into(), None));
+        assert_eq!(
+            b("broker.local:8883").unwrap(),
+            ("broker.local".into(), Some(8883))
+        );
+        assert_eq!(b("[::1]:1884").unwrap(), ("::1".into(), Some(1884)));
+        assert_eq!(b("::1").unwrap(), ("::1".into(), None));
+        for bad in ["", ":1883", "h:0", "h:65536", "h:x"] {
+            assert!(b(bad).is_err(), "{bad}");
+        }
+        let n = NodeSpec::parse_flag("/dev/pts/3=tower-3").unwrap();
+        assert_eq!(
+            (n.port.as_str(), n.name.as_deref()),
+            ("/dev/pts/3", Some("tower-3"))
+        );
+        assert_eq!(n.baud, fois_protocol::BAUD_RATE);
+        assert_eq!(NodeSpec::parse_flag("/dev/ttyACM0").unwrap().name, None);
+        for bad in ["", "=x", "/dev/x=a b", "/dev/x="] {
+            assert!(NodeSpec::parse_flag(bad).is_err(), "{bad}");
+        }
     }
 
     #[test]

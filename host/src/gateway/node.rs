@@ -16,8 +16,8 @@ use std::time::{Duration, Instant};
 
 use fois_protocol::{Command, DeviceFrame, DeviceMsg, Hello};
 
-use crate::csvlog::{ack_text, error_text};
 use crate::link::{Incoming, Link, LinkError, SeqEvent, SeqTracker, open_port};
+use crate::text::{ack_text, error_text};
 use crate::timefmt::unix_ms_now;
 
 use super::config::NodeSpec;

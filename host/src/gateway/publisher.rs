@@ -29,8 +29,8 @@ use rumqttc::{
 };
 use tokio::sync::mpsc;
 
-use crate::csvlog::hello_text;
 use crate::link::SeqEvent;
+use crate::text::hello_text;
 use crate::timefmt::{iso_utc, unix_ms_now};
 
 use super::config::{BrokerConfig, GatewayConfig, NodeSpec, TlsConfig};
