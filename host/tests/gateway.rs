@@ -75,15 +75,12 @@ fn three_nodes_every_record_arrives_once_with_discovery_and_state() {
         "2",
     ]);
     let dry = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--seed", "3"]);
-    let cfg = write(
+    let cfg = gateway_config(
         dir.path(),
-        "gw.toml",
-        &gateway_toml(
-            broker.port,
-            &dir.path().join("q"),
-            &[(&iced.path, "iced"), (&wet.path, "wet"), (&dry.path, "dry")],
-            "",
-        ),
+        "gw",
+        broker.port,
+        &[(&iced.path, "iced"), (&wet.path, "wet"), (&dry.path, "dry")],
+        "",
     );
     let mut gw = GatewayProc::start(&cfg, &[], &dir.path().join("gw.out"));
     gw.wait_output("node dry on", Duration::from_secs(10));
@@ -275,15 +272,12 @@ fn broker_stopped_for_30_s_and_restarted_nothing_is_lost() {
     );
     let a = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--seed", "4"]);
     let b = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--seed", "5"]);
-    let cfg = write(
+    let cfg = gateway_config(
         dir.path(),
-        "gw.toml",
-        &gateway_toml(
-            broker.port,
-            &dir.path().join("q"),
-            &[(&a.path, "a"), (&b.path, "b")],
-            "",
-        ),
+        "gw",
+        broker.port,
+        &[(&a.path, "a"), (&b.path, "b")],
+        "",
     );
     let mut gw = GatewayProc::start(&cfg, &[], &dir.path().join("gw.out"));
     gw.wait_output("node b on", Duration::from_secs(10));
@@ -360,15 +354,12 @@ fn gateway_killed_with_sigkill_and_restarted_loses_at_most_1_s() {
     let speed = 5.0;
     let a = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--seed", "6"]);
     let b = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--seed", "7"]);
-    let cfg = write(
+    let cfg = gateway_config(
         dir.path(),
-        "gw.toml",
-        &gateway_toml(
-            broker.port,
-            &dir.path().join("q"),
-            &[(&a.path, "a"), (&b.path, "b")],
-            "",
-        ),
+        "gw",
+        broker.port,
+        &[(&a.path, "a"), (&b.path, "b")],
+        "",
     );
     let out = dir.path().join("gw.out");
     let mut kills = vec![];
@@ -426,15 +417,12 @@ fn unplugged_node_is_offline_within_5_s_and_back_online_when_it_returns() {
     let ls = link.to_str().unwrap();
     let mut a = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--link", ls]);
     let b = NodeProc::start(&["--speed", "5", "--dry-s", "1000"]);
-    let cfg = write(
+    let cfg = gateway_config(
         dir.path(),
-        "gw.toml",
-        &gateway_toml(
-            broker.port,
-            &dir.path().join("q"),
-            &[(ls, "a"), (&b.path, "b")],
-            "",
-        ),
+        "gw",
+        broker.port,
+        &[(ls, "a"), (&b.path, "b")],
+        "",
     );
     let mut gw = GatewayProc::start(&cfg, &[], &dir.path().join("gw.out"));
     sub.wait_for("a online", Duration::from_secs(10), |m| {
@@ -525,11 +513,7 @@ fn mqtt_commands_are_refused_when_disabled_and_carried_out_only_on_their_topic()
     let nodes = [(node.path.as_str(), "n1")];
 
     // Disabled (the default): the gateway does not even subscribe.
-    let off = write(
-        dir.path(),
-        "off.toml",
-        &gateway_toml(broker.port, &dir.path().join("q"), &nodes, ""),
-    );
+    let off = gateway_config(dir.path(), "off", broker.port, &nodes, "");
     let mut gw = GatewayProc::start(&off, &[], &dir.path().join("off.out"));
     wait_alarm(&sub);
     sub.publish("fois/gw/n1/command", "ack", false);
@@ -542,15 +526,12 @@ fn mqtt_commands_are_refused_when_disabled_and_carried_out_only_on_their_topic()
     // gateway subscribes, it is refused (it would repeat on every reconnect).
     sub.publish("ops/gw/n1/do", "ack", true);
     // Enabled on a chosen topic.
-    let on = write(
+    let on = gateway_config(
         dir.path(),
-        "on.toml",
-        &gateway_toml(
-            broker.port,
-            &dir.path().join("q"),
-            &nodes,
-            "[commands]\nenabled = true\ntopic = \"ops/gw/{node}/do\"\n",
-        ),
+        "on",
+        broker.port,
+        &nodes,
+        "[commands]\nenabled = true\ntopic = \"ops/gw/{node}/do\"\n",
     );
     let mut gw = GatewayProc::start(&on, &[], &dir.path().join("on.out"));
     gw.wait_output("node n1 on", Duration::from_secs(10));
@@ -932,11 +913,7 @@ fn a_node_with_an_ice_estimate_gets_a_thickness_entity() {
             }
         }
     });
-    let cfg = write(
-        dir.path(),
-        "gw.toml",
-        &gateway_toml(broker.port, &dir.path().join("q"), &[(&path, "est")], ""),
-    );
+    let cfg = gateway_config(dir.path(), "gw", broker.port, &[(&path, "est")], "");
     let mut gw = GatewayProc::start(&cfg, &[], &dir.path().join("gw.out"));
     sub.wait_for("the thickness entity", Duration::from_secs(10), |m| {
         m.iter()
@@ -970,41 +947,33 @@ fn a_node_with_an_ice_estimate_gets_a_thickness_entity() {
 
 #[test]
 fn bad_configs_are_refused_with_exit_2_and_the_reason() {
+    // Bad flags (node, broker, ranges) are clap's: tests/usage.rs. These are
+    // the config file's.
     let dir = tempfile::tempdir().unwrap();
-    let run = |args: &[&str]| {
-        let out = std::process::Command::new(BIN)
-            .arg("gateway")
-            .args(args)
-            .output()
-            .unwrap();
-        (
-            out.status.code().unwrap_or(-1),
-            String::from_utf8_lossy(&out.stderr).into_owned(),
-        )
-    };
-    let (code, err) = run(&[]);
-    assert_eq!(code, 2, "{err}");
-    assert!(err.contains("no nodes"), "{err}");
+    let node = "[[node]]\nport = \"/dev/x\"\n";
     let missing = dir.path().join("nope.toml");
-    let (code, err) = run(&["--config", missing.to_str().unwrap()]);
-    assert_eq!(code, 2, "{err}");
-    assert!(err.contains("cannot read the config"), "{err}");
-    let bad = write(
+    let bad_key = write(
         dir.path(),
         "bad.toml",
-        "[broker]\nprot = 1883\n[[node]]\nport = \"/dev/x\"\n",
+        &format!("[broker]\nprot = 1883\n{node}"),
     );
-    let (code, err) = run(&["--config", bad.to_str().unwrap()]);
-    assert_eq!(code, 2, "{err}");
-    assert!(err.contains("unknown field `prot`"), "{err}");
-    let bad_name = write(
-        dir.path(),
-        "name.toml",
-        "[[node]]\nport = \"/dev/x\"\nname = \"a/b\"\n",
-    );
-    let (code, err) = run(&["--config", bad_name.to_str().unwrap()]);
-    assert_eq!(code, 2, "{err}");
-    assert!(err.contains("not usable in topics"), "{err}");
-    assert!(!err.contains("panicked"));
-    // Bad flags (node, broker, ranges) are clap's: tests/usage.rs.
+    let bad_name = write(dir.path(), "name.toml", &format!("{node}name = \"a/b\"\n"));
+    let cases: [(Option<&Path>, &str); 4] = [
+        (None, "no nodes"),
+        (Some(&missing), "cannot read the config"),
+        (Some(&bad_key), "unknown field `prot`"),
+        (Some(&bad_name), "not usable in topics"),
+    ];
+    for (config, needle) in cases {
+        let mut cmd = std::process::Command::new(BIN);
+        cmd.arg("gateway");
+        if let Some(c) = config {
+            cmd.arg("--config").arg(c);
+        }
+        let out = cmd.output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{config:?}: {err}");
+        assert!(err.contains(needle), "{config:?}: `{needle}` not in {err}");
+        assert!(!err.contains("panicked"), "{err}");
+    }
 }

@@ -185,23 +185,14 @@ pub fn run_reader<P, O, S>(
     let mut tracker = SeqTracker::default();
     let mut unreachable_said = false;
     while !stop.load(Ordering::Relaxed) {
-        let port = match open() {
-            Ok(p) => p,
-            Err(e) => {
-                if !unreachable_said {
-                    unreachable_said = true;
-                    if !rep.send(NodeUpdate::Unreachable(e.to_string())) {
-                        return;
-                    }
-                }
-                sleep_unless_stopped(timings.retry, stop);
-                continue;
-            }
-        };
-        let mut link = Link::new(port, name.to_string());
-        link.seq = tracker.clone();
-        let hello = match link.handshake(timings.handshake) {
-            Ok(h) => h,
+        let connected = open().and_then(|port| {
+            let mut link = Link::new(port, name.to_string());
+            link.seq = tracker.clone();
+            let hello = link.handshake(timings.handshake)?;
+            Ok((link, hello))
+        });
+        let (mut link, hello) = match connected {
+            Ok(c) => c,
             Err(e) => {
                 if !unreachable_said {
                     unreachable_said = true;

@@ -3,39 +3,11 @@
 //! node's frame `seq` and `uptime_ms`, so a consumer can drop the duplicates
 //! a gateway crash may cause (the pair is unique per node until it resets).
 
-use fois_protocol::{
-    DetectorState, Event, EventKind, Hello, IceEstimate, Measurement, Medium, flags,
-};
+use fois_protocol::{DetectorState, Event, EventKind, Hello, IceEstimate, Measurement, flags};
 use serde::Serialize;
 
+use crate::text::{centi_c_to_c, na_to_ua};
 use crate::timefmt::iso_utc;
-
-fn ua(na: i64) -> f64 {
-    na as f64 / 1000.0
-}
-
-fn celsius(centi: i16) -> f64 {
-    f64::from(centi) / 100.0
-}
-
-/// Detector state as a lower-case word.
-pub fn state_name(s: DetectorState) -> &'static str {
-    match s {
-        DetectorState::Dry => "dry",
-        DetectorState::Wet => "wet",
-        DetectorState::Ice => "ice",
-    }
-}
-
-/// Medium as a lower-case word.
-pub fn medium_name(m: Medium) -> &'static str {
-    match m {
-        Medium::Dry => "dry",
-        Medium::Water => "water",
-        Medium::Glazed => "glazed",
-        Medium::Rime => "rime",
-    }
-}
 
 /// Names of the fault bits set in `bits` (see `fois_protocol::flags`).
 pub fn fault_names(bits: u16) -> Vec<&'static str> {
@@ -71,7 +43,7 @@ impl From<&IceEstimate> for EstimateJson {
         EstimateJson {
             thickness_mm: f64::from(e.thickness_um) / 1000.0,
             thickness_sigma_mm: f64::from(e.sigma_um) / 1000.0,
-            medium: medium_name(e.medium),
+            medium: e.medium.name(),
             medium_probability: f64::from(e.probability_permille) / 1000.0,
         }
     }
@@ -132,13 +104,13 @@ impl<'a> MeasurementJson<'a> {
             uptime_ms: m.uptime_ms,
             host_unix_ms,
             host_time_utc: iso_utc(host_unix_ms),
-            i1_ua: ua(m.i1_na.into()),
-            i2_ua: ua(m.i2_na.into()),
-            ambient1_ua: ua(m.ambient1_na.into()),
-            ambient2_ua: ua(m.ambient2_na.into()),
-            temperature_c: celsius(m.temperature_centi_c),
+            i1_ua: na_to_ua(m.i1_na.into()),
+            i2_ua: na_to_ua(m.i2_na.into()),
+            ambient1_ua: na_to_ua(m.ambient1_na.into()),
+            ambient2_ua: na_to_ua(m.ambient2_na.into()),
+            temperature_c: centi_c_to_c(m.temperature_centi_c),
             vdda_mv: m.vdda_mv,
-            state: state_name(m.state),
+            state: m.state.name(),
             alarm: m.flags & flags::ALARM != 0,
             valid: m.is_valid(),
             flags: m.flags,
@@ -198,7 +170,7 @@ impl StateJson {
             uptime_ms: m.uptime_ms,
             host_unix_ms,
             host_time_utc: iso_utc(host_unix_ms),
-            state: state_name(m.state),
+            state: m.state.name(),
             ice: m.state == DetectorState::Ice,
             alarm: m.flags & flags::ALARM != 0,
             alarm_acked: m.flags & flags::ALARM_ACKED != 0,
@@ -229,18 +201,6 @@ impl StateJson {
             (Some(a), Some(b)) => (a.thickness_mm - b.thickness_mm).abs() >= mm,
             _ => false,
         }
-    }
-}
-
-/// Snake-case name of an event kind.
-pub fn event_kind_name(k: &EventKind) -> &'static str {
-    match k {
-        EventKind::IceOnset => "ice_onset",
-        EventKind::IceCleared => "ice_cleared",
-        EventKind::WetOnset => "wet_onset",
-        EventKind::WetCleared => "wet_cleared",
-        EventKind::FaultRaised(_) => "fault_raised",
-        EventKind::FaultCleared(_) => "fault_cleared",
     }
 }
 
@@ -287,15 +247,15 @@ impl<'a> EventJson<'a> {
         EventJson {
             node,
             source: "node",
-            kind: event_kind_name(&e.kind),
+            kind: e.kind.name(),
             seq,
             uptime_ms: e.uptime_ms,
             host_unix_ms,
             host_time_utc: iso_utc(host_unix_ms),
-            i1_ua: ua(e.i1_na.into()),
-            i2_ua: ua(e.i2_na.into()),
-            rise1_ua: ua(e.rise1_na.into()),
-            temperature_c: celsius(e.temperature_centi_c),
+            i1_ua: na_to_ua(e.i1_na.into()),
+            i2_ua: na_to_ua(e.i2_na.into()),
+            rise1_ua: na_to_ua(e.rise1_na.into()),
+            temperature_c: centi_c_to_c(e.temperature_centi_c),
             frames: e.frames,
             faults,
         }

@@ -373,6 +373,32 @@ impl Gateway {
         }
     }
 
+    /// `<node>/command/result`: what became of a command from MQTT (QoS 0,
+    /// not retained, not queued: it answers whoever is listening now).
+    fn publish_command_result(
+        &mut self,
+        name: &str,
+        command: &str,
+        ok: bool,
+        detail: String,
+        host_unix_ms: u64,
+    ) {
+        let r = CommandResultJson {
+            node: name,
+            command,
+            ok,
+            detail,
+            host_unix_ms,
+        };
+        let payload = serde_json::to_vec(&r).unwrap_or_default();
+        self.publish_now(
+            self.topics.command_result(name),
+            payload,
+            false,
+            QoS::AtMostOnce,
+        );
+    }
+
     fn queue_record(&mut self, topic: String, payload: Vec<u8>) -> anyhow::Result<()> {
         let rec = Record { topic, payload };
         match self.queue.push(rec.clone()) {
@@ -609,20 +635,7 @@ impl Gateway {
         let refuse = |me: &mut Gateway, detail: String| {
             me.log
                 .say(&format!("command `{shown}` for {name} refused: {detail}"));
-            let r = CommandResultJson {
-                node: &name,
-                command: &shown,
-                ok: false,
-                detail,
-                host_unix_ms: unix_ms_now(),
-            };
-            let payload = serde_json::to_vec(&r).unwrap_or_default();
-            me.publish_now(
-                me.topics.command_result(&name),
-                payload,
-                false,
-                QoS::AtMostOnce,
-            );
+            me.publish_command_result(&name, &shown, false, detail, unix_ms_now());
         };
         if retained {
             refuse(
@@ -750,20 +763,7 @@ impl Gateway {
                     command.name(),
                     if ok { "done" } else { "failed" }
                 ));
-                let r = CommandResultJson {
-                    node: &name,
-                    command: command.name(),
-                    ok,
-                    detail,
-                    host_unix_ms: t,
-                };
-                let payload = serde_json::to_vec(&r).unwrap_or_default();
-                self.publish_now(
-                    self.topics.command_result(&name),
-                    payload,
-                    false,
-                    QoS::AtMostOnce,
-                );
+                self.publish_command_result(&name, command.name(), ok, detail, t);
             }
             NodeUpdate::Frame(f, ev) => {
                 self.sum.frames += 1;

@@ -5,13 +5,18 @@
 #![allow(dead_code)]
 
 use std::collections::BTreeMap;
-use std::io::{BufRead, BufReader};
 use std::net::{TcpListener, TcpStream};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+
+// Also part of the e2e tests: the binary and a virtual node on a pty.
+#[path = "../common/mod.rs"]
+mod common;
+#[allow(unused_imports)] // the load benchmark serves its nodes itself
+pub use common::{BIN, NodeProc};
 
 /// Where Debian puts the broker.
 pub const MOSQUITTO_PATHS: [&str; 3] = [
@@ -352,48 +357,6 @@ impl Drop for Subscriber {
     }
 }
 
-/// `foisctl`.
-pub const BIN: &str = env!("CARGO_BIN_EXE_foisctl");
-
-/// A `foisctl virtual-node`, killed on drop.
-pub struct NodeProc {
-    child: Child,
-    /// Its pty.
-    pub path: String,
-}
-
-impl NodeProc {
-    /// Start with these flags; waits for the pty path.
-    pub fn start(extra: &[&str]) -> NodeProc {
-        let mut child = Command::new(BIN)
-            .arg("virtual-node")
-            .args(extra)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("spawn virtual-node");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let path = line.trim().to_string();
-        assert!(path.starts_with("/dev/pts/"), "first line: {line:?}");
-        NodeProc { child, path }
-    }
-
-    /// SIGKILL: the pty goes away as when a USB cable is pulled.
-    pub fn kill9(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for NodeProc {
-    fn drop(&mut self) {
-        self.kill9();
-    }
-}
-
 /// A `foisctl gateway`, its stdout and stderr in a file; killed on drop.
 pub struct GatewayProc {
     child: Option<Child>,
@@ -504,6 +467,20 @@ pub fn gateway_toml(broker_port: u16, queue: &Path, nodes: &[(&str, &str)], extr
         s.push_str(&format!("[[node]]\nport = \"{port}\"\nname = \"{name}\"\n"));
     }
     s
+}
+
+/// Write [`gateway_toml`] to `dir/<file>.toml` (queue in `dir/q`); its path.
+pub fn gateway_config(
+    dir: &Path,
+    file: &str,
+    broker_port: u16,
+    nodes: &[(&str, &str)],
+    extra: &str,
+) -> PathBuf {
+    let path = dir.join(format!("{file}.toml"));
+    let text = gateway_toml(broker_port, &dir.join("q"), nodes, extra);
+    std::fs::write(&path, text).unwrap();
+    path
 }
 
 /// What one node's published records say.
