@@ -1,7 +1,8 @@
 //! End to end over pseudo-terminals: `foisctl virtual-node` ↔ `foisctl
 //! monitor` / commands as separate processes, and an in-process lossy link.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
@@ -10,43 +11,8 @@ use std::time::{Duration, Instant};
 
 use fois_host::csvlog::{HEADER, LogTable};
 
-const BIN: &str = env!("CARGO_BIN_EXE_foisctl");
-
-/// A running `foisctl virtual-node`, killed on drop.
-struct NodeProc {
-    child: Child,
-    path: String,
-}
-
-impl NodeProc {
-    fn start(extra: &[&str]) -> NodeProc {
-        let mut child = Command::new(BIN)
-            .arg("virtual-node")
-            .args(extra)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("spawn virtual-node");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let path = line.trim().to_string();
-        assert!(path.starts_with("/dev/pts/"), "first line: {line:?}");
-        NodeProc { child, path }
-    }
-
-    fn kill9(&mut self) {
-        let _ = self.child.kill(); // SIGKILL
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for NodeProc {
-    fn drop(&mut self) {
-        self.kill9();
-    }
-}
+mod common;
+use common::{BIN, NodeProc};
 
 /// `foisctl monitor --port PORT --log LOG --plain EXTRA...` as a child;
 /// `piped`: capture its stdout/stderr (else discard them).
@@ -295,8 +261,7 @@ fn logger_killed_with_sigkill_keeps_all_but_the_last_second() {
 #[test]
 fn lossy_wire_gap_and_garbage_are_counted_not_fatal() {
     use fois_host::monitor::{MonitorOptions, run};
-    use fois_host::virtual_hw::{Cover, Environment, Segment, Timeline};
-    use fois_host::virtual_node::{NodeOptions, VirtualNode};
+    use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
     use serialport::SerialPort;
     use std::io::{Read, Write};
 
@@ -399,9 +364,8 @@ fn ctrl_c_stops_the_monitor_cleanly() {
 /// rime at 36 mm/h for 5 min of virtual time (0..3 mm).
 fn make_rime_log(path: &Path) -> usize {
     use fois_host::csvlog::{CsvLog, Row};
-    use fois_host::virtual_hw::{Cover, Environment, Segment, Timeline};
-    use fois_host::virtual_node::{NodeOptions, VirtualNode};
     use fois_protocol::{DeviceFrame, FrameDecoder};
+    use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
 
     let tl = Timeline::new(vec![
         Segment::new(10.0, Cover::Dry),

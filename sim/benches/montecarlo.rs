@@ -5,6 +5,9 @@
 //! sensor, traces 1000 accretions on a 2-thread rayon pool, sums μ/Σ and, for rime, fits the
 //! CRLB; the throughput is in ray evaluations (rays × thicknesses × runs).
 
+// A bench that cannot build its thread pool is a failed bench, not a crash in the field.
+#![allow(clippy::expect_used)]
+
 use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use fois_sim::montecarlo::DEFAULT_FIT_HALF_WIDTH_MM;
 use fois_sim::{Geometry, IceKind, SensorKind, SensorModel, SimConfig, crlb, monte_carlo};
