@@ -32,6 +32,8 @@ pub enum StorageError {
     Write,
     /// The record does not fit the medium (or the caller's buffer).
     TooLarge,
+    /// The flash range does not suit the store (see `flash_store::FlashStore::new`).
+    Layout,
 }
 
 /// One persisted record (config + baseline): a flash sector on the board, RAM

@@ -4,6 +4,9 @@
 //! Cortex-M4F (`firmware/qemu-test`).
 //!
 //! - [`hal`]: the hardware seams ([`hal::PhotoAdc`], [`hal::Storage`], board info).
+//! - [`flash_store::FlashStore`]: the [`hal::Storage`] on NOR flash
+//!   (sequential-storage); [`ram_flash::RamFlash`]: a NOR flash in RAM that
+//!   can lose power mid-operation.
 //! - [`node::Node`]: the whole node behind them.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
 #![cfg_attr(not(test), no_std)]
@@ -11,11 +14,13 @@
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 
 pub mod dispatch;
+pub mod flash_store;
 pub mod hal;
 pub mod measure;
 pub mod node;
 pub mod ntc;
 pub mod persist;
+pub mod ram_flash;
 pub mod rule;
 pub mod vref;
 

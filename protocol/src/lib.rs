@@ -10,7 +10,7 @@ pub mod config;
 pub mod framing;
 pub mod messages;
 
-pub use config::{Config, ConfigError, ConfigField, FIELDS, FieldSpec};
+pub use config::{Config, ConfigError, ConfigField, FIELDS, FieldSpec, LOAD_R_MAX_OHM};
 #[cfg(any(feature = "std", test))]
 pub use framing::encode_to_vec;
 pub use framing::{

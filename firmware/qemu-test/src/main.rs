@@ -321,6 +321,7 @@ fn t_rule() -> TestResult {
     let cold = RuleInput {
         rise1_na: c.onset_rise_na as i32 + 1,
         temperature_centi_c: c.freeze_limit_centi_c,
+        air_known: true,
         valid: true,
     };
     let mut r = Rule::new();

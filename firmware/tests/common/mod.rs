@@ -38,6 +38,9 @@ pub struct Scene {
     pub load_ohm: [f64; 2],
     /// Time one `read_photo` takes, ns.
     pub conversion_ns: u64,
+    /// V_CE(sat) of the phototransistors, mV: the emitter (ADC input) never
+    /// rises above V_DDA minus this (the clip of strong light).
+    pub vce_sat_mv: f64,
 }
 
 impl Default for Scene {
@@ -54,6 +57,7 @@ impl Default for Scene {
             vdda_mv: 3300.0,
             load_ohm: [10_000.0; 2],
             conversion_ns: 15_000,
+            vce_sat_mv: 250.0,
         }
     }
 }
@@ -104,7 +108,9 @@ impl PhotoAdc for SimAdc {
                 0.0
             };
             let i_na = (s.ambient_na[ch] + flicker + led).max(0.0);
-            out[ch] = to_code(i_na * 1e-9 * s.load_ohm[ch], s.vdda_mv);
+            let clip_v = (s.vdda_mv - s.vce_sat_mv) / 1000.0;
+            let v = (i_na * 1e-9 * s.load_ohm[ch]).min(clip_v);
+            out[ch] = to_code(v, s.vdda_mv);
         }
         w.t_ns.set(w.t_ns.get() + s.conversion_ns);
         out
@@ -182,6 +188,20 @@ pub fn frames(bytes: &[u8]) -> Vec<DeviceFrame> {
     let mut dec = FrameDecoder::<{ fois_protocol::MAX_FRAME }>::new();
     let mut out = Vec::new();
     dec.feed::<DeviceFrame>(bytes, |r| out.push(r.expect("node sent a bad frame")));
+    out
+}
+
+/// Run frames until the node has saved what it had pending (at most 30 s of
+/// frames); returns the frames sent.
+pub fn run_until_saved(node: &mut SimNode, w: &World) -> Vec<DeviceFrame> {
+    let mut out = Vec::new();
+    for _ in 0..300 {
+        if !node.save_pending() {
+            break;
+        }
+        out.extend(step(node, w));
+    }
+    assert!(!node.save_pending(), "the save never came");
     out
 }
 
