@@ -16,7 +16,13 @@
 //! - **First boot vs. damage.** A range that is entirely erased is *empty*
 //!   (defaults, no fault). A range that holds anything but no readable
 //!   record is reported as a read failure, so the node raises
-//!   `CONFIG_DEFAULTED`: defaults never come back silently.
+//!   `CONFIG_DEFAULTED`: defaults never come back silently. Nothing is
+//!   erased at boot; if the damage is beyond sequential-storage's own
+//!   repair, the next save erases the range and writes its record. (A cut
+//!   in the moment between that erase and the new record leaves erased
+//!   flash, which the next boot takes for a first boot: the one window in
+//!   which defaults can come back without the flag, and only after the
+//!   flag was raised for the damage.)
 //!
 //! The node is blocking (it runs from one mutex on the board, and in plain
 //! loops on the host) while `sequential-storage` is async. [`Blocking`]
@@ -196,8 +202,20 @@ impl<F: NorFlash> Storage for FlashStore<F> {
             return Err(StorageError::TooLarge);
         }
         let mut work = [0u8; WORK_LEN];
-        block_on(self.map.store_item(&mut work, &RECORD_KEY, &data))
-            .map_err(|_| StorageError::Write)?;
+        match block_on(self.map.store_item(&mut work, &RECORD_KEY, &data)) {
+            Ok(()) => {}
+            // The flash itself failed (or the power went): nothing more to try.
+            Err(sequential_storage::Error::Storage { .. }) => return Err(StorageError::Write),
+            // The store is in a state sequential-storage cannot repair (e.g.
+            // another program's data whose bytes pass for an item header):
+            // the record in it was already unreadable (the node booted with
+            // CONFIG_DEFAULTED), so start the store afresh with this record.
+            Err(_) => {
+                block_on(self.map.erase_all()).map_err(|_| StorageError::Write)?;
+                block_on(self.map.store_item(&mut work, &RECORD_KEY, &data))
+                    .map_err(|_| StorageError::Write)?;
+            }
+        }
         let back = block_on(self.map.fetch_item::<&[u8]>(&mut work, &RECORD_KEY))
             .map_err(|_| StorageError::Read)?;
         if back != Some(data) {

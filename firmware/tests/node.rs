@@ -645,3 +645,194 @@ mod fuzz {
         }
     }
 }
+
+mod saving {
+    use super::*;
+    use fois_firmware::node::{SAVE_MAX_DELAY_MS, SAVE_MIN_INTERVAL_MS, SAVE_QUIET_MS};
+
+    fn writes(node: SimNode) -> u32 {
+        node.into_parts().5.writes
+    }
+
+    /// A burst of config changes and calibrations is one write, after the
+    /// quiet time; the next change waits out the minimum interval.
+    #[test]
+    fn a_burst_is_one_write_and_writes_are_rate_limited() {
+        let (mut node, w) = node();
+        for i in 0..10u16 {
+            let c = Config {
+                onset_rise_na: 1_000 + u32::from(i) * 100,
+                ..Config::default()
+            };
+            command(&mut node, &w, i, Command::SetConfig(c));
+            w.advance_ms(50);
+        }
+        let last_change = w.now_ms();
+        command(&mut node, &w, 20, Command::CalibrateDark);
+        assert_eq!(node.save_due_ms(), Some(last_change + SAVE_QUIET_MS));
+        // Frames before the due time do not write.
+        let mut saved_at = None;
+        for _ in 0..40 {
+            let now = w.now_ms();
+            step(&mut node, &w);
+            if !node.save_pending() {
+                saved_at = Some(now);
+                break;
+            }
+        }
+        let saved_at = saved_at.expect("saved");
+        // Saved by the first frame at or after the due time (frames are 100 ms).
+        let due = last_change + SAVE_QUIET_MS;
+        assert!((due..due + 100).contains(&saved_at), "{saved_at}");
+        // A change 2 s later waits for the 10 s minimum interval.
+        w.advance_ms(2_000);
+        let c = Config {
+            onset_frames: 40,
+            ..node.config().clone()
+        };
+        command(&mut node, &w, 30, Command::SetConfig(c.clone()));
+        let due = node.save_due_ms().expect("pending");
+        assert_eq!(due, saved_at + SAVE_MIN_INTERVAL_MS);
+        run_until_saved(&mut node, &w);
+        assert_eq!(writes(node), 2);
+    }
+
+    /// Changes that never stop are still saved, every max delay.
+    #[test]
+    fn endless_changes_are_saved_at_the_max_delay() {
+        let (mut node, w) = node();
+        let t0 = w.now_ms();
+        let mut saves_at = Vec::new();
+        for i in 0..300u32 {
+            // A new value every 100 ms for 30 s: never quiet for 1 s.
+            let c = Config {
+                onset_rise_na: 1_000 + i,
+                ..Config::default()
+            };
+            command(&mut node, &w, 1, Command::SetConfig(c));
+            let now = w.now_ms() - t0;
+            step(&mut node, &w);
+            if !node.save_pending() {
+                saves_at.push(now);
+            }
+        }
+        // Each at most SAVE_MAX_DELAY_MS after the first unsaved change (0,
+        // then 10 100 ms: the next change after the first save), and at
+        // least SAVE_MIN_INTERVAL_MS apart.
+        assert_eq!(SAVE_MAX_DELAY_MS, 10_000);
+        assert_eq!(SAVE_MIN_INTERVAL_MS, 10_000);
+        assert_eq!(saves_at, vec![10_000, 20_100], "{saves_at:?}");
+    }
+
+    /// The button's acknowledgement never writes flash.
+    #[test]
+    fn the_button_ack_never_writes() {
+        let (mut node, w) = node();
+        w.set(|s| {
+            s.temp_c = -8.0;
+            s.signal_na = [25_000.0, 8_000.0];
+        });
+        for _ in 0..node.config().onset_frames {
+            step(&mut node, &w);
+        }
+        assert_eq!(node.state(), DetectorState::Ice);
+        for _ in 0..20 {
+            let mut bytes = Vec::new();
+            node.button_pressed(w.now_ms(), &mut |b| bytes.extend_from_slice(b));
+            assert_eq!(ack(frames(&bytes), BUTTON_ID), AckResult::AlarmAcknowledged);
+            assert!(!node.save_pending());
+            step(&mut node, &w);
+        }
+        assert_eq!(writes(node), 0);
+    }
+
+    /// A reset saves what is pending first (else a config sent just before
+    /// a reset would be lost).
+    #[test]
+    fn reset_saves_what_is_pending() {
+        let (mut node, w) = node();
+        let c = Config {
+            clear_frames: 500,
+            ..Config::default()
+        };
+        command(&mut node, &w, 1, Command::SetConfig(c.clone()));
+        assert!(node.save_pending());
+        assert_eq!(
+            ack(command(&mut node, &w, 2, Command::Reset), 2),
+            AckResult::Resetting
+        );
+        assert!(!node.save_pending());
+        assert!(node.take_reset_request());
+        let storage = node.into_parts().5;
+        assert_eq!(storage.writes, 1);
+        let (node, _) = node_with(storage);
+        assert_eq!(node.config(), &c);
+    }
+}
+
+/// The NTC breaks during icing in warm-looking conditions: the node reads
+/// the die (warmer than the air); the film must still mean ice, and the
+/// alarm must not clear on the die's "thaw".
+#[test]
+fn ntc_fault_makes_a_film_ice_and_blocks_thaw_clearing() {
+    let (mut node, w) = node();
+    let n = u32::from(node.config().onset_frames);
+    // The die reads 12 °C; the real air is at -1 °C.
+    w.set(|s| {
+        s.temp_c = 12.0;
+        s.ntc_code = Some(4095);
+        s.signal_na = [3_000.0, 900.0];
+    });
+    let mut kinds = Vec::new();
+    for _ in 0..n {
+        kinds.extend(events(&step(&mut node, &w)).into_iter().map(|e| e.kind));
+    }
+    assert_eq!(
+        kinds,
+        vec![EventKind::FaultRaised(flags::NTC_OPEN), EventKind::IceOnset]
+    );
+    assert!(w.alarm.get());
+    // With a working NTC at the same 12 °C it is water.
+    let (mut twin, tw) = common::node();
+    tw.set(|s| {
+        s.temp_c = 12.0;
+        s.signal_na = [3_000.0, 900.0];
+    });
+    for _ in 0..n {
+        step(&mut twin, &tw);
+    }
+    assert_eq!(twin.state(), DetectorState::Wet);
+    // The die "warms" to 30 °C: the alarm holds for 10 N frames.
+    w.set(|s| s.temp_c = 30.0);
+    for _ in 0..10 * n {
+        assert!(events(&step(&mut node, &w)).is_empty());
+    }
+    assert!(w.alarm.get());
+    // The film goes: cleared after M frames, on optics.
+    w.set(|s| s.signal_na = [0.0, 0.0]);
+    let m = u32::from(node.config().clear_frames);
+    let mut cleared = 0;
+    for i in 1..=m {
+        if events(&step(&mut node, &w))
+            .iter()
+            .any(|e| e.kind == EventKind::IceCleared)
+        {
+            cleared = i;
+        }
+    }
+    assert_eq!(cleared, m);
+    assert!(!w.alarm.get());
+}
+
+#[test]
+fn clock_fallback_is_a_fault_flag() {
+    let (mut node, w) = node();
+    node.set_clock_fallback(true);
+    let fs = step(&mut node, &w);
+    assert_ne!(measurement(&fs).flags & flags::CLOCK_FALLBACK, 0);
+    assert_eq!(
+        events(&fs)[0].kind,
+        EventKind::FaultRaised(flags::CLOCK_FALLBACK)
+    );
+    assert!(events(&step(&mut node, &w)).is_empty(), "raised once");
+}

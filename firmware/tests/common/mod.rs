@@ -9,7 +9,7 @@ use std::rc::Rc;
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::{ErrorType, OutputPin};
-use fois_firmware::hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc};
+use fois_firmware::hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc, Storage};
 use fois_firmware::node::Node;
 use fois_protocol::{DeviceFrame, FrameDecoder, HostFrame, encode_to_vec};
 
@@ -162,10 +162,17 @@ impl DelayNs for Delay {
     }
 }
 
-pub type SimNode = Node<SimAdc, Pin, Pin, Pin, Delay, MemStorage>;
+pub type SimNode = NodeOn<MemStorage>;
+/// The simulated node on storage `S`.
+pub type NodeOn<S> = Node<SimAdc, Pin, Pin, Pin, Delay, S>;
 
 /// A node on a fresh world with this storage.
 pub fn node_with(storage: MemStorage) -> (SimNode, World) {
+    node_on(storage)
+}
+
+/// A node on a fresh world with any storage.
+pub fn node_on<S: Storage>(storage: S) -> (NodeOn<S>, World) {
     let w = World::default();
     let node = Node::new(
         SimAdc(w.clone()),
@@ -193,7 +200,7 @@ pub fn frames(bytes: &[u8]) -> Vec<DeviceFrame> {
 
 /// Run frames until the node has saved what it had pending (at most 30 s of
 /// frames); returns the frames sent.
-pub fn run_until_saved(node: &mut SimNode, w: &World) -> Vec<DeviceFrame> {
+pub fn run_until_saved<S: Storage>(node: &mut NodeOn<S>, w: &World) -> Vec<DeviceFrame> {
     let mut out = Vec::new();
     for _ in 0..300 {
         if !node.save_pending() {
@@ -207,7 +214,7 @@ pub fn run_until_saved(node: &mut SimNode, w: &World) -> Vec<DeviceFrame> {
 
 /// Run one frame and return the frames it sent; the clock then moves to the
 /// end of the frame period.
-pub fn step(node: &mut SimNode, w: &World) -> Vec<DeviceFrame> {
+pub fn step<S: Storage>(node: &mut NodeOn<S>, w: &World) -> Vec<DeviceFrame> {
     let start = w.t_ns.get();
     let mut bytes = Vec::new();
     node.run_frame(w.now_ms(), &mut |b| bytes.extend_from_slice(b));
@@ -217,8 +224,8 @@ pub fn step(node: &mut SimNode, w: &World) -> Vec<DeviceFrame> {
 }
 
 /// Send one command; return the frames answered.
-pub fn command(
-    node: &mut SimNode,
+pub fn command<S: Storage>(
+    node: &mut NodeOn<S>,
     w: &World,
     id: u16,
     cmd: fois_protocol::Command,
