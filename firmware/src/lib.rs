@@ -7,7 +7,8 @@
 //! - [`flash_store::FlashStore`]: the [`hal::Storage`] on NOR flash
 //!   (sequential-storage); [`ram_flash::RamFlash`]: a NOR flash in RAM that
 //!   can lose power mid-operation.
-//! - [`node::Node`]: the whole node behind them.
+//! - [`node::Node`]: the whole node behind them; [`schedule::Schedule`]: when
+//!   it sends `Hello` and runs its frames.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
@@ -22,6 +23,7 @@ pub mod ntc;
 pub mod persist;
 pub mod ram_flash;
 pub mod rule;
+pub mod schedule;
 pub mod vref;
 
 pub use hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc, Storage, StorageError};
