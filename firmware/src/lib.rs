@@ -25,6 +25,7 @@ pub mod ram_flash;
 pub mod rule;
 pub mod schedule;
 pub mod vref;
+pub mod watchdog;
 
 pub use hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc, Storage, StorageError};
 pub use node::Node;
