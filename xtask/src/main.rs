@@ -7,6 +7,8 @@
 //!   installed).
 //! - `cargo xtask size` — cross-build the firmware and check its size budget.
 //! - `cargo xtask qemu` — run the firmware logic under qemu-system-arm.
+//! - `cargo xtask fuzz [--runs N]` — every cargo-fuzz target for N executions
+//!   (default 10⁷), installing the nightly toolchain and cargo-fuzz if missing.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -19,6 +21,13 @@ const FLASH_BUDGET_BYTES: u64 = 64 * 1024;
 /// Static RAM budget (.data + .bss; the stack comes on top, flip-link places it below).
 const RAM_BUDGET_BYTES: u64 = 16 * 1024;
 const THUMB: &str = "thumbv7em-none-eabihf";
+/// The cargo-fuzz crates (each its own workspace) and their targets.
+const FUZZ_TARGETS: [(&str, &str); 2] = [
+    ("protocol/fuzz", "decode"),
+    ("firmware/fuzz", "node_commands"),
+];
+/// Executions per fuzz target by default.
+const FUZZ_RUNS: u64 = 10_000_000;
 
 fn main() -> Result<()> {
     let task = std::env::args().nth(1).unwrap_or_else(|| "help".into());
@@ -28,13 +37,15 @@ fn main() -> Result<()> {
         "ci" => ci(),
         "size" => firmware_size().map(|_| ()),
         "qemu" => qemu(true),
+        "fuzz" => fuzz(&std::env::args().skip(2).collect::<Vec<_>>()),
         _ => {
             eprintln!(
                 "usage: cargo xtask <task>\n\n\
                  tasks:\n  \
                  ci     format, clippy (host + thumb), tests, firmware size budget, QEMU run\n  \
                  size   cross-build the firmware (release) and check flash <= 64 KiB, RAM <= 16 KiB\n  \
-                 qemu   run the firmware logic tests on qemu-system-arm (mps2-an386)"
+                 qemu   run the firmware logic tests on qemu-system-arm (mps2-an386)\n  \
+                 fuzz   [--runs N] run every fuzz target N times (default 10^7; installs nightly + cargo-fuzz)"
             );
             if task == "help" || task == "--help" {
                 Ok(())
@@ -117,6 +128,16 @@ fn ci() -> Result<()> {
         Ok(())
     })?;
     step("firmware on emulated Cortex-M4F", &mut || qemu(false))?;
+    step("fuzz targets build", &mut || {
+        // The fuzz crates are their own workspaces (cargo-fuzz runs them on
+        // nightly); libfuzzer-sys builds on the pinned toolchain, so CI
+        // checks that they still compile against today's APIs.
+        for (dir, _) in FUZZ_TARGETS {
+            let manifest = format!("{dir}/Cargo.toml");
+            run("cargo", &["check", "--manifest-path", &manifest, "--bins"])?;
+        }
+        Ok(())
+    })?;
 
     eprintln!("\n=== summary ===");
     for (name, secs) in &steps {
@@ -218,6 +239,69 @@ fn host_triple() -> Result<String> {
         .find_map(|l| l.strip_prefix("host: "))
         .map(str::to_string)
         .context("rustc -vV printed no host triple")
+}
+
+/// Run a command in `dir`, echoing it, failing on a non-zero exit.
+fn run_in(dir: &str, program: &str, args: &[&str]) -> Result<()> {
+    eprintln!("\n$ (cd {dir} && {program} {})", args.join(" "));
+    let status = Command::new(program)
+        .args(args)
+        .current_dir(dir)
+        .status()
+        .with_context(|| format!("could not start `{program}`"))?;
+    if !status.success() {
+        bail!("`{program} {}` in {dir} failed ({status})", args.join(" "));
+    }
+    Ok(())
+}
+
+/// `cargo xtask fuzz [--runs N]`: each target for N executions (libFuzzer's
+/// `-runs`), one after the other; any crash fails (its input is left in the
+/// crate's `artifacts/`).
+fn fuzz(args: &[String]) -> Result<()> {
+    let runs = match args {
+        [] => FUZZ_RUNS,
+        [flag, n] if flag == "--runs" => n
+            .parse::<u64>()
+            .with_context(|| format!("--runs takes a whole number, not `{n}`"))?,
+        _ => bail!("usage: cargo xtask fuzz [--runs N]"),
+    };
+    let nightly = Command::new("rustup")
+        .args(["run", "nightly", "rustc", "--version"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    if !nightly {
+        run(
+            "rustup",
+            &["toolchain", "install", "nightly", "--profile", "minimal"],
+        )?;
+    }
+    if !have("cargo-fuzz") {
+        run("cargo", &["install", "cargo-fuzz", "--locked"])?;
+    }
+    let runs_arg = format!("-runs={runs}");
+    for (dir, target) in FUZZ_TARGETS {
+        let t = Instant::now();
+        run_in(
+            dir,
+            "cargo",
+            &[
+                "+nightly",
+                "fuzz",
+                "run",
+                target,
+                "--",
+                &runs_arg,
+                "-print_final_stats=1",
+            ],
+        )?;
+        eprintln!(
+            "fuzz {dir} {target}: {runs} executions, no crash ({:.0} s)",
+            t.elapsed().as_secs_f64()
+        );
+    }
+    Ok(())
 }
 
 /// Run the firmware's hardware-free logic on qemu-system-arm (mps2-an386).
