@@ -60,6 +60,10 @@ pub const LONGEST_TIMEOUT_MS: u32 = timeout_ms(LSI_MIN_HZ);
 const _: () = assert!(IWDG_PR <= 6 && IWDG_RELOAD <= 0x0FFF);
 const _: () = assert!(SHORTEST_TIMEOUT_MS >= 8_000);
 const _: () = assert!(SHORTEST_TIMEOUT_MS > WORST_UNFED_MS);
+// Even an x8 erase (4 s) after a calibration's four longest frames, with no
+// feed in between, would not fire it.
+const _: () =
+    assert!(MAX_SLEEP_MS + 4 * LONGEST_FRAME_MS + ERASE_128K_X8_MAX_MS < SHORTEST_TIMEOUT_MS);
 
 #[cfg(test)]
 mod tests {
@@ -73,8 +77,5 @@ mod tests {
         assert_eq!(timeout_ms(LSI_TYP_HZ), 12_000);
         assert_eq!(LONGEST_TIMEOUT_MS, 22_588);
         assert_eq!(WORST_UNFED_MS, 3_793);
-        // Even a stall at x8 (4 s) with a calibration's four longest frames
-        // and no feed in between would not fire it.
-        assert!(MAX_SLEEP_MS + 4 * LONGEST_FRAME_MS + ERASE_128K_X8_MAX_MS < SHORTEST_TIMEOUT_MS);
     }
 }
