@@ -10,6 +10,8 @@
 //! - [`node::Node`]: the whole node behind them; [`schedule::Schedule`]: when
 //!   it sends `Hello` and runs its frames.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
+//! - [`watchdog`]: the IWDG prescaler, reload and timeout arithmetic the board
+//!   programs.
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 #![deny(clippy::unwrap_used, clippy::expect_used)]
