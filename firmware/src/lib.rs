@@ -1,7 +1,6 @@
-//! FOIS node logic, free of any HAL: measurement maths, the ice rule, config
-//! handling and command dispatch. Runs on the board, in host tests, in the
-//! host's virtual node, in the hardware-in-loop suite and on an emulated
-//! Cortex-M4F (`firmware/qemu-test`).
+#![doc = include_str!("../README.md")]
+//!
+//! ## Modules
 //!
 //! - [`hal`]: the hardware seams ([`hal::PhotoAdc`], [`hal::Storage`], board info).
 //! - [`flash_store::FlashStore`]: the [`hal::Storage`] on NOR flash
@@ -12,9 +11,9 @@
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
 //! - [`watchdog`]: the IWDG prescaler, reload and timeout arithmetic the board
 //!   programs.
+//! - `sim_board` (feature `sim-board`): a scripted simulated board for tests.
+
 #![cfg_attr(not(test), no_std)]
-#![deny(missing_docs)]
-#![deny(clippy::unwrap_used, clippy::expect_used)]
 
 pub mod dispatch;
 pub mod flash_store;
@@ -26,6 +25,8 @@ pub mod persist;
 pub mod ram_flash;
 pub mod rule;
 pub mod schedule;
+#[cfg(feature = "sim-board")]
+pub mod sim_board;
 pub mod vref;
 pub mod watchdog;
 

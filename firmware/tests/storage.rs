@@ -1,5 +1,7 @@
 //! The node's record on NOR flash (`FlashStore` over a `RamFlash`): first
 //! boot, damage, power cuts at every operation and byte of saves, wear.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 
