@@ -55,6 +55,10 @@ use crate::ram_flash::RamFlash;
 /// Flash pages (erase units) the store uses: sequential-storage's map needs
 /// two, one always kept free to move into.
 pub const STORE_PAGES: usize = 2;
+/// Bytes in each of the board's two store pages: the STM32F446's flash
+/// sectors 6 and 7 are 128 KiB each (RM0390, flash organisation). The
+/// virtual node's flash has the same geometry.
+pub const BOARD_SECTOR_BYTES: usize = 128 * 1024;
 /// The one key of the map.
 const RECORD_KEY: u8 = 0;
 /// Work buffer: key + the largest record, rounded up to flash words, with room.

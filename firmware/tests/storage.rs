@@ -13,7 +13,7 @@ use fois_firmware::ram_flash::{PowerCut, RamFlash};
 use fois_protocol::*;
 
 /// The board's geometry: two 128 KiB sectors (F446 sectors 6 and 7).
-const SECTOR: usize = 128 * 1024;
+const SECTOR: usize = fois_firmware::flash_store::BOARD_SECTOR_BYTES;
 type BoardFlash = RamFlash<Vec<u8>, SECTOR, 2>;
 /// Small pages: a save changes page every few records (erase + move).
 const SMALL: usize = 256;

@@ -1,15 +1,23 @@
 //! The virtual node: the firmware's own [`Node`] on virtual hardware, in
 //! virtual time. (`foisctl` serves it on a pseudo-terminal.)
 //!
-//! The runner does what the board's main loop does: a `Hello` at boot and
-//! every second until streaming starts, one frame every frame period, host
-//! bytes to `handle_rx`, and a fresh `Node` (same storage) after a `Reset`.
+//! The runner does what the board's main loop does, with the board's own
+//! code: the firmware's [`Schedule`] decides when `Hello` goes out and when
+//! a frame runs (the first poll at boot sends `Hello` and runs the first
+//! frame; a new stream period applies at once), a pending save runs when it
+//! comes due, host bytes go to `handle_rx`, and a `Reset` boots a fresh
+//! `Node` and a fresh `Schedule` on the same flash. The flash is the
+//! board's too: the firmware's [`FlashStore`] (sequential-storage) over a
+//! [`RamFlash`] of the board's geometry (two 128 KiB sectors).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use std::sync::Mutex;
 
+use fois_firmware::flash_store::{BOARD_SECTOR_BYTES, FlashStore, STORE_PAGES};
+use fois_firmware::ram_flash::RamFlash;
+use fois_firmware::schedule::Schedule;
 use fois_firmware::{BoardInfo, MemStorage, Node, Storage, StorageError};
 use fois_protocol::ResetReason;
 
@@ -19,54 +27,120 @@ use crate::{Environment, SimAdc, Truth, VirtualClock, VirtualDelay, VirtualPin};
 pub type FirmwareNode =
     Node<SimAdc, VirtualPin, VirtualPin, VirtualPin, VirtualDelay, SharedStorage>;
 
-/// The node's flash record: RAM shared with the runner (so it survives a
-/// `Reset` and can be inspected), optionally mirrored to a file (so it
-/// survives the process, like flash survives a power cycle).
-#[derive(Debug, Clone)]
+/// The virtual node's flash: the board's two store sectors, in RAM.
+pub type VirtualFlash = RamFlash<Vec<u8>, BOARD_SECTOR_BYTES, STORE_PAGES>;
+
+/// Bytes of the virtual flash (and of a state file).
+pub const FLASH_BYTES: usize = BOARD_SECTOR_BYTES * STORE_PAGES;
+
+/// The node's flash store: the board's [`FlashStore`] over a
+/// [`VirtualFlash`], shared with the runner (so it survives a `Reset` and
+/// can be inspected), optionally mirrored to a file (the raw flash image,
+/// so it survives the process, like flash survives a power cycle).
+#[derive(Clone)]
 pub struct SharedStorage {
-    mem: Arc<Mutex<MemStorage>>,
+    store: Arc<Mutex<FlashStore<VirtualFlash>>>,
     file: Option<PathBuf>,
 }
 
+impl std::fmt::Debug for SharedStorage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SharedStorage")
+            .field("file", &self.file)
+            .finish_non_exhaustive()
+    }
+}
+
+fn flash_store(image: Vec<u8>) -> std::io::Result<FlashStore<VirtualFlash>> {
+    FlashStore::new(RamFlash::new(image), 0..FLASH_BYTES as u32)
+        .map_err(|e| std::io::Error::other(format!("flash store: {e:?}")))
+}
+
 impl SharedStorage {
-    /// RAM only, starting with `initial`.
+    /// Erased flash (a first boot), then `initial`'s record written to it
+    /// if it holds one.
     pub fn new(initial: MemStorage) -> Self {
+        Self::try_new(initial).unwrap_or_else(|_| SharedStorage::erased())
+    }
+
+    fn erased() -> Self {
+        // The geometry is the firmware's own; FlashStore::new cannot refuse it.
+        #[allow(clippy::expect_used)]
+        let store = flash_store(vec![0xFF; FLASH_BYTES]).expect("two whole pages");
         SharedStorage {
-            mem: Arc::new(Mutex::new(initial)),
+            store: Arc::new(Mutex::new(store)),
             file: None,
         }
     }
 
-    /// Backed by `path`: starts with its bytes (empty if it does not exist)
-    /// and rewrites it on every write.
+    fn try_new(mut initial: MemStorage) -> Result<Self, StorageError> {
+        let this = Self::erased();
+        let mut buf = [0u8; fois_firmware::persist::MAX_RECORD];
+        let n = initial.read(&mut buf)?;
+        if n > 0 {
+            let record = buf.get(..n).ok_or(StorageError::Read)?;
+            this.store
+                .lock()
+                .map_err(|_| StorageError::Write)?
+                .write(record)?;
+        }
+        Ok(this)
+    }
+
+    /// Backed by `path`: starts with its flash image (erased flash if the
+    /// file does not exist) and rewrites it after every save. A file that
+    /// is not a flash image of [`FLASH_BYTES`] bytes is an error (the node
+    /// would otherwise boot on defaults without a word).
     pub fn with_file(path: &Path) -> std::io::Result<Self> {
-        let initial = match std::fs::read(path) {
-            Ok(bytes) => MemStorage::with_bytes(&bytes),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => MemStorage::new(),
+        let image = match std::fs::read(path) {
+            Ok(bytes) if bytes.len() == FLASH_BYTES => bytes,
+            Ok(bytes) => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    format!(
+                        "{} bytes, not a flash image of {FLASH_BYTES} bytes",
+                        bytes.len()
+                    ),
+                ));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => vec![0xFF; FLASH_BYTES],
             Err(e) => return Err(e),
         };
         Ok(SharedStorage {
-            mem: Arc::new(Mutex::new(initial)),
+            store: Arc::new(Mutex::new(flash_store(image)?)),
             file: Some(path.to_path_buf()),
         })
     }
 
-    /// A copy of the record now.
+    /// The newest record now (empty storage if there is none or the flash
+    /// holds no readable record).
     pub fn snapshot(&self) -> MemStorage {
-        self.mem.lock().map(|m| m.clone()).unwrap_or_default()
+        let mut buf = [0u8; fois_firmware::persist::MAX_RECORD];
+        let n = self
+            .store
+            .lock()
+            .ok()
+            .and_then(|mut s| s.read(&mut buf).ok())
+            .unwrap_or(0);
+        MemStorage::with_bytes(buf.get(..n).unwrap_or(&[]))
+    }
+
+    /// Run `f` on the flash (to read its counters or damage it in a test).
+    pub fn with_flash<T>(&self, f: impl FnOnce(&mut VirtualFlash) -> T) -> Option<T> {
+        self.store.lock().ok().map(|mut s| f(s.flash_mut()))
     }
 }
 
 impl Storage for SharedStorage {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, StorageError> {
-        self.mem.lock().map_err(|_| StorageError::Read)?.read(buf)
+        self.store.lock().map_err(|_| StorageError::Read)?.read(buf)
     }
 
     fn write(&mut self, data: &[u8]) -> Result<(), StorageError> {
-        let mut mem = self.mem.lock().map_err(|_| StorageError::Write)?;
-        mem.write(data)?;
+        let mut store = self.store.lock().map_err(|_| StorageError::Write)?;
+        store.write(data)?;
         if let Some(path) = &self.file {
-            std::fs::write(path, mem.bytes()).map_err(|_| StorageError::Write)?;
+            std::fs::write(path, store.flash_mut().bytes()).map_err(|_| StorageError::Write)?;
         }
         Ok(())
     }
@@ -110,9 +184,7 @@ pub struct VirtualNode {
     indicator: VirtualPin,
     env: Arc<Environment>,
     opts: NodeOptions,
-    next_frame_ns: u64,
-    next_hello_ns: u64,
-    booted: bool,
+    schedule: Schedule,
     resets: u32,
     frames: u64,
     storage: SharedStorage,
@@ -169,10 +241,11 @@ impl VirtualNode {
         let indicator = VirtualPin::with_clock(clock.clone());
         let storage = match &opts.state_file {
             Some(p) => SharedStorage::with_file(p).unwrap_or_else(|_| {
-                // Unreadable state: start empty, writes will report failure.
+                // Unreadable state (the CLI refuses it before this): erased
+                // flash; saves try to rewrite the file.
                 SharedStorage {
-                    mem: Arc::new(Mutex::new(MemStorage::new())),
                     file: Some(p.clone()),
+                    ..SharedStorage::erased()
                 }
             }),
             None => SharedStorage::new(opts.storage.clone()),
@@ -193,9 +266,7 @@ impl VirtualNode {
             indicator,
             env,
             opts,
-            next_frame_ns: 0,
-            next_hello_ns: 0,
-            booted: false,
+            schedule: Schedule::new(),
             resets: 0,
             frames: 0,
             storage,
@@ -261,21 +332,31 @@ impl VirtualNode {
         self.resets
     }
 
-    /// Virtual time of the next frame, ns.
+    /// Virtual time of the next frame, ns (now, before the first poll).
     pub fn next_frame_ns(&self) -> u64 {
-        self.next_frame_ns
-    }
-
-    /// The earliest virtual time something is due (frame or hello), ns.
-    pub fn next_due_ns(&self) -> u64 {
-        if !self.booted {
+        if self.schedule == Schedule::new() {
             return self.clock.now_ns();
         }
-        if self.node().is_streaming() {
-            self.next_frame_ns
-        } else {
-            self.next_frame_ns.min(self.next_hello_ns)
+        self.schedule.next_wake_ms(true).saturating_mul(NS_PER_MS)
+    }
+
+    /// The schedule the node runs on (the board's: `fois_firmware::schedule`).
+    pub fn schedule(&self) -> &Schedule {
+        &self.schedule
+    }
+
+    /// The earliest virtual time something is due (frame, `Hello` or a
+    /// pending save), ns; now before the first poll (boot).
+    pub fn next_due_ns(&self) -> u64 {
+        if self.schedule == Schedule::new() {
+            return self.clock.now_ns();
         }
+        let streaming = self.node.is_streaming();
+        let mut wake_ms = self.schedule.next_wake_ms(streaming);
+        if let Some(save_ms) = self.node.save_due_ms() {
+            wake_ms = wake_ms.min(save_ms);
+        }
+        wake_ms.saturating_mul(NS_PER_MS)
     }
 
     /// Bytes from the host.
@@ -308,38 +389,41 @@ impl VirtualNode {
                 ResetReason::Software,
                 self.storage.clone(),
             );
-            self.booted = false;
-            self.boot(tx);
+            // The board reboots: a fresh schedule, whose first poll sends
+            // Hello and runs the first frame.
+            self.schedule = Schedule::new();
+            self.poll(tx);
         }
     }
 
-    fn boot(&mut self, tx: &mut impl FnMut(&[u8])) {
-        self.booted = true;
-        let now = self.clock.now_ns();
-        self.node_mut().send_hello(tx);
-        self.next_hello_ns = now + 1_000 * NS_PER_MS;
-        self.next_frame_ns = now + u64::from(self.node().frame_period_ms()) * NS_PER_MS;
+    /// One pass of the board's main loop at the current virtual time: what
+    /// the schedule says is due, else a pending save that came due.
+    fn poll(&mut self, tx: &mut impl FnMut(&[u8])) {
+        let now_ms = self.clock.now_ms();
+        let streaming = self.node.is_streaming();
+        let period_ms = self.node.frame_period_ms();
+        let due = self.schedule.poll(now_ms, streaming, period_ms);
+        if due.hello {
+            self.node.send_hello(tx);
+        }
+        if due.frame {
+            // Runs the pending save too, after the frame.
+            self.run_one_frame(tx);
+        } else {
+            self.node.poll_storage(now_ms);
+        }
     }
 
-    /// Run everything due up to virtual time `t_ns` (frames, hellos, the
-    /// boot-time calibration); the clock ends at `t_ns` or later.
+    /// Run everything due up to virtual time `t_ns` (frames, hellos, saves,
+    /// the boot-time calibration); the clock ends at `t_ns` or later.
     pub fn advance_to(&mut self, t_ns: u64, tx: &mut impl FnMut(&[u8])) {
-        if !self.booted {
-            self.boot(tx);
-        }
         loop {
             let due = self.next_due_ns();
             if due > t_ns {
                 break;
             }
             self.clock.advance_to_ns(due);
-            if !self.node().is_streaming() && self.next_hello_ns <= due {
-                self.node_mut().send_hello(tx);
-                self.next_hello_ns = due + 1_000 * NS_PER_MS;
-            }
-            if self.next_frame_ns <= due {
-                self.run_one_frame(tx);
-            }
+            self.poll(tx);
         }
         self.clock.advance_to_ns(t_ns);
     }
@@ -358,12 +442,6 @@ impl VirtualNode {
         let now_ms = self.clock.now_ms();
         self.node_mut().run_frame(now_ms, tx);
         self.frames += 1;
-        let period = u64::from(self.node().frame_period_ms().max(1)) * NS_PER_MS;
-        // Frames start on a fixed grid (as the board's ticker does).
-        self.next_frame_ns = self.next_frame_ns.max(start) + period;
-        if self.next_frame_ns <= self.clock.now_ns() {
-            self.next_frame_ns = self.clock.now_ns() + period;
-        }
     }
 
     /// Run until virtual time `t_s`.
@@ -371,12 +449,13 @@ impl VirtualNode {
         self.advance_to((t_s * 1e9) as u64, tx);
     }
 
-    /// Run exactly one more frame (jumping the clock to it).
+    /// Run exactly one more frame (jumping the clock to it; `Hello`s and
+    /// saves due before it happen on the way).
     pub fn step_frame(&mut self, tx: &mut impl FnMut(&[u8])) {
-        if !self.booted {
-            self.boot(tx);
+        let before = self.frames;
+        while self.frames == before {
+            let t = self.next_due_ns();
+            self.advance_to(t, tx);
         }
-        let t = self.next_frame_ns;
-        self.advance_to(t, tx);
     }
 }

@@ -285,7 +285,7 @@ pub fn ensure_bor_level(vdda_mv: u16, wdg: Watchdog) -> bool {
 /// The store's two sectors: 6 and 7, 0x0804_0000..0x0808_0000 (memory.x
 /// keeps the program in sectors 0–5).
 const STORE_OFFSET: u32 = 0x0004_0000;
-const STORE_SECTOR_BYTES: u32 = 0x0002_0000;
+const STORE_SECTOR_BYTES: u32 = fois_firmware::flash_store::BOARD_SECTOR_BYTES as u32;
 const STORE_FIRST_SECTOR: u8 = 6;
 const STORE_SECTORS: u32 = 2;
 /// x32 parallelism needs V_DD ≥ 2.7 V (RM0390, program/erase parallelism).
