@@ -376,6 +376,12 @@ impl VirtualNode {
         if self.node_mut().take_reset_request() {
             // A fresh node on the same (shared) storage, as after a reset.
             self.resets += 1;
+            // The chip's reset puts every GPIO back to its reset state at
+            // once: LED, alarm output and LD2 are off before the new node
+            // runs its first frame.
+            for pin in [&mut self.led, &mut self.alarm, &mut self.indicator] {
+                let Ok(()) = embedded_hal::digital::OutputPin::set_low(pin);
+            }
             let hw = Hardware {
                 clock: &self.clock,
                 led: &self.led,
