@@ -7,7 +7,7 @@ use std::sync::Arc;
 use fois_firmware::PhotoAdc;
 
 use super::clock::{VirtualClock, VirtualPin};
-use super::environment::{Environment, Truth};
+use super::environment::{Environment, NtcWiring, Truth};
 use super::frontend::FrontEnd;
 
 /// `fois_firmware::PhotoAdc` on virtual hardware.
@@ -68,8 +68,12 @@ impl PhotoAdc for SimAdc {
     }
 
     fn read_ntc(&mut self) -> u16 {
-        let t = self.truth().air_temp_c;
-        self.frontend.ntc_code(t)
+        let t = self.truth();
+        match t.ntc {
+            NtcWiring::Connected => self.frontend.ntc_code(t.air_temp_c),
+            NtcWiring::Open => fois_firmware::hal::ADC_MAX,
+            NtcWiring::Short => 0,
+        }
     }
 
     fn read_vrefint(&mut self) -> u16 {

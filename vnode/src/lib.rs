@@ -18,7 +18,7 @@ pub mod scenario;
 
 pub use adc::SimAdc;
 pub use clock::{VirtualClock, VirtualDelay, VirtualPin};
-pub use environment::{Cover, Environment, Segment, Timeline, Truth};
+pub use environment::{Cover, Environment, NtcWiring, Segment, Timeline, Truth};
 pub use frontend::FrontEnd;
 pub use node::{FirmwareNode, NodeOptions, SharedStorage, VirtualNode};
 pub use scenario::Scenario;
