@@ -366,10 +366,11 @@ impl VirtualNode {
         self.after_commands(tx);
     }
 
-    /// The user button.
+    /// The user button (then the main loop polls again, as on the board).
     pub fn press_button(&mut self, tx: &mut impl FnMut(&[u8])) {
         let now = self.clock.now_ms();
         self.node_mut().button_pressed(now, tx);
+        self.poll(tx);
     }
 
     fn after_commands(&mut self, tx: &mut impl FnMut(&[u8])) {
@@ -398,8 +399,10 @@ impl VirtualNode {
             // The board reboots: a fresh schedule, whose first poll sends
             // Hello and runs the first frame.
             self.schedule = Schedule::new();
-            self.poll(tx);
         }
+        // The board's link task wakes the main loop after every command
+        // (a new period, a StopStream's Hello, a Reset apply from now).
+        self.poll(tx);
     }
 
     /// One pass of the board's main loop at the current virtual time: what
@@ -440,7 +443,8 @@ impl VirtualNode {
             let at_ns = (at * 1e9) as u64;
             if start >= at_ns && self.truth().cover == crate::Cover::Dry {
                 self.opts.calibrate_at_s = None;
-                self.press_button(tx);
+                let now = self.clock.now_ms();
+                self.node.button_pressed(now, tx);
             } else if start >= at_ns {
                 self.opts.calibrate_at_s = None;
             }

@@ -28,6 +28,7 @@ mod app {
     use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
     use embassy_sync::mutex::Mutex;
     use embassy_sync::pipe::Pipe;
+    use embassy_sync::signal::Signal;
     use embassy_time::{Instant, Timer};
     use embedded_io_async::{Read, Write};
     use fois_firmware::flash_store::FlashStore;
@@ -56,6 +57,11 @@ mod app {
     static NODE: Mutex<ThreadModeRawMutex, Option<BoardNode>> = Mutex::new(None);
     /// Encoded frames waiting for the UART.
     static TX: Pipe<ThreadModeRawMutex, 1024> = Pipe::new();
+    /// Raised by the link and the button after the node took a command: the
+    /// measurement loop polls the schedule again at once, so a new stream
+    /// period, a `StopStream`'s first `Hello`, a `Reset` and a save come
+    /// due from now, not from the wake-up planned before the command.
+    static COMMANDED: Signal<ThreadModeRawMutex, ()> = Signal::new();
 
     /// Queue one whole frame for the UART, or drop it whole if there is no room.
     fn queue(frame: &[u8]) {
@@ -193,7 +199,11 @@ mod app {
                 Timer::after_millis(100).await;
                 cortex_m::peripheral::SCB::sys_reset();
             }
-            Timer::at(Instant::from_millis(wake_ms)).await;
+            embassy_futures::select::select(
+                Timer::at(Instant::from_millis(wake_ms)),
+                COMMANDED.wait(),
+            )
+            .await;
         }
     }
 
@@ -219,6 +229,7 @@ mod app {
                     if let (Some(node), Some(bytes)) = (guard.as_mut(), buf.get(..n)) {
                         node.handle_rx(bytes, now_ms(), &mut queue);
                     }
+                    COMMANDED.signal(());
                 }
                 // Framing/noise/overrun: the bytes are lost; the decoder resyncs.
                 Err(_) => Timer::after_millis(1).await,
@@ -237,6 +248,7 @@ mod app {
                 if let Some(node) = guard.as_mut() {
                     node.button_pressed(now_ms(), &mut queue);
                 }
+                COMMANDED.signal(());
             }
             button.wait_for_high().await;
             Timer::after_millis(30).await;
