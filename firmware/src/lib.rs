@@ -10,7 +10,8 @@
 //!   it sends `Hello` and runs its frames.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
 //! - [`watchdog`]: the IWDG prescaler, reload and timeout arithmetic the board
-//!   programs.
+//!   programs; [`reply_time`]: the worst time to answer a command (the
+//!   host's timeout).
 //! - `sim_board` (feature `sim-board`): a scripted simulated board for tests.
 
 #![cfg_attr(not(test), no_std)]
@@ -23,6 +24,7 @@ pub mod node;
 pub mod ntc;
 pub mod persist;
 pub mod ram_flash;
+pub mod reply_time;
 pub mod rule;
 pub mod schedule;
 #[cfg(feature = "sim-board")]

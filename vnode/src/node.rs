@@ -8,30 +8,25 @@
 //! comes due, host bytes go to `handle_rx`, and a `Reset` boots a fresh
 //! `Node` and a fresh `Schedule` on the same flash. The flash is the
 //! board's too: the firmware's [`FlashStore`] (sequential-storage) over a
-//! [`RamFlash`] of the board's geometry (two 128 KiB sectors).
+//! [`VirtualFlash`] (the firmware's `RamFlash` of the board's geometry, two
+//! 128 KiB sectors, whose erases stall the virtual clock as the board's do).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use std::sync::Mutex;
 
-use fois_firmware::flash_store::{BOARD_SECTOR_BYTES, FlashStore, STORE_PAGES};
-use fois_firmware::ram_flash::RamFlash;
+use fois_firmware::flash_store::FlashStore;
 use fois_firmware::schedule::Schedule;
 use fois_firmware::{BoardInfo, MemStorage, Node, Storage, StorageError};
 use fois_protocol::ResetReason;
 
+use crate::flash::{FLASH_BYTES, VirtualFlash};
 use crate::{Environment, SimAdc, Truth, VirtualClock, VirtualDelay, VirtualPin};
 
 /// The firmware node on virtual hardware.
 pub type FirmwareNode =
     Node<SimAdc, VirtualPin, VirtualPin, VirtualPin, VirtualDelay, SharedStorage>;
-
-/// The virtual node's flash: the board's two store sectors, in RAM.
-pub type VirtualFlash = RamFlash<Vec<u8>, BOARD_SECTOR_BYTES, STORE_PAGES>;
-
-/// Bytes of the virtual flash (and of a state file).
-pub const FLASH_BYTES: usize = BOARD_SECTOR_BYTES * STORE_PAGES;
 
 /// The node's flash store: the board's [`FlashStore`] over a
 /// [`VirtualFlash`], shared with the runner (so it survives a `Reset` and
@@ -52,7 +47,7 @@ impl std::fmt::Debug for SharedStorage {
 }
 
 fn flash_store(image: Vec<u8>) -> std::io::Result<FlashStore<VirtualFlash>> {
-    FlashStore::new(RamFlash::new(image), 0..FLASH_BYTES as u32)
+    FlashStore::new(VirtualFlash::new(image, None), 0..FLASH_BYTES as u32)
         .map_err(|e| std::io::Error::other(format!("flash store: {e:?}")))
 }
 
@@ -123,6 +118,12 @@ impl SharedStorage {
             .and_then(|mut s| s.read(&mut buf).ok())
             .unwrap_or(0);
         MemStorage::with_bytes(buf.get(..n).unwrap_or(&[]))
+    }
+
+    /// From now on every erase and write stalls `clock` as the board's
+    /// flash stalls its CPU.
+    pub fn stall_on(&self, clock: &VirtualClock) {
+        self.with_flash(|f| f.set_clock(Some(clock.clone())));
     }
 
     /// Run `f` on the flash (to read its counters or damage it in a test).
@@ -250,6 +251,7 @@ impl VirtualNode {
             }),
             None => SharedStorage::new(opts.storage.clone()),
         };
+        storage.stall_on(&clock);
         let hw = Hardware {
             clock: &clock,
             led: &led,
@@ -315,6 +317,11 @@ impl VirtualNode {
     /// The LED pin.
     pub fn led_pin(&self) -> &VirtualPin {
         &self.led
+    }
+
+    /// The node's flash store (shared with the node).
+    pub fn shared_storage(&self) -> &SharedStorage {
+        &self.storage
     }
 
     /// The node's persisted record now (config + baseline).
