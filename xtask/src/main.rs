@@ -7,8 +7,9 @@
 //!   installed).
 //! - `cargo xtask size` — cross-build the firmware and check its size budget.
 //! - `cargo xtask qemu` — run the firmware logic under qemu-system-arm.
-//! - `cargo xtask fuzz [--runs N]` — every cargo-fuzz target for N executions
-//!   (default 10⁷), installing the nightly toolchain and cargo-fuzz if missing.
+//! - `cargo xtask fuzz [--runs N] [--target NAME]` — every cargo-fuzz target
+//!   (or one) for N executions (default 10⁷), installing the nightly
+//!   toolchain and cargo-fuzz if missing.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -22,9 +23,10 @@ const FLASH_BUDGET_BYTES: u64 = 64 * 1024;
 const RAM_BUDGET_BYTES: u64 = 16 * 1024;
 const THUMB: &str = "thumbv7em-none-eabihf";
 /// The cargo-fuzz crates (each its own workspace) and their targets.
-const FUZZ_TARGETS: [(&str, &str); 2] = [
+const FUZZ_TARGETS: [(&str, &str); 3] = [
     ("protocol/fuzz", "decode"),
     ("firmware/fuzz", "node_commands"),
+    ("host/fuzz", "link_reader"),
 ];
 /// Executions per fuzz target by default.
 const FUZZ_RUNS: u64 = 10_000_000;
@@ -50,7 +52,7 @@ fn main() -> Result<()> {
                  ci     format, clippy (host + thumb), tests, firmware size budget, QEMU run\n  \
                  size   cross-build the firmware (release) and check flash <= 64 KiB, RAM <= 16 KiB\n  \
                  qemu   run the firmware logic tests on qemu-system-arm (mps2-an386)\n  \
-                 fuzz   [--runs N] run every fuzz target N times (default 10^7; installs nightly + cargo-fuzz)"
+                 fuzz   [--runs N] [--target NAME] run every fuzz target (or one) N times (default 10^7; installs nightly + cargo-fuzz)"
             );
             if task == "help" || task == "--help" {
                 Ok(())
@@ -260,17 +262,34 @@ fn run_in(dir: &str, program: &str, args: &[&str]) -> Result<()> {
     Ok(())
 }
 
-/// `cargo xtask fuzz [--runs N]`: each target for N executions (libFuzzer's
-/// `-runs`), one after the other; any crash fails (its input is left in the
-/// crate's `artifacts/`).
+/// `cargo xtask fuzz [--runs N] [--target NAME]`: each target (or the one
+/// named) for N executions (libFuzzer's `-runs`), one after the other; any
+/// crash fails (its input is left in the crate's `artifacts/`).
 fn fuzz(args: &[String]) -> Result<()> {
-    let runs = match args {
-        [] => FUZZ_RUNS,
-        [flag, n] if flag == "--runs" => n
-            .parse::<u64>()
-            .with_context(|| format!("--runs takes a whole number, not `{n}`"))?,
-        _ => bail!("usage: cargo xtask fuzz [--runs N]"),
-    };
+    const USAGE: &str = "usage: cargo xtask fuzz [--runs N] [--target NAME]";
+    let mut runs = FUZZ_RUNS;
+    let mut only: Option<&str> = None;
+    let mut it = args.iter();
+    while let Some(flag) = it.next() {
+        let Some(value) = it.next() else {
+            bail!("{USAGE}");
+        };
+        match flag.as_str() {
+            "--runs" => {
+                runs = value
+                    .parse::<u64>()
+                    .with_context(|| format!("--runs takes a whole number, not `{value}`"))?;
+            }
+            "--target" => {
+                if !FUZZ_TARGETS.iter().any(|(_, t)| t == value) {
+                    let names: Vec<&str> = FUZZ_TARGETS.iter().map(|(_, t)| *t).collect();
+                    bail!("no fuzz target `{value}` (there are: {})", names.join(", "));
+                }
+                only = Some(value.as_str());
+            }
+            _ => bail!("{USAGE}"),
+        }
+    }
     let nightly = Command::new("rustup")
         .args(["run", "nightly", "rustc", "--version"])
         .output()
@@ -287,6 +306,9 @@ fn fuzz(args: &[String]) -> Result<()> {
     }
     let runs_arg = format!("-runs={runs}");
     for (dir, target) in FUZZ_TARGETS {
+        if only.is_some_and(|o| o != target) {
+            continue;
+        }
         let t = Instant::now();
         run_in(
             dir,
