@@ -112,4 +112,22 @@ mod tests {
         assert_eq!(clock.now_ns(), 2_000);
         assert_eq!(adc.conversions, 2);
     }
+
+    #[test]
+    fn the_ntc_wiring_of_the_segment_sets_its_code() {
+        let tl = Timeline::new(vec![
+            Segment::new(1.0, Cover::Dry).temp(0.0),
+            Segment::new(1.0, Cover::Dry).temp(0.0).ntc(NtcWiring::Open),
+            Segment::new(1.0, Cover::Dry).temp(0.0).ntc(NtcWiring::Short),
+        ]);
+        let env = Arc::new(Environment::with_curves(tl, [], [0.0, 0.0]));
+        let clock = VirtualClock::new();
+        let mut adc = SimAdc::new(clock.clone(), VirtualPin::new(), env, 3);
+        // 0 °C: 33.6 kΩ against 10 kΩ → 3156.
+        assert_eq!(adc.read_ntc(), 3156);
+        clock.advance_to_ns(1_500_000_000);
+        assert_eq!(adc.read_ntc(), 4095);
+        clock.advance_to_ns(2_500_000_000);
+        assert_eq!(adc.read_ntc(), 0);
+    }
 }

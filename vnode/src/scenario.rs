@@ -211,6 +211,8 @@ mod tests {
         assert_eq!(segs[1].led_factor_end, Some(0.7));
         assert_eq!(segs[1].ambient_ua, [20.0, 10.0]);
         assert_eq!(segs[1].start_thickness_mm, Some(2.0));
+        assert_eq!(segs[0].ntc, NtcWiring::Connected);
+        assert_eq!(segs[1].ntc, NtcWiring::Open);
     }
 
     #[test]
@@ -224,6 +226,8 @@ mod tests {
         let e =
             parse("[[segment]]\nduration_s = 1\ncover = \"rime\"\nair_temp_c = 300\n").unwrap_err();
         assert!(e.contains("air_temp_c"), "{e}");
+        let e = parse("[[segment]]\nduration_s = 1\ncover = \"dry\"\nntc = \"loose\"\n").unwrap_err();
+        assert!(e.contains("segment 1") && e.contains("loose"), "{e}");
         let ok = parse("[[segment]]\nduration_s = \"inf\"\ncover = \"rime\"\nrate_mm_per_h = 3\n")
             .unwrap();
         assert_eq!(ok.timeline.segments()[0].duration_s, f64::INFINITY);
