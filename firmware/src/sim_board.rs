@@ -81,7 +81,10 @@ pub mod codes {
     /// The code of a phototransistor channel: [`photo_volts`] at reference
     /// `vdda_v`.
     pub fn photo_code(current_na: f64, load_ohm: f64, vdda_v: f64, vce_sat_v: f64) -> u16 {
-        code(lsb(photo_volts(current_na, load_ohm, vdda_v, vce_sat_v), vdda_v))
+        code(lsb(
+            photo_volts(current_na, load_ohm, vdda_v, vce_sat_v),
+            vdda_v,
+        ))
     }
 
     /// NTC resistance at `temp_c`, Ω (beta equation; the firmware inverts it).

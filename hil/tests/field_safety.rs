@@ -39,7 +39,11 @@ fn strong_sun_on_ice_is_flagged_and_the_alarm_holds() {
     let onset = &o.events[0];
     // Rime from 300 s at 3 mm/h; the alarm at under 0.1 mm (0.05 mm =
     // 60 s), long before the sun (600 s).
-    assert!((300.0..360.0).contains(&onset.t_s), "onset at {}", onset.t_s);
+    assert!(
+        (300.0..360.0).contains(&onset.t_s),
+        "onset at {}",
+        onset.t_s
+    );
     assert!(onset.truth.thickness_mm < 0.05, "{:?}", onset.truth);
     assert_eq!(o.states, [DetectorState::Dry, DetectorState::Ice]);
     assert_eq!(o.final_state, Some(DetectorState::Ice));
@@ -86,7 +90,11 @@ fn unplugged_ntc_raises_the_fault_and_never_thaw_clears() {
     assert_eq!(bits, flags::NTC_OPEN, "fault bits {bits:#06x}");
     // Onset in the rime before the NTC goes (300–600 s); the fault with
     // the first frame after 600 s.
-    assert!((300.0..360.0).contains(&o.events[0].t_s), "{:?}", o.events[0]);
+    assert!(
+        (300.0..360.0).contains(&o.events[0].t_s),
+        "{:?}",
+        o.events[0]
+    );
     assert!(
         (600.0..600.2).contains(&o.events[1].t_s),
         "fault at {}",

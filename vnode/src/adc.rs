@@ -118,7 +118,9 @@ mod tests {
         let tl = Timeline::new(vec![
             Segment::new(1.0, Cover::Dry).temp(0.0),
             Segment::new(1.0, Cover::Dry).temp(0.0).ntc(NtcWiring::Open),
-            Segment::new(1.0, Cover::Dry).temp(0.0).ntc(NtcWiring::Short),
+            Segment::new(1.0, Cover::Dry)
+                .temp(0.0)
+                .ntc(NtcWiring::Short),
         ]);
         let env = Arc::new(Environment::with_curves(tl, [], [0.0, 0.0]));
         let clock = VirtualClock::new();

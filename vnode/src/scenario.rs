@@ -161,11 +161,8 @@ pub fn timeline(specs: Vec<SegmentSpec>) -> Result<Timeline, String> {
         seg.adc_noise_lsb = finite(s.adc_noise_lsb, "adc_noise_lsb", 0.0, 500.0)?.unwrap_or(1.0);
         seg.start_thickness_mm = finite(s.thickness_mm, "thickness_mm", 0.0, 15.0)?;
         if let Some(w) = &s.ntc {
-            seg.ntc = NtcWiring::parse(w).ok_or_else(|| {
-                at(&format!(
-                    "ntc = \"{w}\": expected connected, open or short"
-                ))
-            })?;
+            seg.ntc = NtcWiring::parse(w)
+                .ok_or_else(|| at(&format!("ntc = \"{w}\": expected connected, open or short")))?;
         }
         segs.push(seg);
     }
@@ -226,7 +223,8 @@ mod tests {
         let e =
             parse("[[segment]]\nduration_s = 1\ncover = \"rime\"\nair_temp_c = 300\n").unwrap_err();
         assert!(e.contains("air_temp_c"), "{e}");
-        let e = parse("[[segment]]\nduration_s = 1\ncover = \"dry\"\nntc = \"loose\"\n").unwrap_err();
+        let e =
+            parse("[[segment]]\nduration_s = 1\ncover = \"dry\"\nntc = \"loose\"\n").unwrap_err();
         assert!(e.contains("segment 1") && e.contains("loose"), "{e}");
         let ok = parse("[[segment]]\nduration_s = \"inf\"\ncover = \"rime\"\nrate_mm_per_h = 3\n")
             .unwrap();

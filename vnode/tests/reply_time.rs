@@ -97,7 +97,10 @@ fn calibration_behind_an_erasing_save_answers_within_the_host_timeout() {
     node.advance_to(1, &mut tx);
     assert_eq!(node.node().config(), &config);
     let busy_ms = node.clock().now_ms();
-    assert!((640..=650).contains(&busy_ms), "first frame took {busy_ms} ms");
+    assert!(
+        (640..=650).contains(&busy_ms),
+        "first frame took {busy_ms} ms"
+    );
 
     // A config change (one more onset frame) at 3 s: the save is due 1 s
     // later, with the frame at 4 s, so that pass runs the frame, then the
@@ -116,17 +119,24 @@ fn calibration_behind_an_erasing_save_answers_within_the_host_timeout() {
     // The calibration's last byte lands as the 4 s frame starts: the node is
     // busy with that frame and the save's erase before it reads it.
     node.advance_to(3_999_999_999, &mut tx);
-    let erases_before = node.shared_storage().with_flash(|f| f.ram().counters().erases);
+    let erases_before = node
+        .shared_storage()
+        .with_flash(|f| f.ram().counters().erases);
     let sent_ns = 4_000_000_000;
     node.advance_to(sent_ns, &mut tx);
-    let erases_after = node.shared_storage().with_flash(|f| f.ram().counters().erases);
-    assert_eq!(erases_after.unwrap(), erases_before.unwrap() + 1, "the save erased");
+    let erases_after = node
+        .shared_storage()
+        .with_flash(|f| f.ram().counters().erases);
+    assert_eq!(
+        erases_after.unwrap(),
+        erases_before.unwrap() + 1,
+        "the save erased"
+    );
     let cal = encode_to_vec(&HostFrame {
         id: 2,
         cmd: Command::CalibrateDark,
     });
     node.handle_rx(&cal, &mut tx);
-    drop(tx);
     let Some((_, result, at_ns)) = acks.iter().find(|a| a.0 == 2) else {
         panic!("no answer to the calibration: {acks:?}");
     };

@@ -31,10 +31,7 @@ fn node() -> VirtualNode {
 }
 
 /// A `tx` that decodes into `seen`, stamping `Hello`s with the clock.
-fn sink(
-    node: &VirtualNode,
-    seen: &Rc<RefCell<Seen>>,
-) -> impl FnMut(&[u8]) + use<> {
+fn sink(node: &VirtualNode, seen: &Rc<RefCell<Seen>>) -> impl FnMut(&[u8]) + use<> {
     let clock = node.clock().clone();
     let seen = seen.clone();
     let mut dec = FrameDecoder::<{ fois_protocol::MAX_FRAME }>::new();
@@ -80,14 +77,28 @@ fn first_frame_grid_and_new_periods_as_on_the_board() {
 
     // A shorter period at 1 234 ms applies at once, counted from the last
     // frame (1 200 ms): 1 250, 1 300, …
-    send(&mut n, &mut tx, 1, Command::StartStream { frame_period_ms: Some(50) });
+    send(
+        &mut n,
+        &mut tx,
+        1,
+        Command::StartStream {
+            frame_period_ms: Some(50),
+        },
+    );
     n.advance_to(1_400 * MS, &mut tx);
     assert_eq!(seen.borrow().frames_ms[13..], [1_250, 1_300, 1_350, 1_400]);
 
     // A longer one at 1 420 ms: the next frame one new period after the
     // last (1 400 + 500), not one period after the command.
     n.advance_to(1_420 * MS, &mut tx);
-    send(&mut n, &mut tx, 2, Command::StartStream { frame_period_ms: Some(500) });
+    send(
+        &mut n,
+        &mut tx,
+        2,
+        Command::StartStream {
+            frame_period_ms: Some(500),
+        },
+    );
     n.advance_to(2_450 * MS, &mut tx);
     assert_eq!(seen.borrow().frames_ms[17..], [1_900, 2_400]);
 
