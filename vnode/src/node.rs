@@ -154,7 +154,8 @@ pub struct NodeOptions {
     pub seed: u64,
     /// Board name in `Hello`.
     pub board: &'static str,
-    /// Initial storage (config + baseline record); empty = defaults.
+    /// Initial record (config + baseline), written to the erased flash
+    /// before boot; empty = a first boot (defaults).
     pub storage: MemStorage,
     /// Keep the storage in this file instead (loaded if it exists, rewritten
     /// on every write; `storage` is then ignored).
