@@ -6,6 +6,8 @@
 //! - [`link`]: the serial link (handshake, commands, sequence tracking).
 //! - [`monitor`]: the live session behind `monitor` and `demo`; [`csvlog`] its durable CSV log.
 //! - [`serve`]: a virtual node on a pseudo-terminal.
+//! - [`gateway`]: the fleet gateway to an MQTT broker (node readers, publisher,
+//!   disk queue, topics, payloads, Home Assistant discovery).
 //! - [`compare`]: a log against the simulator's band; [`plot`]: every figure.
 //! - [`exit`]: the exit codes; [`text`], [`timefmt`], [`mod@bench`]: helpers.
 
@@ -14,6 +16,7 @@ pub mod cmd;
 pub mod compare;
 pub mod csvlog;
 pub mod exit;
+pub mod gateway;
 pub mod link;
 pub mod monitor;
 pub mod plot;

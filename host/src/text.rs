@@ -1,11 +1,17 @@
 //! One-line texts of protocol messages (a node's identity, answers, errors,
-//! event kinds), as the monitor prints them and the log stores them.
+//! event kinds), as the monitor prints them, the log stores them and the
+//! gateway publishes them; the wire's units in the text's (µA, °C).
 
 use fois_protocol::{Ack, AckResult, ErrorReply, EventKind, Hello};
 
 /// nA → µA.
 pub fn na_to_ua(na: i64) -> f64 {
     na as f64 / 1000.0
+}
+
+/// 0.01 °C (the wire's temperature unit) → °C.
+pub fn centi_c_to_c(centi_c: i16) -> f64 {
+    f64::from(centi_c) / 100.0
 }
 
 /// Short name of an event kind (`IceOnset`, `FaultRaised(0x0004)`).
