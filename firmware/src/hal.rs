@@ -32,13 +32,17 @@ pub enum StorageError {
     Write,
     /// The record does not fit the medium (or the caller's buffer).
     TooLarge,
+    /// The flash range does not suit the store (see `flash_store::FlashStore::new`).
+    Layout,
 }
 
 /// One persisted record (config + baseline): a flash sector on the board, RAM
 /// in tests. The record is self-delimiting (see `persist`), so `read` may
 /// return more bytes than were written (erased flash reads 0xFF).
 pub trait Storage {
-    /// Copy the stored bytes into `buf`; returns how many were copied.
+    /// Copy the stored bytes into `buf`; returns how many were copied (0:
+    /// nothing was ever stored). An error means the medium holds something
+    /// unreadable: the node then raises `CONFIG_DEFAULTED`.
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, StorageError>;
     /// Replace the stored record with `data`.
     fn write(&mut self, data: &[u8]) -> Result<(), StorageError>;

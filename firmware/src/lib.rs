@@ -3,22 +3,34 @@
 //! ## Modules
 //!
 //! - [`hal`]: the hardware seams ([`hal::PhotoAdc`], [`hal::Storage`], board info).
-//! - [`node::Node`]: the whole node behind them.
+//! - [`flash_store::FlashStore`]: the [`hal::Storage`] on NOR flash
+//!   (sequential-storage); [`ram_flash::RamFlash`]: a NOR flash in RAM that
+//!   can lose power mid-operation.
+//! - [`node::Node`]: the whole node behind them; [`schedule::Schedule`]: when
+//!   it sends `Hello` and runs its frames.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
+//! - [`watchdog`]: the IWDG prescaler, reload and timeout arithmetic the board
+//!   programs; [`reply_time`]: the worst time to answer a command (the
+//!   host's timeout).
 //! - `sim_board` (feature `sim-board`): a scripted simulated board for tests.
 
 #![cfg_attr(not(test), no_std)]
 
 pub mod dispatch;
+pub mod flash_store;
 pub mod hal;
 pub mod measure;
 pub mod node;
 pub mod ntc;
 pub mod persist;
+pub mod ram_flash;
+pub mod reply_time;
 pub mod rule;
+pub mod schedule;
 #[cfg(feature = "sim-board")]
 pub mod sim_board;
 pub mod vref;
+pub mod watchdog;
 
 pub use hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc, Storage, StorageError};
 pub use node::Node;

@@ -16,9 +16,31 @@ use embedded_hal::digital::OutputPin;
 
 use crate::hal::{ADC_MAX, PhotoAdc};
 
-/// A sample at or above this code counts as saturated (98 % of full scale:
-/// the phototransistor or the ADC clips, the difference is meaningless).
-pub const SATURATION_CODE: u16 = 4_000;
+/// The ADC's own limit: a sample at or above this code is saturated at any
+/// supply (98 % of full scale).
+pub const ADC_SATURATION_CODE: u16 = 4_000;
+/// V_CE(sat) of the phototransistor, mV. The thesis (§4.5.1) does not name
+/// the part; small NPN phototransistors give 0.2–0.4 V at their rated
+/// current, so the worst of that range is taken: the emitter, where the
+/// load resistor and the ADC sit, cannot rise above V_DD − V_CE(sat).
+pub const PHOTO_VCE_SAT_MV: u16 = 400;
+/// Margin below the clip level, mV (the V_DD ≠ V_DDA difference on the
+/// board, ADC offset and gain error, a few codes of noise).
+pub const CLIP_MARGIN_MV: u16 = 100;
+
+/// The code at and above which a photo sample counts as saturated, for the
+/// V_DDA (mV) measured in this frame. The phototransistor's collector sits
+/// on the 3V3 rail, which also feeds V_DDA (the ADC reference) on the
+/// NUCLEO-F446RE, so its output clips at V_DDA − V_CE(sat): in codes
+/// 4095 × (V_DDA − V_CE(sat) − margin) / V_DDA. At 3.3 V that is 3 475
+/// codes (2.8 V), where the old fixed 4 000 codes (3.22 V) sat above the
+/// clip and strong sun went unflagged.
+pub fn saturation_code(vdda_mv: u16) -> u16 {
+    let vdda = u32::from(vdda_mv.max(1));
+    let headroom = u32::from(PHOTO_VCE_SAT_MV + CLIP_MARGIN_MV);
+    let clip = u32::from(ADC_MAX) * vdda.saturating_sub(headroom) / vdda;
+    (clip as u16).min(ADC_SATURATION_CODE)
+}
 
 /// The raw sums of one frame's K cycles.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -29,18 +51,21 @@ pub struct Acquisition {
     pub sum_off: [u32; 2],
     /// K, the number of LED-on samples.
     pub cycles: u16,
-    /// A sample of the channel reached [`SATURATION_CODE`].
+    /// A sample of the channel reached the saturation code.
     pub saturated: [bool; 2],
 }
 
-/// Run K LED off/on cycles and sum them. Leaves the LED off. LED pin errors
-/// are ignored (the STM32's are infallible; a stuck LED shows as no signal).
+/// Run K LED off/on cycles and sum them; a sample at or above
+/// `saturation_code` (see [`saturation_code`]) marks its channel saturated.
+/// Leaves the LED off. LED pin errors are ignored (the STM32's are
+/// infallible; a stuck LED shows as no signal).
 pub fn acquire<A, L, D>(
     adc: &mut A,
     led: &mut L,
     delay: &mut D,
     cycles: u16,
     settle_us: u16,
+    saturation_code: u16,
 ) -> Acquisition
 where
     A: PhotoAdc,
@@ -55,15 +80,15 @@ where
     };
     let _ = led.set_low();
     delay.delay_us(settle);
-    let mut prev_off = read(adc, &mut acq);
+    let mut prev_off = read(adc, &mut acq, saturation_code);
     add_off(&mut acq, prev_off);
     for _ in 0..cycles {
         let _ = led.set_high();
         delay.delay_us(settle);
-        let on = read(adc, &mut acq);
+        let on = read(adc, &mut acq, saturation_code);
         let _ = led.set_low();
         delay.delay_us(settle);
-        let off = read(adc, &mut acq);
+        let off = read(adc, &mut acq, saturation_code);
         add_off(&mut acq, off);
         for ch in 0..2 {
             let (o, a, b) = (
@@ -80,11 +105,11 @@ where
     acq
 }
 
-fn read<A: PhotoAdc>(adc: &mut A, acq: &mut Acquisition) -> [u16; 2] {
+fn read<A: PhotoAdc>(adc: &mut A, acq: &mut Acquisition, saturation_code: u16) -> [u16; 2] {
     let mut codes = adc.read_photo();
     for (code, sat) in codes.iter_mut().zip(acq.saturated.iter_mut()) {
         *code = (*code).min(ADC_MAX);
-        if *code >= SATURATION_CODE {
+        if *code >= saturation_code {
             *sat = true;
         }
     }
@@ -165,6 +190,20 @@ mod tests {
         assert_eq!(code_sum_to_na(1, 1, 3_300, 10_000), 81);
         assert_eq!(code_sum_to_na(1, 0, 3_300, 10_000), 0);
         assert_eq!(code_sum_to_na(i64::MAX, 1, 3_300, 0), i64::MAX / 4095);
+    }
+
+    #[test]
+    fn saturation_follows_the_supply() {
+        // 3.3 V: clip at 2.9 V, flagged from 2.8 V = 4095 × 2.8 / 3.3.
+        assert_eq!(saturation_code(3_300), 3_474);
+        // 3.0 V: from 2.5 V.
+        assert_eq!(saturation_code(3_000), 3_412);
+        // 3.6 V: from 3.1 V = 3526 codes.
+        assert_eq!(saturation_code(3_600), 3_526);
+        // Absurd supplies never go above the ADC's own limit or wrap.
+        assert_eq!(saturation_code(u16::MAX), ADC_SATURATION_CODE);
+        assert_eq!(saturation_code(0), 0);
+        assert_eq!(saturation_code(400), 0);
     }
 
     #[test]

@@ -39,6 +39,22 @@ const fn parse_u8(s: &str) -> u8 {
 /// Dark calibration averages this many frames of K cycles.
 pub const CAL_FRAMES: u16 = 4;
 
+/// A change is saved once no further change came for this long, ms: a burst
+/// of config changes and calibrations is one flash write.
+pub const SAVE_QUIET_MS: u64 = 1_000;
+/// ... but at most this long after the first unsaved change, ms.
+pub const SAVE_MAX_DELAY_MS: u64 = 10_000;
+/// Saves (and retries after a failed one) are at least this far apart, ms:
+/// at most 8 640 a day, whatever a host sends (wear: `firmware/README.md`).
+pub const SAVE_MIN_INTERVAL_MS: u64 = 10_000;
+
+/// An unsaved change: when the first and the last one came.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct PendingSave {
+    first_ms: u64,
+    last_ms: u64,
+}
+
 /// Everything one frame measured (also what a [`Measurement`] carries).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct FrameValues {
@@ -74,6 +90,11 @@ where
     baseline: Option<Baseline>,
     config_defaulted: bool,
     storage_failed: bool,
+    clock_fallback: bool,
+    /// The record the storage holds, as far as the node knows.
+    stored: Option<Record>,
+    pending_save: Option<PendingSave>,
+    last_save_ms: Option<u64>,
     rule: Rule,
     seq: u32,
     streaming: bool,
@@ -94,8 +115,9 @@ where
     S: Storage,
 {
     /// Build the node: loads config + baseline from `storage`. An empty store
-    /// gives the defaults; a corrupt or old record gives the defaults and the
-    /// `CONFIG_DEFAULTED` fault. The LED and the outputs start off.
+    /// gives the defaults; a corrupt or old record, or a store that cannot
+    /// be read, gives the defaults and the `CONFIG_DEFAULTED` fault. The LED
+    /// and the outputs start off.
     pub fn new(
         adc: A,
         led: L,
@@ -110,10 +132,14 @@ where
             Ok(n) => persist::decode(buf.get(..n).unwrap_or(&[])),
             Err(_) => Err(LoadError::Corrupt),
         };
-        let (config, baseline, config_defaulted) = match loaded {
-            Ok(r) => (r.config, r.baseline, false),
-            Err(LoadError::Empty) => (Config::default(), None, false),
-            Err(_) => (Config::default(), None, true),
+        let (stored, config_defaulted) = match loaded {
+            Ok(r) => (Some(r), false),
+            Err(LoadError::Empty) => (None, false),
+            Err(_) => (None, true),
+        };
+        let (config, baseline) = match &stored {
+            Some(r) => (r.config.clone(), r.baseline),
+            None => (Config::default(), None),
         };
         let info = BoardInfo {
             cal: info.cal.or_typical(),
@@ -132,6 +158,10 @@ where
             baseline,
             config_defaulted,
             storage_failed: false,
+            clock_fallback: false,
+            stored,
+            pending_save: None,
+            last_save_ms: None,
             rule: Rule::new(),
             seq: 0,
             stream_period_ms: None,
@@ -170,11 +200,13 @@ where
         let values = self.measure_frame();
         let rise1 = self.rise1(values.currents.net_na[0]);
         let valid = values.flags & flags::INVALID_MASK == 0;
+        let air_known = values.flags & (flags::NTC_OPEN | flags::NTC_SHORT) == 0;
         let transition = self.rule.step(
             &self.config,
             RuleInput {
                 rise1_na: rise1,
                 temperature_centi_c: values.temperature_centi_c,
+                air_known,
                 valid,
             },
         );
@@ -223,17 +255,53 @@ where
         }
         self.reported_faults = faults;
         self.last = Some(m);
+        // After the frame, so a save's erase never delays a measurement.
+        self.poll_storage(now_ms);
+    }
+
+    /// When the pending change will be saved (`None`: nothing to save), ms
+    /// on the `now_ms` clock. The driver calls [`Self::poll_storage`] then
+    /// (`run_frame` also does, after its frame).
+    pub fn save_due_ms(&self) -> Option<u64> {
+        let p = self.pending_save?;
+        let coalesced = p
+            .last_ms
+            .saturating_add(SAVE_QUIET_MS)
+            .min(p.first_ms.saturating_add(SAVE_MAX_DELAY_MS));
+        let earliest = self
+            .last_save_ms
+            .map_or(0, |t| t.saturating_add(SAVE_MIN_INTERVAL_MS));
+        Some(coalesced.max(earliest))
+    }
+
+    /// Save the pending change if it is due. A failed save sets
+    /// `STORAGE_FAILED` (reported as a fault event with the next frame) and
+    /// is retried [`SAVE_MIN_INTERVAL_MS`] later.
+    pub fn poll_storage(&mut self, now_ms: u64) {
+        if self.save_due_ms().is_some_and(|due| now_ms >= due) {
+            self.save(now_ms);
+        }
+    }
+
+    /// True while a change waits to be saved.
+    pub fn save_pending(&self) -> bool {
+        self.pending_save.is_some()
+    }
+
+    /// Tell the node it runs on its internal oscillator because the external
+    /// clock did not start (raises `CLOCK_FALLBACK`).
+    pub fn set_clock_fallback(&mut self, fallback: bool) {
+        self.clock_fallback = fallback;
     }
 
     /// Bytes received from the host link, in any chunking. Each complete
     /// frame is answered through `tx`: an `Ack`, or an `Error` (garbled,
     /// unknown, out of range). Never stops the measurement.
     pub fn handle_rx(&mut self, bytes: &[u8], now_ms: u64, tx: &mut impl FnMut(&[u8])) {
-        let _ = now_ms;
         for &b in bytes {
             match self.decoder.push::<HostFrame>(b) {
                 None => {}
-                Some(Ok(frame)) => self.execute(frame, tx),
+                Some(Ok(frame)) => self.execute(frame, now_ms, tx),
                 Some(Err(e)) => {
                     self.send(DeviceMsg::Error(dispatch::frame_error_reply(e)), tx);
                 }
@@ -245,15 +313,15 @@ where
     /// output stays on while the ice holds); otherwise it runs a dark
     /// calibration (the user cleaned the dry face and pressed the button).
     /// Either way an unsolicited `Ack` (or `Error`) with id
-    /// [`BUTTON_ID`](crate::dispatch::BUTTON_ID) reports what happened.
+    /// [`BUTTON_ID`](crate::dispatch::BUTTON_ID) reports what happened. The
+    /// acknowledgement never writes flash.
     pub fn button_pressed(&mut self, now_ms: u64, tx: &mut impl FnMut(&[u8])) {
-        let _ = now_ms;
         let cmd = if self.rule.alarm() {
             Command::AckAlarm
         } else {
             Command::CalibrateDark
         };
-        self.execute(HostFrame { id: BUTTON_ID, cmd }, tx);
+        self.execute(HostFrame { id: BUTTON_ID, cmd }, now_ms, tx);
     }
 
     /// The output frame period now in force, ms (the `StartStream` rate
@@ -325,6 +393,9 @@ where
         if self.storage_failed {
             f |= flags::STORAGE_FAILED;
         }
+        if self.clock_fallback {
+            f |= flags::CLOCK_FALLBACK;
+        }
         if self.baseline.is_none() {
             f |= flags::NO_BASELINE;
         }
@@ -348,15 +419,9 @@ where
         }
     }
 
-    /// Acquire one frame and convert it (no rule, no output).
+    /// Acquire one frame and convert it (no rule, no output). V_DDA is
+    /// measured first: it sets this frame's saturation code.
     fn measure_frame(&mut self) -> FrameValues {
-        let acq = measure::acquire(
-            &mut self.adc,
-            &mut self.led,
-            &mut self.delay,
-            self.config.cycles_per_frame,
-            self.config.settle_us,
-        );
         let cal = self.info.cal;
         let vdda_mv = vref::vdda_mv(&cal, self.adc.read_vrefint());
         let mut flags = 0u16;
@@ -364,6 +429,14 @@ where
             flags |= flags::VDDA_OUT_OF_RANGE;
         }
         let conv_mv = vref::vdda_for_conversion(vdda_mv);
+        let acq = measure::acquire(
+            &mut self.adc,
+            &mut self.led,
+            &mut self.delay,
+            self.config.cycles_per_frame,
+            self.config.settle_us,
+            measure::saturation_code(conv_mv),
+        );
         let currents = measure::currents(
             &acq,
             conv_mv,
@@ -414,12 +487,12 @@ where
         self.send(msg, tx);
     }
 
-    fn execute(&mut self, frame: HostFrame, tx: &mut impl FnMut(&[u8])) {
+    fn execute(&mut self, frame: HostFrame, now_ms: u64, tx: &mut impl FnMut(&[u8])) {
         let id = frame.id;
         let result = match frame.cmd {
             Command::GetInfo => Ok(AckResult::Info(self.hello())),
             Command::GetConfig => Ok(AckResult::Config(self.config.clone())),
-            Command::SetConfig(cfg) => self.set_config(cfg),
+            Command::SetConfig(cfg) => self.set_config(cfg, now_ms),
             Command::StartStream { frame_period_ms } => {
                 match dispatch::stream_period(&self.config, frame_period_ms) {
                     Ok(period) => {
@@ -437,12 +510,16 @@ where
                 self.stream_period_ms = None;
                 Ok(AckResult::Stopped)
             }
-            Command::CalibrateDark => self.calibrate_dark(),
+            Command::CalibrateDark => self.calibrate_dark(now_ms),
             Command::AckAlarm => {
                 self.rule.acknowledge();
                 Ok(AckResult::AlarmAcknowledged)
             }
             Command::Reset => {
+                // Whatever waits to be saved is saved before the reset.
+                if self.pending_save.is_some() {
+                    self.save(now_ms);
+                }
                 self.reset_request = true;
                 Ok(AckResult::Resetting)
             }
@@ -450,9 +527,8 @@ where
         self.reply(id, result, tx);
     }
 
-    fn set_config(&mut self, cfg: Config) -> Result<AckResult, ErrorCode> {
+    fn set_config(&mut self, cfg: Config, now_ms: u64) -> Result<AckResult, ErrorCode> {
         cfg.validate().map_err(ErrorCode::InvalidConfig)?;
-        let unchanged = cfg == self.config && !self.config_defaulted && !self.storage_failed;
         self.config = cfg;
         self.config_defaulted = false;
         // A StartStream rate that no longer fits the new K × settle is dropped.
@@ -461,16 +537,15 @@ where
         {
             self.stream_period_ms = None;
         }
-        if !unchanged {
-            self.persist()?;
-        }
+        self.changed(now_ms);
         Ok(AckResult::Config(self.config.clone()))
     }
 
-    fn calibrate_dark(&mut self) -> Result<AckResult, ErrorCode> {
-        if self.rule.alarm() {
-            // An iced face is not a dark reference.
-            return Err(ErrorCode::CalibrationFailed);
+    fn calibrate_dark(&mut self, now_ms: u64) -> Result<AckResult, ErrorCode> {
+        if self.rule.state() != DetectorState::Dry {
+            // An iced or wet face is not a dark reference (water would
+            // become the baseline and hide the next film).
+            return Err(ErrorCode::NotDry);
         }
         let mut min = [i32::MAX; 2];
         let mut max = [i32::MIN; 2];
@@ -500,26 +575,57 @@ where
             i2_na: (sum[1] / n) as i32,
         };
         self.baseline = Some(baseline);
-        self.persist()?;
+        self.changed(now_ms);
         Ok(AckResult::DarkCalibrated(baseline))
     }
 
-    fn persist(&mut self) -> Result<(), ErrorCode> {
-        let record = Record {
+    /// The record the node would store now.
+    fn record(&self) -> Record {
+        Record {
             config: self.config.clone(),
             baseline: self.baseline,
-        };
+        }
+    }
+
+    /// Config or baseline changed: schedule a save, unless the storage
+    /// already holds exactly this (then a pending save is dropped).
+    fn changed(&mut self, now_ms: u64) {
+        if self.stored.as_ref() == Some(&self.record()) && !self.storage_failed {
+            self.pending_save = None;
+            return;
+        }
+        self.pending_save = Some(match self.pending_save {
+            Some(p) => PendingSave {
+                last_ms: now_ms,
+                ..p
+            },
+            None => PendingSave {
+                first_ms: now_ms,
+                last_ms: now_ms,
+            },
+        });
+    }
+
+    /// Write the record now.
+    fn save(&mut self, now_ms: u64) {
+        let record = self.record();
         let mut buf = [0u8; MAX_RECORD];
         let n = persist::encode(&record, &mut buf);
         let written = match buf.get(..n) {
             Some(bytes) if n > 0 => self.storage.write(bytes).is_ok(),
             _ => false,
         };
+        self.last_save_ms = Some(now_ms);
         self.storage_failed = !written;
         if written {
-            Ok(())
+            self.stored = Some(record);
+            self.pending_save = None;
         } else {
-            Err(ErrorCode::StorageFailed)
+            // Retry once the interval has passed.
+            self.pending_save = Some(PendingSave {
+                first_ms: now_ms,
+                last_ms: now_ms,
+            });
         }
     }
 }

@@ -14,6 +14,10 @@
 //!
 //! Frames flagged invalid (saturated) are skipped: they neither advance nor
 //! reset a counter, and never change the state.
+//!
+//! Without an air temperature (NTC open or shorted) the air counts as cold
+//! and never as thawing: a film then means ice (an alarm rather than a
+//! wrong all-clear), and ice clears only when the film is optically gone.
 
 use fois_protocol::{Config, DetectorState, EventKind};
 
@@ -24,6 +28,9 @@ pub struct RuleInput {
     pub rise1_na: i32,
     /// Air temperature, 0.01 °C.
     pub temperature_centi_c: i16,
+    /// False when the air temperature is unknown (NTC fault): the rule then
+    /// takes the air as cold and never as thawing.
+    pub air_known: bool,
     /// False for a saturated frame: the rule ignores it.
     pub valid: bool,
 }
@@ -105,8 +112,8 @@ impl Rule {
         let rise = i64::from(input.rise1_na);
         let film = rise > i64::from(cfg.onset_rise_na);
         let gone = rise < i64::from(cfg.clear_rise_na);
-        let cold = input.temperature_centi_c <= cfg.freeze_limit_centi_c;
-        let thawing = input.temperature_centi_c > cfg.thaw_limit_centi_c;
+        let cold = !input.air_known || input.temperature_centi_c <= cfg.freeze_limit_centi_c;
+        let thawing = input.air_known && input.temperature_centi_c > cfg.thaw_limit_centi_c;
         let n = cfg.onset_frames.max(1);
         let m = cfg.clear_frames.max(1);
 

@@ -64,10 +64,27 @@ pub mod codes {
         libm::round(lsb).clamp(0.0, f64::from(ADC_MAX)) as u16
     }
 
-    /// The code of a phototransistor channel: `current_na` (negative reads
-    /// as 0) through `load_ohm`, at reference `vdda_v`.
-    pub fn photo_code(current_na: f64, load_ohm: f64, vdda_v: f64) -> u16 {
-        code(lsb(current_na.max(0.0) * 1e-9 * load_ohm, vdda_v))
+    /// A typical V_CE(sat) of a small NPN phototransistor, V (0.2–0.4 V at
+    /// its rated current; the firmware flags saturation against the worst,
+    /// `measure::PHOTO_VCE_SAT_MV`).
+    pub const VCE_SAT_TYPICAL_V: f64 = 0.25;
+
+    /// The emitter voltage of a phototransistor channel: `current_na`
+    /// (negative reads as 0) through `load_ohm`, clipped where the
+    /// transistor saturates: its collector is on the 3V3 rail (= V_DDA on
+    /// the NUCLEO), so the emitter never rises above `vdda_v − vce_sat_v`.
+    pub fn photo_volts(current_na: f64, load_ohm: f64, vdda_v: f64, vce_sat_v: f64) -> f64 {
+        let clip_v = (vdda_v - vce_sat_v).max(0.0);
+        (current_na.max(0.0) * 1e-9 * load_ohm).min(clip_v)
+    }
+
+    /// The code of a phototransistor channel: [`photo_volts`] at reference
+    /// `vdda_v`.
+    pub fn photo_code(current_na: f64, load_ohm: f64, vdda_v: f64, vce_sat_v: f64) -> u16 {
+        code(lsb(
+            photo_volts(current_na, load_ohm, vdda_v, vce_sat_v),
+            vdda_v,
+        ))
     }
 
     /// NTC resistance at `temp_c`, Ω (beta equation; the firmware inverts it).
@@ -123,10 +140,14 @@ pub struct Scene {
     pub load_ohm: [f64; 2],
     /// Time one photo conversion (both channels) takes, ns.
     pub conversion_ns: u64,
+    /// V_CE(sat) of the phototransistors, mV: the emitter (the ADC input)
+    /// clips at `vdda_mv` minus this in strong light.
+    pub vce_sat_mv: f64,
 }
 
 impl Scene {
-    /// Dark and still: no light, 10 °C, 3.3 V, 10 kΩ loads, 15 µs conversions.
+    /// Dark and still: no light, 10 °C, 3.3 V, 10 kΩ loads, 15 µs
+    /// conversions, phototransistors clipping 0.25 V below V_DDA.
     pub const DEFAULT: Scene = Scene {
         signal_na: [0.0; 2],
         signal_ramp_na_per_s: [0.0; 2],
@@ -139,6 +160,7 @@ impl Scene {
         vdda_mv: 3300.0,
         load_ohm: [10_000.0; 2],
         conversion_ns: 15_000,
+        vce_sat_mv: codes::VCE_SAT_TYPICAL_V * 1000.0,
     };
 }
 
@@ -210,7 +232,8 @@ impl SimBoard {
 }
 
 /// The ADC: ambient + flicker (+ the LED's signal while the LED is on),
-/// through the load resistors, at the board's time. Each photo conversion
+/// through the load resistors, clipped at V_DDA − V_CE(sat),
+/// at the board's time. Each photo conversion
 /// advances the clock by [`Scene::conversion_ns`].
 #[derive(Debug, Clone)]
 pub struct BoardAdc<B>(pub B);
@@ -231,7 +254,12 @@ impl<B: Deref<Target = SimBoard>> PhotoAdc for BoardAdc<B> {
                 0.0
             };
             let i_na = s.ambient_na[ch] + flicker + led;
-            codes::photo_code(i_na, s.load_ohm[ch], s.vdda_mv / 1000.0)
+            codes::photo_code(
+                i_na,
+                s.load_ohm[ch],
+                s.vdda_mv / 1000.0,
+                s.vce_sat_mv / 1000.0,
+            )
         });
         board.t_ns.set(board.t_ns.get() + s.conversion_ns);
         codes

@@ -103,7 +103,7 @@ fn currents_temperature_and_ambient() {
 #[test]
 fn saturation_flags_the_frame_and_the_rule_ignores_it() {
     let (mut node, w) = node();
-    // Full sun on channel 1: 340 µA × 10 kΩ = 3.4 V > full scale.
+    // Full sun on channel 1: 340 µA × 10 kΩ = 3.4 V, past the clip.
     w.set(|s| {
         s.ambient_na = [340_000.0, 0.0];
         s.signal_na = [20_000.0, 0.0];
@@ -117,10 +117,48 @@ fn saturation_flags_the_frame_and_the_rule_ignores_it() {
         assert_eq!(m.state, DetectorState::Dry);
         assert!(events(&fs).is_empty());
     }
-    // Just under the saturation code (98 % of full scale) is valid.
-    w.set(|s| s.ambient_na = [300_000.0, 0.0]);
-    w.set(|s| s.signal_na = [1_000.0, 0.0]);
-    assert!(measurement(&step(&mut node, &w)).is_valid());
+}
+
+/// The phototransistor clips at V_DDA − V_CE(sat) (3.05 V here), well below
+/// the ADC's full scale: a frame whose LED-on samples reach the clip must be
+/// flagged, or the squeezed difference reads as "no film".
+#[test]
+fn saturation_is_flagged_at_the_phototransistor_clip_from_the_measured_supply() {
+    let (mut node, w) = node();
+    // 295 µA of sun (2.95 V) + 20 µA of ice signal: LED on would be 3.15 V
+    // but clips at 3.05 V, so the net reads 10 µA instead of 20. Every
+    // sample is below the old 4 000-code limit (3.22 V), which let it through.
+    w.set(|s| {
+        s.ambient_na = [295_000.0, 0.0];
+        s.signal_na = [20_000.0, 0.0];
+    });
+    let m = measurement(&step(&mut node, &w));
+    assert!(
+        (m.i1_na - 10_000).abs() <= 81,
+        "the clip squeezes the signal: {m:?}"
+    );
+    assert_eq!(m.flags & flags::INVALID_MASK, flags::SATURATED_CH1, "{m:?}");
+    // Just under the flag level (2.8 V at 3.3 V): 265 µA + 10 µA = 2.75 V, valid and right.
+    w.set(|s| {
+        s.ambient_na = [265_000.0, 0.0];
+        s.signal_na = [10_000.0, 0.0];
+    });
+    let m = measurement(&step(&mut node, &w));
+    assert!(m.is_valid(), "{m:?}");
+    assert!((m.i1_na - 10_000).abs() <= 81, "{m:?}");
+    // The level follows the supply measured in the frame: at 3.0 V the
+    // clip is at 2.75 V and the flag from 2.5 V.
+    w.set(|s| {
+        s.vdda_mv = 3_000.0;
+        s.ambient_na = [250_000.0, 0.0];
+        s.signal_na = [10_000.0, 0.0];
+    });
+    let m = measurement(&step(&mut node, &w));
+    assert_eq!(m.flags & flags::INVALID_MASK, flags::SATURATED_CH1, "{m:?}");
+    w.set(|s| s.ambient_na = [230_000.0, 0.0]);
+    let m = measurement(&step(&mut node, &w));
+    assert!(m.is_valid(), "{m:?}");
+    assert!((m.i1_na - 10_000).abs() <= 90, "{m:?}");
 }
 
 #[test]
@@ -195,7 +233,7 @@ fn icing_drives_alarm_and_ld2_and_sends_events() {
     // Dark calibration is refused on an iced face.
     assert_eq!(
         error(command(&mut node, &w, 8, Command::CalibrateDark)).code,
-        ErrorCode::CalibrationFailed
+        ErrorCode::NotDry
     );
 
     // The ice sheds: M frames later the alarm clears.
@@ -228,6 +266,15 @@ fn water_above_the_freezing_limit_is_wet_not_ice() {
     }
     assert_eq!(kinds, vec![EventKind::WetOnset]);
     assert!(!w.alarm.get());
+    // The water is no dark reference: calibration refused, baseline kept.
+    assert_eq!(
+        error(command(&mut node, &w, 4, Command::CalibrateDark)),
+        ErrorReply {
+            id: Some(4),
+            code: ErrorCode::NotDry
+        }
+    );
+    assert_eq!(node.baseline(), None);
     // The water freezes.
     w.set(|s| s.temp_c = -1.0);
     for _ in 0..n {
@@ -264,10 +311,12 @@ fn dark_calibration_by_command_and_button_persists() {
             panic!()
         };
         assert!((b2.i1_na - 700).abs() <= 81);
+        run_until_saved(&mut node, &w);
         let (_, _, _, _, _, s) = node.into_parts();
         storage = s;
     }
-    assert!(storage.writes >= 2);
+    // Two calibrations 100 ms apart: one write.
+    assert_eq!(storage.writes, 1);
     // A new boot reads it back.
     let (node, _w) = node_with(storage);
     assert!(node.baseline().is_some_and(|b| (b.i1_na - 700).abs() <= 81));
@@ -422,8 +471,15 @@ fn set_config_validates_applies_and_persists() {
         ErrorCode::InvalidConfig(ConfigError::BelowMin(ConfigField::SettleUs))
     );
     assert_eq!(node.config(), &c);
+    run_until_saved(&mut node, &w);
+    // The same config again: nothing to write.
+    command(&mut node, &w, 4, Command::SetConfig(c.clone()));
+    assert!(!node.save_pending());
     let (_, _, _, _, _, storage) = node.into_parts();
-    assert_eq!(storage.writes, 1, "refused configs are not written");
+    assert_eq!(
+        storage.writes, 1,
+        "refused or unchanged configs are not written"
+    );
     let (node, _) = node_with(storage);
     assert_eq!(node.config(), &c);
 }
@@ -437,19 +493,35 @@ fn storage_failure_is_reported_and_the_change_holds() {
         onset_frames: 10,
         ..Config::default()
     };
+    // Applied at once; the save comes after the quiet time.
     assert_eq!(
-        error(command(&mut node, &w, 1, Command::SetConfig(c.clone()))),
-        ErrorReply {
-            id: Some(1),
-            code: ErrorCode::StorageFailed
-        }
+        ack(command(&mut node, &w, 1, Command::SetConfig(c.clone())), 1),
+        AckResult::Config(c.clone())
     );
     assert_eq!(node.config(), &c, "holds until the next reset");
-    let fs = step(&mut node, &w);
-    assert_ne!(measurement(&fs).flags & flags::STORAGE_FAILED, 0);
+    let t0 = w.now_ms();
+    let mut raised_at = None;
+    for _ in 0..30 {
+        let fs = step(&mut node, &w);
+        if events(&fs)
+            .iter()
+            .any(|e| e.kind == EventKind::FaultRaised(flags::STORAGE_FAILED))
+        {
+            raised_at = Some(w.now_ms() - t0);
+            break;
+        }
+    }
+    // The save ran after the 1 s quiet time; the fault goes out with the next frame.
+    let raised_at = raised_at.expect("STORAGE_FAILED raised");
+    assert!((1_000..=1_300).contains(&raised_at), "{raised_at} ms");
+    assert_ne!(
+        measurement(&step(&mut node, &w)).flags & flags::STORAGE_FAILED,
+        0
+    );
+    assert!(node.save_pending(), "retried later");
     assert_eq!(
-        events(&fs)[0].kind,
-        EventKind::FaultRaised(flags::STORAGE_FAILED)
+        node.save_due_ms().map(|t| t - t0),
+        Some(fois_firmware::node::SAVE_MIN_INTERVAL_MS + 1_000)
     );
 }
 
@@ -574,4 +646,195 @@ mod fuzz {
             prop_assert!(ms == chunks.len() || !node.is_streaming());
         }
     }
+}
+
+mod saving {
+    use super::*;
+    use fois_firmware::node::{SAVE_MAX_DELAY_MS, SAVE_MIN_INTERVAL_MS, SAVE_QUIET_MS};
+
+    fn writes(node: SimNode) -> u32 {
+        node.into_parts().5.writes
+    }
+
+    /// A burst of config changes and calibrations is one write, after the
+    /// quiet time; the next change waits out the minimum interval.
+    #[test]
+    fn a_burst_is_one_write_and_writes_are_rate_limited() {
+        let (mut node, w) = node();
+        for i in 0..10u16 {
+            let c = Config {
+                onset_rise_na: 1_000 + u32::from(i) * 100,
+                ..Config::default()
+            };
+            command(&mut node, &w, i, Command::SetConfig(c));
+            w.advance_ms(50);
+        }
+        let last_change = w.now_ms();
+        command(&mut node, &w, 20, Command::CalibrateDark);
+        assert_eq!(node.save_due_ms(), Some(last_change + SAVE_QUIET_MS));
+        // Frames before the due time do not write.
+        let mut saved_at = None;
+        for _ in 0..40 {
+            let now = w.now_ms();
+            step(&mut node, &w);
+            if !node.save_pending() {
+                saved_at = Some(now);
+                break;
+            }
+        }
+        let saved_at = saved_at.expect("saved");
+        // Saved by the first frame at or after the due time (frames are 100 ms).
+        let due = last_change + SAVE_QUIET_MS;
+        assert!((due..due + 100).contains(&saved_at), "{saved_at}");
+        // A change 2 s later waits for the 10 s minimum interval.
+        w.advance_ms(2_000);
+        let c = Config {
+            onset_frames: 40,
+            ..node.config().clone()
+        };
+        command(&mut node, &w, 30, Command::SetConfig(c.clone()));
+        let due = node.save_due_ms().expect("pending");
+        assert_eq!(due, saved_at + SAVE_MIN_INTERVAL_MS);
+        run_until_saved(&mut node, &w);
+        assert_eq!(writes(node), 2);
+    }
+
+    /// Changes that never stop are still saved, every max delay.
+    #[test]
+    fn endless_changes_are_saved_at_the_max_delay() {
+        let (mut node, w) = node();
+        let t0 = w.now_ms();
+        let mut saves_at = Vec::new();
+        for i in 0..300u32 {
+            // A new value every 100 ms for 30 s: never quiet for 1 s.
+            let c = Config {
+                onset_rise_na: 1_000 + i,
+                ..Config::default()
+            };
+            command(&mut node, &w, 1, Command::SetConfig(c));
+            let now = w.now_ms() - t0;
+            step(&mut node, &w);
+            if !node.save_pending() {
+                saves_at.push(now);
+            }
+        }
+        // Each at most SAVE_MAX_DELAY_MS after the first unsaved change (0,
+        // then 10 100 ms: the next change after the first save), and at
+        // least SAVE_MIN_INTERVAL_MS apart.
+        assert_eq!(SAVE_MAX_DELAY_MS, 10_000);
+        assert_eq!(SAVE_MIN_INTERVAL_MS, 10_000);
+        assert_eq!(saves_at, vec![10_000, 20_100], "{saves_at:?}");
+    }
+
+    /// The button's acknowledgement never writes flash.
+    #[test]
+    fn the_button_ack_never_writes() {
+        let (mut node, w) = node();
+        w.set(|s| {
+            s.temp_c = -8.0;
+            s.signal_na = [25_000.0, 8_000.0];
+        });
+        for _ in 0..node.config().onset_frames {
+            step(&mut node, &w);
+        }
+        assert_eq!(node.state(), DetectorState::Ice);
+        for _ in 0..20 {
+            let mut bytes = Vec::new();
+            node.button_pressed(w.now_ms(), &mut |b| bytes.extend_from_slice(b));
+            assert_eq!(ack(frames(&bytes), BUTTON_ID), AckResult::AlarmAcknowledged);
+            assert!(!node.save_pending());
+            step(&mut node, &w);
+        }
+        assert_eq!(writes(node), 0);
+    }
+
+    /// A reset saves what is pending first (else a config sent just before
+    /// a reset would be lost).
+    #[test]
+    fn reset_saves_what_is_pending() {
+        let (mut node, w) = node();
+        let c = Config {
+            clear_frames: 500,
+            ..Config::default()
+        };
+        command(&mut node, &w, 1, Command::SetConfig(c.clone()));
+        assert!(node.save_pending());
+        assert_eq!(
+            ack(command(&mut node, &w, 2, Command::Reset), 2),
+            AckResult::Resetting
+        );
+        assert!(!node.save_pending());
+        assert!(node.take_reset_request());
+        let storage = node.into_parts().5;
+        assert_eq!(storage.writes, 1);
+        let (node, _) = node_with(storage);
+        assert_eq!(node.config(), &c);
+    }
+}
+
+/// The NTC breaks during icing in warm-looking conditions: the node reads
+/// the die (warmer than the air); the film must still mean ice, and the
+/// alarm must not clear on the die's "thaw".
+#[test]
+fn ntc_fault_makes_a_film_ice_and_blocks_thaw_clearing() {
+    let (mut node, w) = node();
+    let n = u32::from(node.config().onset_frames);
+    // The die reads 12 °C; the real air is at -1 °C.
+    w.set(|s| {
+        s.temp_c = 12.0;
+        s.ntc_code = Some(4095);
+        s.signal_na = [3_000.0, 900.0];
+    });
+    let mut kinds = Vec::new();
+    for _ in 0..n {
+        kinds.extend(events(&step(&mut node, &w)).into_iter().map(|e| e.kind));
+    }
+    assert_eq!(
+        kinds,
+        vec![EventKind::FaultRaised(flags::NTC_OPEN), EventKind::IceOnset]
+    );
+    assert!(w.alarm.get());
+    // With a working NTC at the same 12 °C it is water.
+    let (mut twin, tw) = common::node();
+    tw.set(|s| {
+        s.temp_c = 12.0;
+        s.signal_na = [3_000.0, 900.0];
+    });
+    for _ in 0..n {
+        step(&mut twin, &tw);
+    }
+    assert_eq!(twin.state(), DetectorState::Wet);
+    // The die "warms" to 30 °C: the alarm holds for 10 N frames.
+    w.set(|s| s.temp_c = 30.0);
+    for _ in 0..10 * n {
+        assert!(events(&step(&mut node, &w)).is_empty());
+    }
+    assert!(w.alarm.get());
+    // The film goes: cleared after M frames, on optics.
+    w.set(|s| s.signal_na = [0.0, 0.0]);
+    let m = u32::from(node.config().clear_frames);
+    let mut cleared = 0;
+    for i in 1..=m {
+        if events(&step(&mut node, &w))
+            .iter()
+            .any(|e| e.kind == EventKind::IceCleared)
+        {
+            cleared = i;
+        }
+    }
+    assert_eq!(cleared, m);
+    assert!(!w.alarm.get());
+}
+
+#[test]
+fn clock_fallback_is_a_fault_flag() {
+    let (mut node, w) = node();
+    node.set_clock_fallback(true);
+    let fs = step(&mut node, &w);
+    assert_ne!(measurement(&fs).flags & flags::CLOCK_FALLBACK, 0);
+    assert_eq!(
+        events(&fs)[0].kind,
+        EventKind::FaultRaised(flags::CLOCK_FALLBACK)
+    );
+    assert!(events(&step(&mut node, &w)).is_empty(), "raised once");
 }

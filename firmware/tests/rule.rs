@@ -14,6 +14,7 @@ fn frame(rise1_na: i32, temperature_centi_c: i16) -> RuleInput {
     RuleInput {
         rise1_na,
         temperature_centi_c,
+        air_known: true,
         valid: true,
     }
 }
@@ -282,6 +283,73 @@ fn extreme_inputs_do_not_panic() {
     feed(&mut r, &c, frame(i32::MAX, i16::MAX), 70_000);
 }
 
+/// An NTC fault: the air counts as cold (a film is ice, not water) and
+/// never as thawing (ice clears only when the film is gone).
+#[test]
+fn unknown_air_is_cold_and_never_thaws() {
+    let c = cfg();
+    let n = u32::from(c.onset_frames);
+    let m = u32::from(c.clear_frames);
+    let film = c.onset_rise_na as i32 + 1;
+    // A warm reading that would make the film water, but the NTC is broken
+    // (the node then reads the die, which runs warmer than the air).
+    let unknown = |rise1_na: i32| RuleInput {
+        air_known: false,
+        ..frame(rise1_na, 1_500)
+    };
+    let mut r = Rule::new();
+    let ev = feed(&mut r, &c, unknown(film), n);
+    assert_eq!(ev.len(), 1);
+    assert_eq!(ev[0].kind, EventKind::IceOnset);
+    assert_eq!(ev[0].frames, c.onset_frames);
+    // Its twin with a known 15 °C air is water.
+    let mut w = Rule::new();
+    let ev = feed(&mut w, &c, frame(film, 1_500), n);
+    assert_eq!(ev[0].kind, EventKind::WetOnset);
+    // Iced, the broken sensor reads "hot": no thaw-clearing, however long.
+    let hot = RuleInput {
+        air_known: false,
+        ..frame(film, 3_000)
+    };
+    assert!(feed(&mut r, &c, hot, 100 * n).is_empty());
+    assert_eq!(r.state(), DetectorState::Ice);
+    // The same reading with a working NTC clears by thaw after N frames.
+    let mut k = Rule::new();
+    feed(&mut k, &c, frame(film, 0), n);
+    let ev = feed(&mut k, &c, frame(film, 3_000), n);
+    assert_eq!(ev.len(), 1);
+    assert_eq!(
+        (ev[0].kind, ev[0].frames),
+        (EventKind::IceCleared, c.onset_frames)
+    );
+    // With the NTC broken the ice clears only when the film is gone (M frames).
+    let ev = feed(
+        &mut r,
+        &c,
+        RuleInput {
+            air_known: false,
+            ..frame(c.clear_rise_na as i32 - 1, 3_000)
+        },
+        m,
+    );
+    assert_eq!(ev.len(), 1);
+    assert_eq!(
+        (ev[0].kind, ev[0].to),
+        (EventKind::IceCleared, DetectorState::Dry)
+    );
+    assert_eq!(ev[0].frames, c.clear_frames);
+    // Wet (known air), then the NTC fails: the film is now ice.
+    let mut w = Rule::new();
+    feed(&mut w, &c, frame(film, 1_500), n);
+    assert_eq!(w.state(), DetectorState::Wet);
+    let ev = feed(&mut w, &c, unknown(film), n);
+    assert_eq!(ev.len(), 1);
+    assert_eq!(
+        (ev[0].kind, ev[0].to),
+        (EventKind::IceOnset, DetectorState::Ice)
+    );
+}
+
 mod property {
     use super::*;
     use proptest::prelude::*;
@@ -308,12 +376,16 @@ mod property {
                 -3_000..3_000i16
             ],
             prop::bool::weighted(0.95),
+            prop::bool::weighted(0.9),
         )
-            .prop_map(|(rise1_na, temperature_centi_c, valid)| RuleInput {
-                rise1_na,
-                temperature_centi_c,
-                valid,
-            })
+            .prop_map(
+                |(rise1_na, temperature_centi_c, valid, air_known)| RuleInput {
+                    rise1_na,
+                    temperature_centi_c,
+                    air_known,
+                    valid,
+                },
+            )
     }
 
     proptest! {
@@ -329,8 +401,9 @@ mod property {
             let c = Config { onset_frames: n, clear_frames: m, ..cfg() };
             let film = |f: &RuleInput| i64::from(f.rise1_na) > i64::from(c.onset_rise_na);
             let gone = |f: &RuleInput| i64::from(f.rise1_na) < i64::from(c.clear_rise_na);
-            let cold = |f: &RuleInput| f.temperature_centi_c <= c.freeze_limit_centi_c;
-            let thaw = |f: &RuleInput| f.temperature_centi_c > c.thaw_limit_centi_c;
+            // Unknown air (NTC fault) is cold and never thawing.
+            let cold = |f: &RuleInput| !f.air_known || f.temperature_centi_c <= c.freeze_limit_centi_c;
+            let thaw = |f: &RuleInput| f.air_known && f.temperature_centi_c > c.thaw_limit_centi_c;
             let mut r = Rule::new();
             let mut valid: Vec<RuleInput> = Vec::new();
             for f in frames {

@@ -354,6 +354,9 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
         obs.out.sent.push((id, 0.0));
         id += 1;
     }
+    // When each Reset reached the node (a frame due at the same instant
+    // runs first, so this can be a few ms after the command's time).
+    let mut resets: Vec<f64> = Vec::new();
     for c in &f.commands {
         node.advance_to(ns(c.at_s), &mut |b: &[u8]| obs.wire(b));
         obs.out.virtual_s = node.clock().now_s();
@@ -374,7 +377,10 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
                 frame_period_ms: c.frame_period_ms,
             },
             Send::StopStream => Command::StopStream,
-            Send::Reset => Command::Reset,
+            Send::Reset => {
+                resets.push(node.clock().now_s());
+                Command::Reset
+            }
         };
         let bytes = encode_to_vec(&HostFrame { id, cmd });
         node.handle_rx(&bytes, &mut |b: &[u8]| obs.wire(b));
@@ -385,12 +391,6 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
     let mut out = obs.out;
     out.virtual_s = node.clock().now_s();
     out.node_frames = node.frames();
-    let resets: Vec<f64> = f
-        .commands
-        .iter()
-        .filter(|c| c.send == Send::Reset)
-        .map(|c| c.at_s)
-        .collect();
     check_alarm_pin(&node, &resets, &mut out);
     out.wall = start.elapsed();
     Ok(out)

@@ -41,7 +41,9 @@ impl MonitorOptions {
             baud: fois_protocol::BAUD_RATE,
             log: None,
             duration: None,
-            handshake_timeout: Duration::from_secs(3),
+            // The node's `GetInfo` answer can wait behind its longest frame
+            // and a flash erase (3.4 s): the host's command timeout covers it.
+            handshake_timeout: Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS),
             plain: false,
             quiet: false,
         }

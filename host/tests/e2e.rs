@@ -572,6 +572,9 @@ fn virtual_node_state_file_keeps_the_config_across_restarts() {
     let mut node = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--state", st]);
     let (code, _, err) = foisctl(&["config", "set", "--port", &node.path, "onset_frames=17"]);
     assert_eq!(code, 0, "{err}");
+    // The node saves a change once no other came for 1 s of its time
+    // (0.1 s at --speed 10); wait well past that before pulling the plug.
+    std::thread::sleep(std::time::Duration::from_millis(600));
     node.kill9();
     assert!(std::fs::metadata(&state).unwrap().len() > 0);
     let node = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--state", st]);

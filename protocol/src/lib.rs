@@ -12,7 +12,7 @@ pub mod config;
 pub mod framing;
 pub mod messages;
 
-pub use config::{Config, ConfigError, ConfigField, FIELDS, FieldSpec};
+pub use config::{Config, ConfigError, ConfigField, FIELDS, FieldSpec, LOAD_R_MAX_OHM};
 #[cfg(any(feature = "std", test))]
 pub use framing::encode_to_vec;
 pub use framing::{
@@ -32,3 +32,12 @@ pub const OLDEST_READABLE_VERSION: u16 = 1;
 
 /// Baud rate of the node's UART link (ST-LINK virtual COM port), 8N1.
 pub const BAUD_RATE: u32 = 115_200;
+
+/// How long a host waits for the `Ack` or `Error` of a command, ms. The
+/// node answers every command within its worst case (`fois_firmware::
+/// reply_time::WORST_REPLY_MS`, 5.95 s: the command lands just as the node
+/// starts its longest frame and a save that erases a flash sector, and it
+/// is a dark calibration of four longest frames), which the firmware
+/// checks at compile time to stay below this with 2 s to spare for the
+/// host's own latency.
+pub const REPLY_TIMEOUT_MS: u64 = 8_000;

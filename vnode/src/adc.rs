@@ -7,7 +7,7 @@ use std::sync::Arc;
 use fois_firmware::PhotoAdc;
 
 use super::clock::{VirtualClock, VirtualPin};
-use super::environment::{Environment, Truth};
+use super::environment::{Environment, NtcWiring, Truth};
 use super::frontend::FrontEnd;
 
 /// `fois_firmware::PhotoAdc` on virtual hardware.
@@ -68,8 +68,12 @@ impl PhotoAdc for SimAdc {
     }
 
     fn read_ntc(&mut self) -> u16 {
-        let t = self.truth().air_temp_c;
-        self.frontend.ntc_code(t)
+        let t = self.truth();
+        match t.ntc {
+            NtcWiring::Connected => self.frontend.ntc_code(t.air_temp_c),
+            NtcWiring::Open => fois_firmware::hal::ADC_MAX,
+            NtcWiring::Short => 0,
+        }
     }
 
     fn read_vrefint(&mut self) -> u16 {
@@ -107,5 +111,25 @@ mod tests {
         assert_eq!(adc.read_photo(), [819, 137]);
         assert_eq!(clock.now_ns(), 2_000);
         assert_eq!(adc.conversions, 2);
+    }
+
+    #[test]
+    fn the_ntc_wiring_of_the_segment_sets_its_code() {
+        let tl = Timeline::new(vec![
+            Segment::new(1.0, Cover::Dry).temp(0.0),
+            Segment::new(1.0, Cover::Dry).temp(0.0).ntc(NtcWiring::Open),
+            Segment::new(1.0, Cover::Dry)
+                .temp(0.0)
+                .ntc(NtcWiring::Short),
+        ]);
+        let env = Arc::new(Environment::with_curves(tl, [], [0.0, 0.0]));
+        let clock = VirtualClock::new();
+        let mut adc = SimAdc::new(clock.clone(), VirtualPin::new(), env, 3);
+        // 0 °C: 33.6 kΩ against 10 kΩ → 3156.
+        assert_eq!(adc.read_ntc(), 3156);
+        clock.advance_to_ns(1_500_000_000);
+        assert_eq!(adc.read_ntc(), 4095);
+        clock.advance_to_ns(2_500_000_000);
+        assert_eq!(adc.read_ntc(), 0);
     }
 }

@@ -68,6 +68,31 @@ impl Cover {
     }
 }
 
+/// How the NTC (air temperature, PA4) is wired during a segment.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum NtcWiring {
+    /// Connected: the divider reads the air temperature.
+    #[default]
+    Connected,
+    /// Unplugged (or a broken lead): PA4 sits at 3V3 through the fixed
+    /// resistor, code 4095.
+    Open,
+    /// Shorted to GND: code 0.
+    Short,
+}
+
+impl NtcWiring {
+    /// Parse `connected|open|short`.
+    pub fn parse(s: &str) -> Option<NtcWiring> {
+        Some(match s.trim().to_ascii_lowercase().as_str() {
+            "connected" => NtcWiring::Connected,
+            "open" => NtcWiring::Open,
+            "short" => NtcWiring::Short,
+            _ => return None,
+        })
+    }
+}
+
 /// One stretch of constant conditions (temperature may ramp).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Segment {
@@ -95,6 +120,8 @@ pub struct Segment {
     pub led_factor_end: Option<f64>,
     /// ADC noise, rms LSB (Gaussian, per conversion).
     pub adc_noise_lsb: f64,
+    /// The NTC's wiring (fault injection: unplugged or shorted).
+    pub ntc: NtcWiring,
 }
 
 impl Segment {
@@ -114,7 +141,13 @@ impl Segment {
             led_factor: 1.0,
             led_factor_end: None,
             adc_noise_lsb: 1.0,
+            ntc: NtcWiring::Connected,
         }
+    }
+    /// The NTC unplugged, shorted or connected.
+    pub fn ntc(mut self, wiring: NtcWiring) -> Self {
+        self.ntc = wiring;
+        self
     }
     /// Accretion rate, mm/h.
     pub fn rate(mut self, mm_per_h: f64) -> Self {
@@ -265,6 +298,8 @@ pub struct Truth {
     pub led_factor: f64,
     /// ADC noise, rms LSB.
     pub adc_noise_lsb: f64,
+    /// The NTC's wiring.
+    pub ntc: NtcWiring,
 }
 
 /// Timeline + the simulator's curves for each medium in it.
@@ -378,6 +413,7 @@ impl Environment {
             ambient_ua,
             led_factor,
             adc_noise_lsb: seg.adc_noise_lsb.max(0.0),
+            ntc: seg.ntc,
         }
     }
 }

@@ -1,5 +1,7 @@
 //! The analog front end between light and ADC codes: load resistors (I·R_L),
-//! the V_DDA reference, 12-bit quantisation with saturation at full scale,
+//! the phototransistors' clip (the emitter never rises above V_DDA −
+//! V_CE(sat), ~3.05 V on 3.3 V: strong sun saturates the transistor well
+//! below the ADC's full scale), the V_DDA reference, 12-bit quantisation,
 //! Gaussian noise from a seeded stream; the NTC divider (10 kΩ NTC, B = 3950,
 //! to GND; 10 kΩ to 3V3 on PA4; ratiometric), VREFINT and the internal
 //! temperature sensor (from the factory calibration). The conversions are
@@ -21,6 +23,9 @@ pub struct FrontEnd {
     pub load_ohm: [f64; 2],
     /// Analog supply and ADC reference, V.
     pub vdda_v: f64,
+    /// V_CE(sat) of the phototransistors, V: their collectors sit on the
+    /// 3V3 rail (= V_DDA), so the emitter clips at `vdda_v − vce_sat_v`.
+    pub vce_sat_v: f64,
     /// The MCU's factory calibration (VREFINT, temperature sensor).
     pub cal: FactoryCal,
     /// Force the NTC code (fault injection: 4095 = open, 0 = short).
@@ -31,13 +36,14 @@ pub struct FrontEnd {
 }
 
 impl FrontEnd {
-    /// Defaults: R_L from `Config::default()`, V_DDA 3.3 V, typical
-    /// calibration; noise stream from `seed`.
+    /// Defaults: R_L from `Config::default()`, V_DDA 3.3 V, V_CE(sat)
+    /// 0.25 V, typical calibration; noise stream from `seed`.
     pub fn new(seed: u64) -> Self {
         let c = fois_protocol::Config::default();
         FrontEnd {
             load_ohm: [f64::from(c.load_r1_ohm), f64::from(c.load_r2_ohm)],
             vdda_v: CAL_VDDA_V,
+            vce_sat_v: codes::VCE_SAT_TYPICAL_V,
             cal: FactoryCal::TYPICAL,
             ntc_code_override: None,
             die_above_air_c: 0.0,
@@ -62,10 +68,17 @@ impl FrontEnd {
         codes::code(x)
     }
 
-    /// Codes of the two phototransistor channels for these currents, µA.
+    /// Codes of the two phototransistor channels for these currents, µA:
+    /// I·R_L, clipped at V_DDA − V_CE(sat) (`sim_board::codes::photo_volts`),
+    /// plus noise.
     pub fn photo_codes(&mut self, current_ua: [f64; 2], noise_lsb: f64) -> [u16; 2] {
         [0, 1].map(|k| {
-            let v = current_ua[k].max(0.0) * 1e-6 * self.load_ohm[k];
+            let v = codes::photo_volts(
+                current_ua[k] * 1e3,
+                self.load_ohm[k],
+                self.vdda_v,
+                self.vce_sat_v,
+            );
             self.quantise(v, noise_lsb)
         })
     }
@@ -105,10 +118,19 @@ mod tests {
         fe.load_ohm = [22_000.0; 2];
         // 30 µA × 22 kΩ = 0.66 V → 0.66/3.3 × 4095 = 819.
         assert_eq!(fe.photo_codes([30.0, 0.0], 0.0), [819, 0]);
-        // 200 µA × 22 kΩ = 4.4 V > V_DDA: full scale.
-        assert_eq!(fe.photo_codes([200.0, -5.0], 0.0), [4095, 0]);
+        // 200 µA × 22 kΩ = 4.4 V: the transistor saturates at
+        // 3.3 − 0.25 = 3.05 V → 3.05/3.3 × 4095 = 3784.8, not full scale.
+        assert_eq!(fe.photo_codes([200.0, -5.0], 0.0), [3785, 0]);
+        // Just below the clip it is still Ohm's law: 138 µA × 22 kΩ = 3.036 V.
+        assert_eq!(fe.photo_codes([138.0, 0.0], 0.0)[0], 3767);
         fe.vdda_v = 3.0;
         assert_eq!(fe.photo_codes([30.0, 0.0], 0.0)[0], 901);
+        // The clip follows the supply: 2.75 V of 3.0 V → 3753.75.
+        assert_eq!(fe.photo_codes([200.0, 0.0], 0.0)[0], 3754);
+        // Noise rides on the clipped level (it is the ADC's), and stays
+        // within a few codes of it.
+        let noisy = fe.photo_codes([200.0, 0.0], 2.0)[0];
+        assert!((3740..=3768).contains(&noisy), "{noisy}");
     }
 
     #[test]

@@ -6,19 +6,22 @@
 //! - [`environment`]: segments, the timeline, what the face sees at each instant.
 //! - [`frontend`]: light and temperature → ADC codes, with noise.
 //! - [`adc`]: the simulated ADC ([`fois_firmware::PhotoAdc`]).
+//! - [`flash`]: the board's store flash in RAM, stalling the virtual clock.
 //! - [`node`]: the virtual node, its options and its storage.
 //! - [`scenario`]: the TOML scenario format.
 
 pub mod adc;
 pub mod clock;
 pub mod environment;
+pub mod flash;
 pub mod frontend;
 pub mod node;
 pub mod scenario;
 
 pub use adc::SimAdc;
 pub use clock::{VirtualClock, VirtualDelay, VirtualPin};
-pub use environment::{Cover, Environment, Segment, Timeline, Truth};
+pub use environment::{Cover, Environment, NtcWiring, Segment, Timeline, Truth};
+pub use flash::VirtualFlash;
 pub use frontend::FrontEnd;
 pub use node::{FirmwareNode, NodeOptions, SharedStorage, VirtualNode};
 pub use scenario::Scenario;

@@ -1,72 +1,147 @@
 //! The virtual node: the firmware's own [`Node`] on virtual hardware, in
 //! virtual time. (`foisctl` serves it on a pseudo-terminal.)
 //!
-//! The runner does what the board's main loop does: a `Hello` at boot and
-//! every second until streaming starts, one frame every frame period, host
-//! bytes to `handle_rx`, and a fresh `Node` (same storage) after a `Reset`.
+//! The runner does what the board's main loop does, with the board's own
+//! code: the firmware's [`Schedule`] decides when `Hello` goes out and when
+//! a frame runs (the first poll at boot sends `Hello` and runs the first
+//! frame; a new stream period applies at once), a pending save runs when it
+//! comes due, host bytes go to `handle_rx`, and a `Reset` boots a fresh
+//! `Node` and a fresh `Schedule` on the same flash. The flash is the
+//! board's too: the firmware's [`FlashStore`] (sequential-storage) over a
+//! [`VirtualFlash`] (the firmware's `RamFlash` of the board's geometry, two
+//! 128 KiB sectors, whose erases stall the virtual clock as the board's do).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use std::sync::Mutex;
 
+use fois_firmware::flash_store::FlashStore;
+use fois_firmware::schedule::Schedule;
 use fois_firmware::{BoardInfo, MemStorage, Node, Storage, StorageError};
 use fois_protocol::ResetReason;
 
+use crate::flash::{FLASH_BYTES, VirtualFlash};
 use crate::{Environment, SimAdc, Truth, VirtualClock, VirtualDelay, VirtualPin};
 
 /// The firmware node on virtual hardware.
 pub type FirmwareNode =
     Node<SimAdc, VirtualPin, VirtualPin, VirtualPin, VirtualDelay, SharedStorage>;
 
-/// The node's flash record: RAM shared with the runner (so it survives a
-/// `Reset` and can be inspected), optionally mirrored to a file (so it
-/// survives the process, like flash survives a power cycle).
-#[derive(Debug, Clone)]
+/// The node's flash store: the board's [`FlashStore`] over a
+/// [`VirtualFlash`], shared with the runner (so it survives a `Reset` and
+/// can be inspected), optionally mirrored to a file (the raw flash image,
+/// so it survives the process, like flash survives a power cycle).
+#[derive(Clone)]
 pub struct SharedStorage {
-    mem: Arc<Mutex<MemStorage>>,
+    store: Arc<Mutex<FlashStore<VirtualFlash>>>,
     file: Option<PathBuf>,
 }
 
+impl std::fmt::Debug for SharedStorage {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SharedStorage")
+            .field("file", &self.file)
+            .finish_non_exhaustive()
+    }
+}
+
+fn flash_store(image: Vec<u8>) -> std::io::Result<FlashStore<VirtualFlash>> {
+    FlashStore::new(VirtualFlash::new(image, None), 0..FLASH_BYTES as u32)
+        .map_err(|e| std::io::Error::other(format!("flash store: {e:?}")))
+}
+
 impl SharedStorage {
-    /// RAM only, starting with `initial`.
+    /// Erased flash (a first boot), then `initial`'s record written to it
+    /// if it holds one.
     pub fn new(initial: MemStorage) -> Self {
+        Self::try_new(initial).unwrap_or_else(|_| SharedStorage::erased())
+    }
+
+    fn erased() -> Self {
+        // The geometry is the firmware's own; FlashStore::new cannot refuse it.
+        #[allow(clippy::expect_used)]
+        let store = flash_store(vec![0xFF; FLASH_BYTES]).expect("two whole pages");
         SharedStorage {
-            mem: Arc::new(Mutex::new(initial)),
+            store: Arc::new(Mutex::new(store)),
             file: None,
         }
     }
 
-    /// Backed by `path`: starts with its bytes (empty if it does not exist)
-    /// and rewrites it on every write.
+    fn try_new(mut initial: MemStorage) -> Result<Self, StorageError> {
+        let this = Self::erased();
+        let mut buf = [0u8; fois_firmware::persist::MAX_RECORD];
+        let n = initial.read(&mut buf)?;
+        if n > 0 {
+            let record = buf.get(..n).ok_or(StorageError::Read)?;
+            this.store
+                .lock()
+                .map_err(|_| StorageError::Write)?
+                .write(record)?;
+        }
+        Ok(this)
+    }
+
+    /// Backed by `path`: starts with its flash image (erased flash if the
+    /// file does not exist) and rewrites it after every save. A file that
+    /// is not a flash image of [`FLASH_BYTES`] bytes is an error (the node
+    /// would otherwise boot on defaults without a word).
     pub fn with_file(path: &Path) -> std::io::Result<Self> {
-        let initial = match std::fs::read(path) {
-            Ok(bytes) => MemStorage::with_bytes(&bytes),
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => MemStorage::new(),
+        let image = match std::fs::read(path) {
+            Ok(bytes) if bytes.len() == FLASH_BYTES => bytes,
+            Ok(bytes) => {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::InvalidData,
+                    format!(
+                        "{} bytes, not a flash image of {FLASH_BYTES} bytes",
+                        bytes.len()
+                    ),
+                ));
+            }
+            Err(e) if e.kind() == std::io::ErrorKind::NotFound => vec![0xFF; FLASH_BYTES],
             Err(e) => return Err(e),
         };
         Ok(SharedStorage {
-            mem: Arc::new(Mutex::new(initial)),
+            store: Arc::new(Mutex::new(flash_store(image)?)),
             file: Some(path.to_path_buf()),
         })
     }
 
-    /// A copy of the record now.
+    /// The newest record now (empty storage if there is none or the flash
+    /// holds no readable record).
     pub fn snapshot(&self) -> MemStorage {
-        self.mem.lock().map(|m| m.clone()).unwrap_or_default()
+        let mut buf = [0u8; fois_firmware::persist::MAX_RECORD];
+        let n = self
+            .store
+            .lock()
+            .ok()
+            .and_then(|mut s| s.read(&mut buf).ok())
+            .unwrap_or(0);
+        MemStorage::with_bytes(buf.get(..n).unwrap_or(&[]))
+    }
+
+    /// From now on every erase and write stalls `clock` as the board's
+    /// flash stalls its CPU.
+    pub fn stall_on(&self, clock: &VirtualClock) {
+        self.with_flash(|f| f.set_clock(Some(clock.clone())));
+    }
+
+    /// Run `f` on the flash (to read its counters or damage it in a test).
+    pub fn with_flash<T>(&self, f: impl FnOnce(&mut VirtualFlash) -> T) -> Option<T> {
+        self.store.lock().ok().map(|mut s| f(s.flash_mut()))
     }
 }
 
 impl Storage for SharedStorage {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, StorageError> {
-        self.mem.lock().map_err(|_| StorageError::Read)?.read(buf)
+        self.store.lock().map_err(|_| StorageError::Read)?.read(buf)
     }
 
     fn write(&mut self, data: &[u8]) -> Result<(), StorageError> {
-        let mut mem = self.mem.lock().map_err(|_| StorageError::Write)?;
-        mem.write(data)?;
+        let mut store = self.store.lock().map_err(|_| StorageError::Write)?;
+        store.write(data)?;
         if let Some(path) = &self.file {
-            std::fs::write(path, mem.bytes()).map_err(|_| StorageError::Write)?;
+            std::fs::write(path, store.flash_mut().bytes()).map_err(|_| StorageError::Write)?;
         }
         Ok(())
     }
@@ -79,7 +154,8 @@ pub struct NodeOptions {
     pub seed: u64,
     /// Board name in `Hello`.
     pub board: &'static str,
-    /// Initial storage (config + baseline record); empty = defaults.
+    /// Initial record (config + baseline), written to the erased flash
+    /// before boot; empty = a first boot (defaults).
     pub storage: MemStorage,
     /// Keep the storage in this file instead (loaded if it exists, rewritten
     /// on every write; `storage` is then ignored).
@@ -110,9 +186,7 @@ pub struct VirtualNode {
     indicator: VirtualPin,
     env: Arc<Environment>,
     opts: NodeOptions,
-    next_frame_ns: u64,
-    next_hello_ns: u64,
-    booted: bool,
+    schedule: Schedule,
     resets: u32,
     frames: u64,
     storage: SharedStorage,
@@ -169,14 +243,16 @@ impl VirtualNode {
         let indicator = VirtualPin::with_clock(clock.clone());
         let storage = match &opts.state_file {
             Some(p) => SharedStorage::with_file(p).unwrap_or_else(|_| {
-                // Unreadable state: start empty, writes will report failure.
+                // Unreadable state (the CLI refuses it before this): erased
+                // flash; saves try to rewrite the file.
                 SharedStorage {
-                    mem: Arc::new(Mutex::new(MemStorage::new())),
                     file: Some(p.clone()),
+                    ..SharedStorage::erased()
                 }
             }),
             None => SharedStorage::new(opts.storage.clone()),
         };
+        storage.stall_on(&clock);
         let hw = Hardware {
             clock: &clock,
             led: &led,
@@ -193,9 +269,7 @@ impl VirtualNode {
             indicator,
             env,
             opts,
-            next_frame_ns: 0,
-            next_hello_ns: 0,
-            booted: false,
+            schedule: Schedule::new(),
             resets: 0,
             frames: 0,
             storage,
@@ -246,6 +320,11 @@ impl VirtualNode {
         &self.led
     }
 
+    /// The node's flash store (shared with the node).
+    pub fn shared_storage(&self) -> &SharedStorage {
+        &self.storage
+    }
+
     /// The node's persisted record now (config + baseline).
     pub fn storage(&self) -> MemStorage {
         self.storage.snapshot()
@@ -261,21 +340,31 @@ impl VirtualNode {
         self.resets
     }
 
-    /// Virtual time of the next frame, ns.
+    /// Virtual time of the next frame, ns (now, before the first poll).
     pub fn next_frame_ns(&self) -> u64 {
-        self.next_frame_ns
-    }
-
-    /// The earliest virtual time something is due (frame or hello), ns.
-    pub fn next_due_ns(&self) -> u64 {
-        if !self.booted {
+        if self.schedule == Schedule::new() {
             return self.clock.now_ns();
         }
-        if self.node().is_streaming() {
-            self.next_frame_ns
-        } else {
-            self.next_frame_ns.min(self.next_hello_ns)
+        self.schedule.next_wake_ms(true).saturating_mul(NS_PER_MS)
+    }
+
+    /// The schedule the node runs on (the board's: `fois_firmware::schedule`).
+    pub fn schedule(&self) -> &Schedule {
+        &self.schedule
+    }
+
+    /// The earliest virtual time something is due (frame, `Hello` or a
+    /// pending save), ns; now before the first poll (boot).
+    pub fn next_due_ns(&self) -> u64 {
+        if self.schedule == Schedule::new() {
+            return self.clock.now_ns();
         }
+        let streaming = self.node.is_streaming();
+        let mut wake_ms = self.schedule.next_wake_ms(streaming);
+        if let Some(save_ms) = self.node.save_due_ms() {
+            wake_ms = wake_ms.min(save_ms);
+        }
+        wake_ms.saturating_mul(NS_PER_MS)
     }
 
     /// Bytes from the host.
@@ -285,16 +374,23 @@ impl VirtualNode {
         self.after_commands(tx);
     }
 
-    /// The user button.
+    /// The user button (then the main loop polls again, as on the board).
     pub fn press_button(&mut self, tx: &mut impl FnMut(&[u8])) {
         let now = self.clock.now_ms();
         self.node_mut().button_pressed(now, tx);
+        self.poll(tx);
     }
 
     fn after_commands(&mut self, tx: &mut impl FnMut(&[u8])) {
         if self.node_mut().take_reset_request() {
             // A fresh node on the same (shared) storage, as after a reset.
             self.resets += 1;
+            // The chip's reset puts every GPIO back to its reset state at
+            // once: LED, alarm output and LD2 are off before the new node
+            // runs its first frame.
+            for pin in [&mut self.led, &mut self.alarm, &mut self.indicator] {
+                let Ok(()) = embedded_hal::digital::OutputPin::set_low(pin);
+            }
             let hw = Hardware {
                 clock: &self.clock,
                 led: &self.led,
@@ -308,38 +404,43 @@ impl VirtualNode {
                 ResetReason::Software,
                 self.storage.clone(),
             );
-            self.booted = false;
-            self.boot(tx);
+            // The board reboots: a fresh schedule, whose first poll sends
+            // Hello and runs the first frame.
+            self.schedule = Schedule::new();
+        }
+        // The board's link task wakes the main loop after every command
+        // (a new period, a StopStream's Hello, a Reset apply from now).
+        self.poll(tx);
+    }
+
+    /// One pass of the board's main loop at the current virtual time: what
+    /// the schedule says is due, else a pending save that came due.
+    fn poll(&mut self, tx: &mut impl FnMut(&[u8])) {
+        let now_ms = self.clock.now_ms();
+        let streaming = self.node.is_streaming();
+        let period_ms = self.node.frame_period_ms();
+        let due = self.schedule.poll(now_ms, streaming, period_ms);
+        if due.hello {
+            self.node.send_hello(tx);
+        }
+        if due.frame {
+            // Runs the pending save too, after the frame.
+            self.run_one_frame(tx);
+        } else {
+            self.node.poll_storage(now_ms);
         }
     }
 
-    fn boot(&mut self, tx: &mut impl FnMut(&[u8])) {
-        self.booted = true;
-        let now = self.clock.now_ns();
-        self.node_mut().send_hello(tx);
-        self.next_hello_ns = now + 1_000 * NS_PER_MS;
-        self.next_frame_ns = now + u64::from(self.node().frame_period_ms()) * NS_PER_MS;
-    }
-
-    /// Run everything due up to virtual time `t_ns` (frames, hellos, the
-    /// boot-time calibration); the clock ends at `t_ns` or later.
+    /// Run everything due up to virtual time `t_ns` (frames, hellos, saves,
+    /// the boot-time calibration); the clock ends at `t_ns` or later.
     pub fn advance_to(&mut self, t_ns: u64, tx: &mut impl FnMut(&[u8])) {
-        if !self.booted {
-            self.boot(tx);
-        }
         loop {
             let due = self.next_due_ns();
             if due > t_ns {
                 break;
             }
             self.clock.advance_to_ns(due);
-            if !self.node().is_streaming() && self.next_hello_ns <= due {
-                self.node_mut().send_hello(tx);
-                self.next_hello_ns = due + 1_000 * NS_PER_MS;
-            }
-            if self.next_frame_ns <= due {
-                self.run_one_frame(tx);
-            }
+            self.poll(tx);
         }
         self.clock.advance_to_ns(t_ns);
     }
@@ -350,7 +451,8 @@ impl VirtualNode {
             let at_ns = (at * 1e9) as u64;
             if start >= at_ns && self.truth().cover == crate::Cover::Dry {
                 self.opts.calibrate_at_s = None;
-                self.press_button(tx);
+                let now = self.clock.now_ms();
+                self.node.button_pressed(now, tx);
             } else if start >= at_ns {
                 self.opts.calibrate_at_s = None;
             }
@@ -358,12 +460,6 @@ impl VirtualNode {
         let now_ms = self.clock.now_ms();
         self.node_mut().run_frame(now_ms, tx);
         self.frames += 1;
-        let period = u64::from(self.node().frame_period_ms().max(1)) * NS_PER_MS;
-        // Frames start on a fixed grid (as the board's ticker does).
-        self.next_frame_ns = self.next_frame_ns.max(start) + period;
-        if self.next_frame_ns <= self.clock.now_ns() {
-            self.next_frame_ns = self.clock.now_ns() + period;
-        }
     }
 
     /// Run until virtual time `t_s`.
@@ -371,12 +467,13 @@ impl VirtualNode {
         self.advance_to((t_s * 1e9) as u64, tx);
     }
 
-    /// Run exactly one more frame (jumping the clock to it).
+    /// Run exactly one more frame (jumping the clock to it; `Hello`s and
+    /// saves due before it happen on the way).
     pub fn step_frame(&mut self, tx: &mut impl FnMut(&[u8])) {
-        if !self.booted {
-            self.boot(tx);
+        let before = self.frames;
+        while self.frames == before {
+            let t = self.next_due_ns();
+            self.advance_to(t, tx);
         }
-        let t = self.next_frame_ns;
-        self.advance_to(t, tx);
     }
 }

@@ -26,11 +26,12 @@
 //! led_factor_end = 0.7        # LED output -30 % over the segment
 //! adc_noise_lsb = 1.0
 //! thickness_mm = 2.0          # set the thickness at the start (optional)
+//! ntc = "open"                # connected | open | short (default connected)
 //! ```
 
 use serde::Deserialize;
 
-use super::environment::{Cover, Segment, Timeline};
+use super::environment::{Cover, NtcWiring, Segment, Timeline};
 use fois_sim::SensorKind;
 
 /// A parsed scenario.
@@ -83,6 +84,8 @@ pub struct SegmentSpec {
     pub adc_noise_lsb: Option<f64>,
     /// Thickness at the segment's start, mm (default: carried over).
     pub thickness_mm: Option<f64>,
+    /// The NTC's wiring: connected | open | short (default connected).
+    pub ntc: Option<String>,
 }
 
 /// A segment's length: seconds, or `"inf"`.
@@ -157,6 +160,10 @@ pub fn timeline(specs: Vec<SegmentSpec>) -> Result<Timeline, String> {
         seg.led_factor_end = finite(s.led_factor_end, "led_factor_end", 0.0, 10.0)?;
         seg.adc_noise_lsb = finite(s.adc_noise_lsb, "adc_noise_lsb", 0.0, 500.0)?.unwrap_or(1.0);
         seg.start_thickness_mm = finite(s.thickness_mm, "thickness_mm", 0.0, 15.0)?;
+        if let Some(w) = &s.ntc {
+            seg.ntc = NtcWiring::parse(w)
+                .ok_or_else(|| at(&format!("ntc = \"{w}\": expected connected, open or short")))?;
+        }
         segs.push(seg);
     }
     Ok(Timeline::new(segs))
@@ -201,6 +208,8 @@ mod tests {
         assert_eq!(segs[1].led_factor_end, Some(0.7));
         assert_eq!(segs[1].ambient_ua, [20.0, 10.0]);
         assert_eq!(segs[1].start_thickness_mm, Some(2.0));
+        assert_eq!(segs[0].ntc, NtcWiring::Connected);
+        assert_eq!(segs[1].ntc, NtcWiring::Open);
     }
 
     #[test]
@@ -214,6 +223,9 @@ mod tests {
         let e =
             parse("[[segment]]\nduration_s = 1\ncover = \"rime\"\nair_temp_c = 300\n").unwrap_err();
         assert!(e.contains("air_temp_c"), "{e}");
+        let e =
+            parse("[[segment]]\nduration_s = 1\ncover = \"dry\"\nntc = \"loose\"\n").unwrap_err();
+        assert!(e.contains("segment 1") && e.contains("loose"), "{e}");
         let ok = parse("[[segment]]\nduration_s = \"inf\"\ncover = \"rime\"\nrate_mm_per_h = 3\n")
             .unwrap();
         assert_eq!(ok.timeline.segments()[0].duration_s, f64::INFINITY);

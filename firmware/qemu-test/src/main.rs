@@ -2,9 +2,11 @@
 //! emulated Cortex-M4F: QEMU `mps2-an386`, semihosting for output and the
 //! exit code, `-icount shift=0` for exact, repeatable instruction counts.
 //!
-//! 1. Tests: NTC/VREFINT maths on the real FPU, the persisted record, the ice
-//!    rule, and the whole `Node` on a simulated board (currents, ambient
-//!    flicker, ice onset → alarm pin + event, commands in, garbage in).
+//! 1. Tests: NTC/VREFINT maths on the real FPU, the persisted record, the
+//!    flash store (sequential-storage through `block_on` on a RAM flash, with
+//!    a power cut mid-save), the ice rule, and the whole `Node` on a
+//!    simulated board (currents, ambient flicker, ice onset → alarm pin +
+//!    event, commands in, garbage in).
 //! 2. A measurement loop that counts the instructions of one output frame:
 //!    SysTick runs from the core clock and QEMU drives it from the virtual
 //!    clock, which under `-icount shift=0` advances exactly 1 ns per guest
@@ -25,8 +27,10 @@ use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hprintln};
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::{ErrorType, OutputPin};
-use fois_firmware::hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc};
+use fois_firmware::flash_store::FlashStore;
+use fois_firmware::hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc, Storage};
 use fois_firmware::node::Node;
+use fois_firmware::ram_flash::{PowerCut, RamFlash};
 use fois_firmware::rule::{Rule, RuleInput};
 use fois_firmware::sim_board::{self, SimBoard};
 use fois_firmware::{ntc, persist, vref};
@@ -204,11 +208,74 @@ fn t_persist() -> TestResult {
     Ok(())
 }
 
+/// The config store as the board runs it: sequential-storage's async map
+/// driven by `block_on` over a blocking flash, here 2 × 1 KiB of RAM. Saves
+/// go round both pages; a power cut in the middle of a save leaves the old
+/// record, and the store saves again after the "reboot".
+fn t_flash_store() -> TestResult {
+    static mut MEM: [u8; 2048] = [0xFF; 2048];
+    // SAFETY: the only reference to MEM, taken once in this test.
+    let mem: &'static mut [u8; 2048] = unsafe { &mut *core::ptr::addr_of_mut!(MEM) };
+    let flash: RamFlash<&mut [u8], 1024, 2> = RamFlash::new(&mut mem[..]);
+    let Ok(mut st) = FlashStore::new(flash, 0..2048) else {
+        check!(false, "    layout");
+        return Ok(());
+    };
+    let mut buf = [0u8; persist::MAX_RECORD];
+    check!(st.read(&mut buf) == Ok(0), "    erased = empty");
+    let record = |k: u32| {
+        let rec = persist::Record {
+            config: Config {
+                onset_rise_na: 1_000 + k,
+                ..Config::default()
+            },
+            baseline: None,
+        };
+        let mut b = [0u8; persist::MAX_RECORD];
+        let n = persist::encode(&rec, &mut b);
+        (b, n)
+    };
+    for k in 0..60 {
+        let (b, n) = record(k);
+        check!(st.write(&b[..n]).is_ok(), "    save {}", k);
+    }
+    let mut flash = st.into_flash();
+    check!(
+        flash.counters().erases >= 2,
+        "    erases {}",
+        flash.counters().erases
+    );
+    // Cut 20 bytes into the next save.
+    flash.cut_power(PowerCut::AfterBytes(20));
+    let Ok(mut st) = FlashStore::new(flash, 0..2048) else {
+        return Ok(());
+    };
+    let (b, n) = record(60);
+    check!(st.write(&b[..n]).is_err(), "    the cut save failed");
+    let mut flash = st.into_flash();
+    flash.power_on();
+    let Ok(mut st) = FlashStore::new(flash, 0..2048) else {
+        return Ok(());
+    };
+    let (old, n_old) = record(59);
+    let got = st.read(&mut buf);
+    check!(
+        got == Ok(n_old) && buf[..n_old] == old[..n_old],
+        "    old record after the cut: {:?}",
+        got
+    );
+    check!(st.write(&b[..n]).is_ok(), "    saves again");
+    let got = st.read(&mut buf);
+    check!(got == Ok(n) && buf[..n] == b[..n], "    new record");
+    Ok(())
+}
+
 fn t_rule() -> TestResult {
     let c = Config::default();
     let cold = RuleInput {
         rise1_na: c.onset_rise_na as i32 + 1,
         temperature_centi_c: c.freeze_limit_centi_c,
+        air_known: true,
         valid: true,
     };
     let mut r = Rule::new();
@@ -440,9 +507,10 @@ fn main() -> ! {
     cp.SYST.enable_interrupt();
     cp.SYST.enable_counter();
 
-    let tests: [Test; 6] = [
+    let tests: [Test; 7] = [
         ("ntc_and_vref", t_ntc_and_vref),
         ("persist", t_persist),
+        ("flash_store", t_flash_store),
         ("rule", t_rule),
         ("node_currents_and_commands", t_node_currents_and_commands),
         (

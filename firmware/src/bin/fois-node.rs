@@ -1,8 +1,9 @@
 //! The embassy application for the NUCLEO-F446RE. Only this file and its
 //! board module touch the HAL; all the logic is `fois_firmware::node::Node`.
 //!
-//! Tasks: `measure` (runs a frame every frame period, feeds the watchdog,
-//! sends `Hello` every second until streaming starts), `uart_rx` (bytes →
+//! Tasks: `measure` (the library's `Schedule`: `Hello` at boot and every
+//! second until streaming, a frame every frame period, pending saves; feeds
+//! the watchdog), `uart_rx` (bytes →
 //! `Node::handle_rx`), `uart_tx` (frame bytes → USART2) and `button` (B1 →
 //! `Node::button_pressed`). The node sits in one mutex; frames go to the
 //! transmitter through a byte pipe, and a frame that does not fit is dropped
@@ -23,36 +24,44 @@ mod app {
     use embassy_stm32::flash::Flash;
     use embassy_stm32::gpio::{Level, Output, Pull, Speed};
     use embassy_stm32::usart::{self, BufferedUart, BufferedUartRx, BufferedUartTx};
-    use embassy_stm32::wdg::IndependentWatchdog;
     use embassy_stm32::{bind_interrupts, interrupt, peripherals};
     use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
     use embassy_sync::mutex::Mutex;
     use embassy_sync::pipe::Pipe;
-    use embassy_time::{Delay, Duration, Instant, Timer};
+    use embassy_sync::signal::Signal;
+    use embassy_time::{Instant, Timer};
     use embedded_io_async::{Read, Write};
+    use fois_firmware::flash_store::FlashStore;
     use fois_firmware::hal::BoardInfo;
     use fois_firmware::node::Node;
+    use fois_firmware::schedule::Schedule;
+    use fois_firmware::watchdog::MAX_SLEEP_MS;
     use panic_probe as _;
 
-    use crate::board::{self, BoardAdc, FlashStorage};
+    use crate::board::{self, BoardAdc, BoardFlash, FeedingDelay, Watchdog};
 
     bind_interrupts!(struct Irqs {
         USART2 => usart::BufferedInterruptHandler<peripherals::USART2>;
         EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
     });
 
-    type BoardNode =
-        Node<BoardAdc, Output<'static>, Output<'static>, Output<'static>, Delay, FlashStorage>;
+    type BoardNode = Node<
+        BoardAdc,
+        Output<'static>,
+        Output<'static>,
+        Output<'static>,
+        FeedingDelay,
+        FlashStore<BoardFlash>,
+    >;
 
     static NODE: Mutex<ThreadModeRawMutex, Option<BoardNode>> = Mutex::new(None);
     /// Encoded frames waiting for the UART.
     static TX: Pipe<ThreadModeRawMutex, 1024> = Pipe::new();
-
-    /// Independent watchdog timeout: longer than a flash sector erase (≤ 2 s)
-    /// plus the longest frame (K = 64 × 2 × 5 ms = 0.65 s), short enough to
-    /// recover a hung node quickly.
-    const WATCHDOG_US: u32 = 4_000_000;
-    const HELLO_EVERY_MS: u64 = 1_000;
+    /// Raised by the link and the button after the node took a command: the
+    /// measurement loop polls the schedule again at once, so a new stream
+    /// period, a `StopStream`'s first `Hello`, a `Reset` and a save come
+    /// due from now, not from the wake-up planned before the command.
+    static COMMANDED: Signal<ThreadModeRawMutex, ()> = Signal::new();
 
     /// Queue one whole frame for the UART, or drop it whole if there is no room.
     fn queue(frame: &[u8]) {
@@ -74,15 +83,23 @@ mod app {
 
     #[embassy_executor::main]
     async fn main(spawner: Spawner) {
-        let p = embassy_stm32::init(Default::default());
+        // Probe the ST-LINK's 8 MHz before embassy's clock setup (which
+        // would wait for it for ever), then run on it or on HSI.
+        let hse = board::hse_bypass_present();
+        let p = embassy_stm32::init(board::clock_config(hse));
+        // The watchdog runs from here on; the flash store feeds it before
+        // each sector erase, the settle waits in every frame.
+        let wdg = Watchdog::start(p.IWDG);
         let reset_reason = board::take_reset_reason();
         defmt::info!(
-            "fois-node up, reset reason {=str}",
-            board::reset_reason_name(reset_reason)
+            "fois-node up, reset reason {=str}, clock {=str}",
+            board::reset_reason_name(reset_reason),
+            if hse {
+                "HSE 8 MHz bypass"
+            } else {
+                "HSI (HSE missing)"
+            }
         );
-
-        let mut wdg = IndependentWatchdog::new(p.IWDG, WATCHDOG_US);
-        wdg.unleash();
 
         let info = BoardInfo {
             board: board::BOARD_NAME,
@@ -94,8 +111,13 @@ mod app {
         let led = Output::new(p.PB0, Level::Low, Speed::Low);
         let alarm = Output::new(p.PA9, Level::Low, Speed::Low);
         let ld2 = Output::new(p.PA5, Level::Low, Speed::Low);
-        let storage = FlashStorage::new(Flash::new_blocking(p.FLASH));
-        let node = Node::new(adc, led, alarm, ld2, Delay, storage, info);
+        let flash = BoardFlash::new(Flash::new_blocking(p.FLASH), wdg);
+        let storage = match FlashStore::new(flash, BoardFlash::RANGE) {
+            Ok(s) => s,
+            Err(_) => defmt::panic!("flash store: sectors 6-7 are not two equal pages"),
+        };
+        let mut node = Node::new(adc, led, alarm, ld2, FeedingDelay { wdg }, storage, info);
+        node.set_clock_fallback(!hse);
         *NODE.lock().await = Some(node);
 
         let mut config = usart::Config::default();
@@ -128,42 +150,46 @@ mod app {
         }
     }
 
-    /// The measurement loop: one frame per frame period on a fixed grid,
-    /// `Hello` at boot and every second while not streaming, the watchdog fed
-    /// at least every `MAX_SLEEP` (frame periods go up to 10 min).
-    async fn measure(mut wdg: IndependentWatchdog<'static, peripherals::IWDG>) -> ! {
-        const MAX_SLEEP: Duration = Duration::from_millis(500);
-        let hello_every = Duration::from_millis(HELLO_EVERY_MS);
-        let mut next_frame = Instant::now();
-        let mut next_hello = Instant::now();
-        let mut booted = false;
+    /// The measurement loop, on the library's `Schedule` (the same one the
+    /// virtual node runs): `Hello` at boot and every second until
+    /// streaming, frames on a fixed grid, pending saves when due, the
+    /// watchdog fed at least every `MAX_SLEEP_MS` (periods go up to 10 min).
+    async fn measure(wdg: Watchdog) -> ! {
+        let mut schedule = Schedule::new();
+        let mut bor_checked = false;
         loop {
-            let (wake, reset) = {
+            let (wake_ms, reset) = {
                 let mut guard = NODE.lock().await;
                 let Some(node) = guard.as_mut() else {
                     defmt::panic!("node missing")
                 };
-                let now = Instant::now();
-                // Hello at boot and every second until streaming starts.
-                if now >= next_hello && (!booted || !node.is_streaming()) {
+                let now = now_ms();
+                let streaming = node.is_streaming();
+                let due = schedule.poll(now, streaming, node.frame_period_ms());
+                if due.hello {
                     node.send_hello(&mut queue);
-                    next_hello = now + hello_every;
                 }
-                booted = true;
-                let period = Duration::from_millis(u64::from(node.frame_period_ms()));
-                if now >= next_frame {
-                    node.run_frame(now.as_millis(), &mut queue);
-                    next_frame += period;
-                    if next_frame < now {
-                        // Overran (flash erase, long calibration): restart the grid.
-                        next_frame = now + period;
+                if due.frame {
+                    // Runs the pending save too, after the frame.
+                    node.run_frame(now, &mut queue);
+                    if let Some(m) = node.last_measurement() {
+                        board::LAST_VDDA_MV.store(m.vdda_mv, core::sync::atomic::Ordering::Relaxed);
+                        if !bor_checked {
+                            bor_checked = true;
+                            if board::ensure_bor_level(m.vdda_mv, wdg) {
+                                defmt::info!("brown-out reset level set to 3");
+                            }
+                        }
                     }
+                } else {
+                    node.poll_storage(now);
                 }
-                // A shorter period (StartStream) takes effect at once.
-                next_frame = next_frame.min(now + period);
-                let mut wake = next_frame.min(now + MAX_SLEEP);
-                if !node.is_streaming() {
-                    wake = wake.min(next_hello);
+                let streaming = node.is_streaming();
+                let mut wake = schedule
+                    .next_wake_ms(streaming)
+                    .min(now.saturating_add(u64::from(MAX_SLEEP_MS)));
+                if let Some(save) = node.save_due_ms() {
+                    wake = wake.min(save);
                 }
                 (wake, node.take_reset_request())
             };
@@ -173,7 +199,11 @@ mod app {
                 Timer::after_millis(100).await;
                 cortex_m::peripheral::SCB::sys_reset();
             }
-            Timer::at(wake).await;
+            embassy_futures::select::select(
+                Timer::at(Instant::from_millis(wake_ms)),
+                COMMANDED.wait(),
+            )
+            .await;
         }
     }
 
@@ -199,6 +229,7 @@ mod app {
                     if let (Some(node), Some(bytes)) = (guard.as_mut(), buf.get(..n)) {
                         node.handle_rx(bytes, now_ms(), &mut queue);
                     }
+                    COMMANDED.signal(());
                 }
                 // Framing/noise/overrun: the bytes are lost; the decoder resyncs.
                 Err(_) => Timer::after_millis(1).await,
@@ -217,6 +248,7 @@ mod app {
                 if let Some(node) = guard.as_mut() {
                     node.button_pressed(now_ms(), &mut queue);
                 }
+                COMMANDED.signal(());
             }
             button.wait_for_high().await;
             Timer::after_millis(30).await;

@@ -5,18 +5,25 @@
 
 use std::rc::Rc;
 
-use fois_firmware::hal::MemStorage;
+use fois_firmware::hal::{MemStorage, Storage};
 use fois_firmware::sim_board::{self, SimBoard};
 use fois_protocol::{DeviceFrame, FrameDecoder, HostFrame, encode_to_vec};
 
 /// The board a test drives: clock, output levels, scene.
 pub type World = Rc<SimBoard>;
 
-/// The node on a [`World`].
-pub type SimNode = sim_board::SimNode<World, MemStorage>;
+/// The node on a [`World`] with [`MemStorage`].
+pub type SimNode = NodeOn<MemStorage>;
+/// The node on a [`World`] with storage `S`.
+pub type NodeOn<S> = sim_board::SimNode<World, S>;
 
 /// A node on a fresh world with this storage.
 pub fn node_with(storage: MemStorage) -> (SimNode, World) {
+    node_on(storage)
+}
+
+/// A node on a fresh world with any storage.
+pub fn node_on<S: Storage>(storage: S) -> (NodeOn<S>, World) {
     let w = World::default();
     (sim_board::sim_node(w.clone(), storage, "sim"), w)
 }
@@ -33,17 +40,31 @@ pub fn frames(bytes: &[u8]) -> Vec<DeviceFrame> {
     out
 }
 
+/// Run frames until the node has saved what it had pending (at most 30 s of
+/// frames); returns the frames sent.
+pub fn run_until_saved<S: Storage>(node: &mut NodeOn<S>, w: &World) -> Vec<DeviceFrame> {
+    let mut out = Vec::new();
+    for _ in 0..300 {
+        if !node.save_pending() {
+            break;
+        }
+        out.extend(step(node, w));
+    }
+    assert!(!node.save_pending(), "the save never came");
+    out
+}
+
 /// Run one frame and return the frames it sent; the clock then moves to the
 /// end of the frame period.
-pub fn step(node: &mut SimNode, w: &World) -> Vec<DeviceFrame> {
+pub fn step<S: Storage>(node: &mut NodeOn<S>, w: &World) -> Vec<DeviceFrame> {
     let mut bytes = Vec::new();
     w.run_frame(node, &mut |b| bytes.extend_from_slice(b));
     frames(&bytes)
 }
 
 /// Send one command; return the frames answered.
-pub fn command(
-    node: &mut SimNode,
+pub fn command<S: Storage>(
+    node: &mut NodeOn<S>,
     w: &World,
     id: u16,
     cmd: fois_protocol::Command,

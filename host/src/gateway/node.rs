@@ -24,10 +24,13 @@ use super::config::NodeSpec;
 
 /// Wait between reconnection attempts.
 pub const RETRY_INTERVAL: Duration = Duration::from_millis(500);
-/// Time allowed for the handshake.
-pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_secs(3);
-/// Time a node has to answer a command from MQTT.
-pub const COMMAND_TIMEOUT: Duration = Duration::from_secs(5);
+/// Time allowed for the handshake: the node's `GetInfo` answer can queue
+/// behind its longest frame and a flash erase (3.4 s).
+pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS);
+/// Time a node has to answer a command from MQTT: the protocol's
+/// `REPLY_TIMEOUT_MS` (8 s), over the node's worst answer (5.955 s, a dark
+/// calibration behind the longest frame and an erasing save).
+pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS);
 
 /// A command from MQTT for the node.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

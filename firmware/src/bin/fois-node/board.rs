@@ -1,13 +1,23 @@
 //! The NUCLEO-F446RE board module: the only code that knows the STM32. It
-//! implements the library's seams with embassy-stm32 (ADC, flash) and reads
-//! the chip's identity (unique id, factory calibration, reset reason).
+//! implements the library's seams with embassy-stm32 (ADC, flash as
+//! `NorFlash`), reads the chip's identity (unique id, factory calibration,
+//! reset reason), and owns the field-safety parts that need registers: the
+//! watchdog, the HSE-bypass probe, the brown-out level, the erase at x32.
 //! Porting to another STM32 means rewriting this file.
+
+use core::sync::atomic::{AtomicU16, Ordering};
 
 use embassy_stm32::Peri;
 use embassy_stm32::adc::{Adc, SampleTime, Temperature, VrefInt};
-use embassy_stm32::flash::{Blocking, Flash};
-use embassy_stm32::peripherals::{ADC1, PA0, PA1, PA4};
-use fois_firmware::hal::{FactoryCal, PhotoAdc, Storage, StorageError};
+use embassy_stm32::flash::{Blocking, Error as FlashError, Flash};
+use embassy_stm32::pac;
+use embassy_stm32::pac::flash::vals::Psize;
+use embassy_stm32::pac::iwdg::vals::{Key, Pr};
+use embassy_stm32::peripherals::{ADC1, IWDG, PA0, PA1, PA4};
+use embedded_hal::delay::DelayNs;
+use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
+use fois_firmware::hal::{FactoryCal, PhotoAdc};
+use fois_firmware::watchdog;
 use fois_protocol::ResetReason;
 
 /// Board name sent in `Hello`.
@@ -17,12 +27,6 @@ pub const BOARD_NAME: &str = "NUCLEO-F446RE";
 const VREFINT_CAL_ADDR: usize = 0x1FFF_7A2A;
 const TS_CAL1_ADDR: usize = 0x1FFF_7A2C;
 const TS_CAL2_ADDR: usize = 0x1FFF_7A2E;
-
-/// Flash sector 7: 128 KiB at 0x0806_0000, kept out of the program by memory.x.
-const STORAGE_OFFSET: u32 = 0x0006_0000;
-const STORAGE_SIZE: u32 = 0x0002_0000;
-/// Flash is programmed in words.
-const WRITE_SIZE: usize = 4;
 
 /// The factory calibration values.
 pub fn factory_cal() -> FactoryCal {
@@ -114,8 +118,11 @@ impl BoardAdc {
     }
 }
 
-// ADC clock: PCLK2 16 MHz / 2 = 8 MHz. 56 cycles = 7 µs sampling, enough for
-// the 10 kΩ load resistors; the internal channels need ≥ 10 µs (112 cycles).
+// ADC clock: PCLK2 16 MHz / 2 = 8 MHz. 56 cycles = 7 µs sampling: settles
+// sources up to 96 kΩ to ¼ LSB (RM0390 / datasheet eq. 1 with C_ADC = 7 pF,
+// R_ADC = 6 kΩ), which is why the config rule caps the load resistors at
+// fois_protocol::LOAD_R_MAX_OHM = 90 kΩ. The internal channels need ≥ 10 µs
+// (112 cycles).
 const PHOTO_SAMPLE: SampleTime = SampleTime::CYCLES56;
 const NTC_SAMPLE: SampleTime = SampleTime::CYCLES84;
 const INTERNAL_SAMPLE: SampleTime = SampleTime::CYCLES144;
@@ -138,53 +145,271 @@ impl PhotoAdc for BoardAdc {
     }
 }
 
-/// The config/baseline record in flash sector 7.
-pub struct FlashStorage {
+// ---- Watchdog ----
+
+/// The independent watchdog, programmed through the PAC with the prescaler
+/// and reload of `fois_firmware::watchdog` (timeout ≥ 8.17 s at the fastest
+/// LSI, see there). Zero-sized and `Copy`, so the flash erase and the
+/// settle waits can feed it too.
+#[derive(Clone, Copy)]
+pub struct Watchdog(());
+
+impl Watchdog {
+    /// Program and start the IWDG (it cannot be stopped again). In debug
+    /// builds it is frozen while a debugger halts the core
+    /// (DBGMCU_APB1_FZ.DBG_IWDG_STOP), so stepping through code does not
+    /// reset the chip; release images leave it running.
+    pub fn start(_iwdg: Peri<'static, IWDG>) -> Self {
+        if cfg!(debug_assertions) {
+            pac::DBGMCU.apb1fzr().modify(|w| w.set_iwdg(true));
+        }
+        let iwdg = pac::IWDG;
+        iwdg.kr().write(|w| w.set_key(Key::ENABLE));
+        iwdg.pr()
+            .write(|w| w.set_pr(Pr::from_bits(watchdog::IWDG_PR)));
+        iwdg.rlr().write(|w| w.set_rl(watchdog::IWDG_RELOAD));
+        iwdg.kr().write(|w| w.set_key(Key::START));
+        Watchdog(())
+    }
+
+    /// Reload the counter.
+    pub fn pet(self) {
+        pac::IWDG.kr().write(|w| w.set_key(Key::RESET));
+    }
+}
+
+/// Settle waits that feed the watchdog: a dark calibration (four frames of
+/// up to 0.64 s) or a long frame never starves it.
+pub struct FeedingDelay {
+    pub wdg: Watchdog,
+}
+
+impl DelayNs for FeedingDelay {
+    fn delay_ns(&mut self, ns: u32) {
+        self.wdg.pet();
+        embassy_time::Delay.delay_ns(ns);
+    }
+}
+
+// ---- Clock ----
+
+/// How long the 8 MHz from the ST-LINK (MCO, into PH0/OSC_IN through the
+/// NUCLEO's default solder bridges) may take to show HSERDY, in 1 ms steps.
+/// A bypass clock that is there is ready at once; ST's HAL waits 100 ms.
+const HSE_PROBE_MS: u32 = 100;
+
+/// Try the external clock (HSE bypass) with the chip still on HSI after
+/// reset. embassy-stm32 0.6 spins on HSERDY without a timeout, so a board
+/// without the ST-LINK clock (the ST-LINK part cut off, SB changed) would
+/// hang there: probe first, then choose the config.
+pub fn hse_bypass_present() -> bool {
+    let rcc = pac::RCC;
+    rcc.cr().modify(|w| w.set_hseon(false));
+    rcc.cr().modify(|w| w.set_hsebyp(true));
+    rcc.cr().modify(|w| w.set_hseon(true));
+    for _ in 0..HSE_PROBE_MS {
+        if rcc.cr().read().hserdy() {
+            return true;
+        }
+        // 16 000 cycles of the 16 MHz HSI = 1 ms.
+        cortex_m::asm::delay(16_000);
+    }
+    rcc.cr().modify(|w| w.set_hseon(false));
+    rcc.cr().modify(|w| w.set_hsebyp(false));
+    false
+}
+
+/// The clock config: SYSCLK 16 MHz either way (so the ADC clock, sample
+/// times and baud divider are the same). With the 8 MHz HSE: PLL 8 / 4 × 64
+/// / 8 = 16 MHz (VCO input 2 MHz, VCO 128 MHz, both in range); without it
+/// embassy's default, HSI 16 MHz (±1 % at 25 °C, −8 / +4.5 % over
+/// −40…105 °C, beyond the UART's ±3.5 %: hence the CLOCK_FALLBACK flag).
+pub fn clock_config(hse: bool) -> embassy_stm32::Config {
+    use embassy_stm32::rcc::{Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllSource, Sysclk};
+    let mut config = embassy_stm32::Config::default();
+    if hse {
+        config.rcc.hse = Some(Hse {
+            freq: embassy_stm32::time::Hertz(8_000_000),
+            mode: HseMode::Bypass,
+        });
+        config.rcc.pll_src = PllSource::HSE;
+        config.rcc.pll = Some(Pll {
+            prediv: PllPreDiv::DIV4,
+            mul: PllMul::MUL64,
+            divp: Some(PllPDiv::DIV8),
+            divq: None,
+            divr: None,
+        });
+        config.rcc.sys = Sysclk::PLL1_P;
+    }
+    config
+}
+
+// ---- Brown-out reset ----
+
+/// BOR level 3 (OPTCR.BOR_LEV = 0b00): reset below ≈ 2.7 V, so flash is
+/// only ever erased or programmed at x32 within its 2.7–3.6 V range and
+/// the analogue front end never runs on a sagging rail. The factory value
+/// is "off" (0b11: only the ≈ 1.7 V power-on reset).
+const BOR_LEVEL_3: u8 = 0b00;
+/// Program the option bytes only on a supply this healthy, mV.
+const BOR_PROGRAM_MIN_VDDA_MV: u16 = 3_000;
+
+/// Set the brown-out level once: the option bytes are written only when
+/// they differ (the first boot of a board; never at every boot), only on a
+/// healthy supply, with the watchdog fed first. Returns true if written
+/// (the level applies from the next reset). The write rewrites the whole
+/// option word; a power cut in those milliseconds could leave RDP at
+/// level 1 (read protection, recoverable by a probe's mass erase), which is
+/// why it happens at most once per board.
+pub fn ensure_bor_level(vdda_mv: u16, wdg: Watchdog) -> bool {
+    let flash = pac::FLASH;
+    if flash.optcr().read().bor_lev() == BOR_LEVEL_3 || vdda_mv < BOR_PROGRAM_MIN_VDDA_MV {
+        return false;
+    }
+    wdg.pet();
+    while flash.sr().read().bsy() {}
+    if flash.optcr().read().optlock() {
+        flash.optkeyr().write_value(0x0819_2A3B);
+        flash.optkeyr().write_value(0x4C5D_6E7F);
+    }
+    flash.optcr().modify(|w| w.set_bor_lev(BOR_LEVEL_3));
+    flash.optcr().modify(|w| w.set_optstrt(true));
+    while flash.sr().read().bsy() {}
+    flash.optcr().modify(|w| w.set_optlock(true));
+    true
+}
+
+// ---- Flash: the config store ----
+
+/// The store's two sectors: 6 and 7, 0x0804_0000..0x0808_0000 (memory.x
+/// keeps the program in sectors 0–5).
+const STORE_OFFSET: u32 = 0x0004_0000;
+const STORE_SECTOR_BYTES: u32 = fois_firmware::flash_store::BOARD_SECTOR_BYTES as u32;
+const STORE_FIRST_SECTOR: u8 = 6;
+const STORE_SECTORS: u32 = 2;
+/// x32 parallelism needs V_DD ≥ 2.7 V (RM0390, program/erase parallelism).
+const X32_MIN_VDDA_MV: u16 = 2_700;
+
+/// The V_DDA of the last frame, mV (0 before the first one): chooses the
+/// erase parallelism.
+pub static LAST_VDDA_MV: AtomicU16 = AtomicU16::new(0);
+
+/// Sectors 6 and 7 as one `NorFlash` of two 128 KiB pages (offset 0 =
+/// 0x0804_0000). Reads and programming go through embassy-stm32 (which
+/// programs at x32); erases through the PAC at x32 (x16 below 2.7 V or
+/// before the first V_DDA reading), because embassy-stm32 0.6 leaves PSIZE
+/// at x8 for erases (up to 4 s per sector instead of 2 s). The watchdog is
+/// fed right before each sector erase.
+pub struct BoardFlash {
     flash: Flash<'static, Blocking>,
+    wdg: Watchdog,
 }
 
-impl FlashStorage {
+impl BoardFlash {
     /// Take the flash controller.
-    pub fn new(flash: Flash<'static, Blocking>) -> Self {
-        FlashStorage { flash }
+    pub fn new(flash: Flash<'static, Blocking>, wdg: Watchdog) -> Self {
+        BoardFlash { flash, wdg }
+    }
+
+    /// The store's range in this flash's addresses.
+    pub const RANGE: core::ops::Range<u32> = 0..STORE_SECTORS * STORE_SECTOR_BYTES;
+
+    fn erase_sector(&mut self, snb: u8) -> Result<(), FlashError> {
+        let psize = if LAST_VDDA_MV.load(Ordering::Relaxed) >= X32_MIN_VDDA_MV {
+            Psize::PSIZE32
+        } else {
+            Psize::PSIZE16
+        };
+        let flash = pac::FLASH;
+        self.wdg.pet();
+        while flash.sr().read().bsy() {}
+        if flash.cr().read().lock() {
+            flash.keyr().write_value(0x4567_0123);
+            flash.keyr().write_value(0xCDEF_89AB);
+        }
+        // Clear old error flags (write 1 to clear).
+        flash.sr().write(|w| {
+            w.set_eop(true);
+            w.set_operr(true);
+            w.set_wrperr(true);
+            w.set_pgaerr(true);
+            w.set_pgperr(true);
+            w.set_pgserr(true);
+        });
+        flash.cr().write(|w| {
+            w.set_ser(true);
+            w.set_snb(snb);
+            w.set_psize(psize);
+        });
+        flash.cr().modify(|w| w.set_strt(true));
+        // The CPU stalls here on its next instruction fetch until the erase
+        // ends (one bank): 1–2 s at x32.
+        while flash.sr().read().bsy() {}
+        let sr = flash.sr().read();
+        flash.cr().write(|w| w.set_ser(false));
+        flash.cr().modify(|w| w.set_lock(true));
+        // Stale lines of the erased sector must not be served from the data
+        // cache (if anything enabled it).
+        if flash.acr().read().dcen() {
+            flash.acr().modify(|w| w.set_dcen(false));
+            flash.acr().modify(|w| w.set_dcrst(true));
+            flash.acr().modify(|w| w.set_dcrst(false));
+            flash.acr().modify(|w| w.set_dcen(true));
+        }
+        self.wdg.pet();
+        if sr.pgserr() {
+            Err(FlashError::Seq)
+        } else if sr.pgperr() {
+            Err(FlashError::Parallelism)
+        } else if sr.pgaerr() {
+            Err(FlashError::Unaligned)
+        } else if sr.wrperr() {
+            Err(FlashError::Protected)
+        } else {
+            Ok(())
+        }
     }
 }
 
-impl Storage for FlashStorage {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, StorageError> {
-        let n = buf.len().min(STORAGE_SIZE as usize);
-        let dst = buf.get_mut(..n).ok_or(StorageError::Read)?;
-        self.flash
-            .blocking_read(STORAGE_OFFSET, dst)
-            .map_err(|_| StorageError::Read)?;
-        Ok(n)
-    }
+impl ErrorType for BoardFlash {
+    type Error = FlashError;
+}
 
-    fn write(&mut self, data: &[u8]) -> Result<(), StorageError> {
-        // Pad to whole words with 0xFF (what erased flash reads anyway).
-        let mut buf = [0xFFu8; 256];
-        let padded = data.len().div_ceil(WRITE_SIZE) * WRITE_SIZE;
-        buf.get_mut(..data.len())
-            .ok_or(StorageError::TooLarge)?
-            .copy_from_slice(data);
-        let words = buf.get(..padded).ok_or(StorageError::TooLarge)?;
-        // Erasing the 128 KiB sector takes 1–2 s (the CPU stalls on flash
-        // reads meanwhile); the watchdog timeout allows for it.
-        self.flash
-            .blocking_erase(STORAGE_OFFSET, STORAGE_OFFSET + STORAGE_SIZE)
-            .map_err(|_| StorageError::Write)?;
-        self.flash
-            .blocking_write(STORAGE_OFFSET, words)
-            .map_err(|_| StorageError::Write)?;
-        // Read back: a write that does not verify is a failure.
-        let mut check = [0u8; 256];
-        let back = check.get_mut(..padded).ok_or(StorageError::TooLarge)?;
-        self.flash
-            .blocking_read(STORAGE_OFFSET, back)
-            .map_err(|_| StorageError::Read)?;
-        if back != words {
-            return Err(StorageError::Write);
+impl ReadNorFlash for BoardFlash {
+    const READ_SIZE: usize = 1;
+    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
+        self.flash.blocking_read(STORE_OFFSET + offset, bytes)
+    }
+    fn capacity(&self) -> usize {
+        (STORE_SECTORS * STORE_SECTOR_BYTES) as usize
+    }
+}
+
+impl NorFlash for BoardFlash {
+    const WRITE_SIZE: usize = 4;
+    const ERASE_SIZE: usize = STORE_SECTOR_BYTES as usize;
+
+    fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
+        if !from.is_multiple_of(STORE_SECTOR_BYTES) || !to.is_multiple_of(STORE_SECTOR_BYTES) {
+            return Err(FlashError::Unaligned);
+        }
+        if from > to || to > STORE_SECTORS * STORE_SECTOR_BYTES {
+            return Err(FlashError::Size);
+        }
+        let mut at = from;
+        while at < to {
+            let snb = STORE_FIRST_SECTOR + (at / STORE_SECTOR_BYTES) as u8;
+            self.erase_sector(snb)?;
+            at += STORE_SECTOR_BYTES;
         }
         Ok(())
+    }
+
+    fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
+        if offset.saturating_add(bytes.len() as u32) > STORE_SECTORS * STORE_SECTOR_BYTES {
+            return Err(FlashError::Size);
+        }
+        self.flash.blocking_write(STORE_OFFSET + offset, bytes)
     }
 }

@@ -1,0 +1,50 @@
+//! How long the node may take to answer a command, worst case: the figure
+//! behind the host's command timeout (`fois_protocol::REPLY_TIMEOUT_MS`).
+//!
+//! On the board the node sits in one mutex. A command whose last byte
+//! arrives just as the measure loop takes it waits for
+//! - the longest frame the config rule allows ([`LONGEST_FRAME_MS`]),
+//! - a save that comes due after that frame and must erase a 128 KiB
+//!   sector first (x16 worst case, [`ERASE_128K_X16_MAX_MS`]: the board
+//!   erases at x32 from the first frame on at V_DDA ≥ 2.7 V, x16 below),
+//!   plus the item's programming and read-back ([`SAVE_PROGRAM_MAX_MS`]).
+//!
+//! Then it runs itself: a dark calibration measures [`CAL_FRAMES`] longest
+//! frames before its `Ack` (any other command answers at once), which then
+//! queues behind at most a full transmit pipe ([`TX_QUEUE_MAX_MS`]). (The
+//! save a command causes is deferred and coalesced: it never delays the
+//! command's own answer.)
+
+use crate::node::CAL_FRAMES;
+use crate::watchdog::{ERASE_128K_X16_MAX_MS, LONGEST_FRAME_MS};
+
+/// Programming one record item and reading it back, ms (a ~50-byte item
+/// at ≤ 100 µs per 32-bit word, RM0390 t_PROG, with room).
+pub const SAVE_PROGRAM_MAX_MS: u32 = 50;
+/// The board's transmit pipe (1 KiB) drained at 115 200 Bd, 10 bits a
+/// byte: 89 ms, rounded up.
+pub const TX_QUEUE_MAX_MS: u32 = 90;
+/// The worst time from a command's last byte to the first byte of its
+/// answer, ms (5 955 ms).
+pub const WORST_REPLY_MS: u32 = LONGEST_FRAME_MS
+    + ERASE_128K_X16_MAX_MS
+    + SAVE_PROGRAM_MAX_MS
+    + CAL_FRAMES as u32 * LONGEST_FRAME_MS
+    + TX_QUEUE_MAX_MS;
+
+// The host waits longer than the node can take, with 2 s for the host's own
+// latency (USB-serial, scheduling).
+const _: () = assert!(WORST_REPLY_MS as u64 + 2_000 <= fois_protocol::REPLY_TIMEOUT_MS);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_worst_reply_and_the_host_timeout() {
+        assert_eq!(WORST_REPLY_MS, 643 + 2_600 + 50 + 4 * 643 + 90);
+        // 5.955 s: longer than the host's former 3 s timeout.
+        assert_eq!(WORST_REPLY_MS, 5_955);
+        assert_eq!(fois_protocol::REPLY_TIMEOUT_MS, 8_000);
+    }
+}
