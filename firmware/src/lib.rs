@@ -6,11 +6,13 @@
 //! - [`hal`]: the hardware seams ([`hal::PhotoAdc`], [`hal::Storage`], board info).
 //! - [`node::Node`]: the whole node behind them.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
+//! - [`estimator`]: ice thickness ± σ and medium (grid Bayes filter on the simulator's table).
 #![cfg_attr(not(test), no_std)]
 #![deny(missing_docs)]
 #![deny(clippy::unwrap_used, clippy::expect_used)]
 
 pub mod dispatch;
+pub mod estimator;
 pub mod hal;
 pub mod measure;
 pub mod node;

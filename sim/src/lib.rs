@@ -4,6 +4,7 @@
 //! * [`accretion_curve`]: one physical accretion, currents I1(d), I2(d) in µA.
 //! * [`analytic`]: the conventional overlap model (thesis §2.1, §3.3).
 //! * [`montecarlo`]: mean μ(d), covariance Σ(d), fits and the Cramér–Rao bound (§5.4).
+//! * [`table`]: the node estimator's response table (μ, Σ per medium, fixed point, Rust source).
 #![warn(missing_docs)]
 
 pub mod analytic;
@@ -12,6 +13,7 @@ pub mod geometry;
 pub mod laws;
 pub mod model;
 pub mod montecarlo;
+pub mod table;
 
 pub use analytic::analytic_curve;
 pub use geometry::{Geometry, Region};
