@@ -31,14 +31,20 @@ fn main() {
             let max = if kind == IceKind::Water { 3.0 } else { 11.0 };
             let mut run = Run::new(
                 seed,
-                vec![Segment::dry(60.0, temp), Segment::grow(kind, 0.0, max, rate, temp)],
+                vec![
+                    Segment::dry(60.0, temp),
+                    Segment::grow(kind, 0.0, max, rate, temp),
+                ],
             );
             run.led = led;
             run.frame_s = frame_s;
             let frames = simulate(&run, params);
             st.add(&frames, 0.05);
         }
-        println!("== {name}: {seeds} seeds, {:.1} s", t0.elapsed().as_secs_f64());
+        println!(
+            "== {name}: {seeds} seeds, {:.1} s",
+            t0.elapsed().as_secs_f64()
+        );
         for d in TARGETS_MM {
             if let Some((bias, rms, sig, n)) = st.at(d) {
                 println!(
@@ -70,7 +76,13 @@ pub fn trace(args: &[String]) {
     let seed: u64 = args[5].parse().unwrap();
     let led: f64 = args.get(6).and_then(|s| s.parse().ok()).unwrap_or(1.0);
     let max = if kind == IceKind::Water { 3.0 } else { 11.0 };
-    let mut run = Run::new(seed, vec![Segment::dry(60.0, temp), Segment::grow(kind, 0.0, max, rate, temp)]);
+    let mut run = Run::new(
+        seed,
+        vec![
+            Segment::dry(60.0, temp),
+            Segment::grow(kind, 0.0, max, rate, temp),
+        ],
+    );
     run.led = led;
     run.frame_s = 1.0;
     let frames = simulate(&run, EstimatorParams::default());
@@ -78,8 +90,16 @@ pub fn trace(args: &[String]) {
         if let Some(e) = f.est {
             println!(
                 "t {:6.0} d {:6.2} x ({:6.2},{:6.2}) est {:6.2} ± {:5.2}  p dry {:.3} water {:.3} glazed {:.3} rime {:.3}",
-                f.t_s, f.thickness_mm, f.currents_ua[0], f.currents_ua[1], e.thickness_mm, e.sigma_mm,
-                e.p_medium[0], e.p_medium[1], e.p_medium[2], e.p_medium[3]
+                f.t_s,
+                f.thickness_mm,
+                f.currents_ua[0],
+                f.currents_ua[1],
+                e.thickness_mm,
+                e.sigma_mm,
+                e.p_medium[0],
+                e.p_medium[1],
+                e.p_medium[2],
+                e.p_medium[3]
             );
         }
     }

@@ -56,6 +56,7 @@
 //! Frames without currents (saturated, invalid, an outlier that fits no
 //! state) still predict and forget: the estimate widens instead of freezing.
 
+mod fast_math;
 #[rustfmt::skip]
 pub mod table;
 
@@ -184,8 +185,18 @@ impl EstimatorParams {
         let d = EstimatorParams::default();
         EstimatorParams {
             forget_time_s: within(self.forget_time_s, 0.1, 86_400.0, d.forget_time_s),
-            max_growth_mm_per_h: within(self.max_growth_mm_per_h, 0.0, 1_000.0, d.max_growth_mm_per_h),
-            max_shrink_mm_per_h: within(self.max_shrink_mm_per_h, 0.0, 1_000.0, d.max_shrink_mm_per_h),
+            max_growth_mm_per_h: within(
+                self.max_growth_mm_per_h,
+                0.0,
+                1_000.0,
+                d.max_growth_mm_per_h,
+            ),
+            max_shrink_mm_per_h: within(
+                self.max_shrink_mm_per_h,
+                0.0,
+                1_000.0,
+                d.max_shrink_mm_per_h,
+            ),
             shed_per_h: within(self.shed_per_h, 0.0, 3_600.0, d.shed_per_h),
             switch_per_h: within(self.switch_per_h, 0.0, 3_600.0, d.switch_per_h),
             noise_ua: [
@@ -274,39 +285,94 @@ fn softplus(x: f32) -> f32 {
     }
 }
 
-/// Per-frame constants of the measurement model.
-struct Frame {
-    x: [f32; 2],
-    r: [f32; 2],
+/// Covariance C = Σ + R + g²μμᵀ of a state, nA² (c₁₁, c₁₂, c₂₂), and μ, nA.
+#[inline(always)]
+fn covariance(e: &TableEntry, r_na2: [f32; 2], g2: f32) -> ([f32; 2], [f32; 3]) {
+    let mu = [f32::from(e.mu_na[0]), f32::from(e.mu_na[1])];
+    let s1 = f32::from(e.sd_na[0]);
+    let s2 = f32::from(e.sd_na[1]);
+    let rho = f32::from(e.rho_q15) * (1.0 / 32767.0);
+    let c11 = s1 * s1 + r_na2[0] + g2 * mu[0] * mu[0];
+    let c22 = s2 * s2 + r_na2[1] + g2 * mu[1] * mu[1];
+    let c12 = rho * s1 * s2 + g2 * mu[0] * mu[1];
+    (mu, [c11, c12, c22])
+}
+
+/// det C, never below r₁r₂ (|ρ| < 1 and R > 0 make it so; rounding may not).
+#[inline(always)]
+fn det(c: [f32; 3], r_na2: [f32; 2]) -> f32 {
+    let d = c[0] * c[2] - c[1] * c[1];
+    let floor = r_na2[0] * r_na2[1];
+    if d > floor { d } else { floor }
+}
+
+/// Squared Mahalanobis distance of `x` from N(μ, C), nA.
+#[inline(always)]
+fn distance2(x: [f32; 2], mu: [f32; 2], c: [f32; 3], det: f32) -> f32 {
+    let e1 = x[0] - mu[0];
+    let e2 = x[1] - mu[1];
+    (c[2] * e1 * e1 - 2.0 * c[1] * e1 * e2 + c[0] * e2 * e2) / det
+}
+
+/// What stays fixed between frames for a given set of parameters: the
+/// measurement noise and gain terms, and ½ ln det C of every state.
+#[derive(Debug, Clone)]
+struct Model {
+    r_na2: [f32; 2],
     g2: f32,
+    half_ln_det_dry: f32,
+    half_ln_det: [[f32; ROWS]; 3],
 }
 
-impl Frame {
-    /// ln N(x; μ, C) + ln 2π and the squared Mahalanobis distance.
-    #[inline]
-    fn log_lik(&self, mu: [f32; 2], sd: [f32; 2], rho: f32) -> (f32, f32) {
-        let c11 = sd[0] * sd[0] + self.r[0] + self.g2 * mu[0] * mu[0];
-        let c22 = sd[1] * sd[1] + self.r[1] + self.g2 * mu[1] * mu[1];
-        let c12 = rho * sd[0] * sd[1] + self.g2 * mu[0] * mu[1];
-        // C = Σ + R + g²μμᵀ with |ρ| < 1 and R > 0: det ≥ r₁r₂ > 0.
-        let det = (c11 * c22 - c12 * c12).max(self.r[0] * self.r[1]);
-        let e1 = self.x[0] - mu[0];
-        let e2 = self.x[1] - mu[1];
-        let q = (c22 * e1 * e1 - 2.0 * c12 * e1 * e2 + c11 * e2 * e2) / det;
-        (-0.5 * (q + libm::logf(det)), q)
+impl Model {
+    fn new(p: &EstimatorParams) -> Self {
+        let r_na2 = [
+            (p.noise_ua[0] * 1000.0) * (p.noise_ua[0] * 1000.0),
+            (p.noise_ua[1] * 1000.0) * (p.noise_ua[1] * 1000.0),
+        ];
+        let g2 = p.gain_sd * p.gain_sd;
+        let mut half_ln_det = [[0.0; ROWS]; 3];
+        for (k, row) in half_ln_det.iter_mut().enumerate() {
+            for (h, e) in row.iter_mut().zip(table_of(k).iter()) {
+                let (_, c) = covariance(e, r_na2, g2);
+                *h = 0.5 * libm::logf(det(c, r_na2));
+            }
+        }
+        Model {
+            r_na2,
+            g2,
+            half_ln_det_dry: 0.5 * libm::logf(r_na2[0] * r_na2[1]),
+            half_ln_det,
+        }
     }
 
-    fn entry(&self, e: &TableEntry) -> (f32, f32) {
-        let mu = [f32::from(e.mu_na[0]) * 1e-3, f32::from(e.mu_na[1]) * 1e-3];
-        let sd = [f32::from(e.sd_na[0]) * 1e-3, f32::from(e.sd_na[1]) * 1e-3];
-        self.log_lik(mu, sd, f32::from(e.rho_q15) * (1.0 / 32767.0))
+    /// ln N(x; μ, C) + ln 2π of row `i` of medium `k`, and the squared distance.
+    #[inline(always)]
+    fn log_lik(&self, x: [f32; 2], e: &TableEntry, half_ln_det: f32) -> (f32, f32) {
+        let (mu, c) = covariance(e, self.r_na2, self.g2);
+        let q = distance2(x, mu, c, det(c, self.r_na2));
+        (-0.5 * q - half_ln_det, q)
+    }
+
+    /// The same for the dry face: N(0, R).
+    fn log_lik_dry(&self, x: [f32; 2]) -> (f32, f32) {
+        let q = x[0] * x[0] / self.r_na2[0] + x[1] * x[1] / self.r_na2[1];
+        (-0.5 * q - self.half_ln_det_dry, q)
     }
 }
 
-/// The grid Bayes filter. ~1.8 KiB: one `f32` per state.
+/// Log-probability given back to states the filter had ruled out when the
+/// currents fit only those (relative to the best state), nats: such a state
+/// is then unlikely but reachable, and the evidence decides within ~τ.
+const REBIRTH_NATS: f32 = 25.0;
+
+/// The grid Bayes filter: one `f32` per state (~0.9 KiB) and ½ ln det C per
+/// state (~0.9 KiB).
 #[derive(Debug, Clone)]
 pub struct Estimator {
     params: EstimatorParams,
+    model: Model,
+    /// Probability of each state, unnormalised (the largest is 1).
     dry: f32,
     cells: [[f32; ROWS]; 3],
     /// ln of the normalising sum of the water prior exp(−d/scale).
@@ -333,10 +399,11 @@ impl Estimator {
             sum += libm::expf(-row_mm(i) / params.water_scale_mm);
         }
         Estimator {
+            model: Model::new(&params),
             params,
             dry: 0.0,
             cells: [[0.0; ROWS]; 3],
-            water_log_norm: libm::logf(sum.max(f32::MIN_POSITIVE)),
+            water_log_norm: libm::logf(if sum > 0.0 { sum } else { 1.0 }),
             initialised: false,
             air_temp_c: None,
             update: Update::Waiting,
@@ -351,7 +418,12 @@ impl Estimator {
 
     /// Forget everything: the next valid frame starts afresh.
     pub fn reset(&mut self) {
-        *self = Estimator::new(self.params);
+        self.dry = 0.0;
+        self.cells = [[0.0; ROWS]; 3];
+        self.initialised = false;
+        self.air_temp_c = None;
+        self.update = Update::Waiting;
+        self.posterior = None;
     }
 
     /// What the last step did.
@@ -369,7 +441,8 @@ impl Estimator {
         self.posterior.map(|p| p.ice_estimate())
     }
 
-    /// Probability of each state: (dry, [medium][row]) (tests, plots).
+    /// The filtered optical evidence of every state, unnormalised, before
+    /// the prior and the temperature: (dry, [medium][row]) (tests, plots).
     pub fn cells(&self) -> (f32, &[[f32; ROWS]; 3]) {
         (self.dry, &self.cells)
     }
@@ -385,78 +458,133 @@ impl Estimator {
         air_temp_c: Option<f32>,
     ) -> Option<IceEstimate> {
         let dt_s = within(dt_s, 0.0, MAX_DT_S, 0.0);
-        let x = currents_ua.filter(|x| x.iter().all(|v| v.is_finite() && v.abs() <= MAX_CURRENT_UA));
-        let t = air_temp_c.filter(|t| t.is_finite()).map(|t| t.clamp(-100.0, 200.0));
-        let p = self.params;
-        let frame = x.map(|x| Frame {
-            x,
-            r: [p.noise_ua[0] * p.noise_ua[0], p.noise_ua[1] * p.noise_ua[1]],
-            g2: p.gain_sd * p.gain_sd,
-        });
-        self.air_temp_c = t;
+        let x = currents_ua
+            .filter(|x| x.iter().all(|v| v.is_finite() && v.abs() <= MAX_CURRENT_UA))
+            .map(|x| [x[0] * 1000.0, x[1] * 1000.0]);
+        self.air_temp_c = air_temp_c
+            .filter(|t| t.is_finite())
+            .map(|t| t.clamp(-100.0, 200.0));
+        if !self.initialised {
+            return self.initialise(x);
+        }
+        self.predict(dt_s);
 
-        // Log-likelihood of every state (0 without currents) and the best fit.
-        let mut ln_l = [[0.0f32; ROWS]; 3];
-        let mut ln_l_dry = 0.0;
-        let mut best_q = 0.0f32;
-        if let Some(f) = &frame {
-            let (l, q) = f.log_lik([0.0; 2], [0.0; 2], 0.0);
-            ln_l_dry = l;
-            best_q = q;
-            for (k, row) in ln_l.iter_mut().enumerate() {
-                for (out, e) in row.iter_mut().zip(table_of(k).iter()) {
-                    let (l, q) = f.entry(e);
-                    *out = l;
-                    best_q = best_q.min(q);
+        // Tempered update: ℓ = α ln p̂ + (1 − α) ln L, and the largest ℓ.
+        let alpha = libm::expf(-dt_s / self.params.forget_time_s);
+        let w = 1.0 - alpha;
+        let m = &self.model;
+        let mut best_q = f32::INFINITY;
+        let mut max = f32::NEG_INFINITY;
+        let dry_l = x.map(|x| m.log_lik_dry(x));
+        self.dry = tempered(self.dry, alpha, w, dry_l, &mut best_q, &mut max);
+        for k in 0..3 {
+            let (cells, table, h) = (&mut self.cells[k], table_of(k), &m.half_ln_det[k]);
+            for ((c, e), &h) in cells.iter_mut().zip(table.iter()).zip(h.iter()) {
+                let l = if *c > 0.0 {
+                    x.map(|x| m.log_lik(x, e, h))
+                } else {
+                    None
+                };
+                *c = tempered(*c, alpha, w, l, &mut best_q, &mut max);
+            }
+        }
+        self.update = Update::NoCurrents;
+        if let Some(x) = x {
+            self.update = Update::Measured;
+            if best_q > self.params.outlier_distance2 {
+                max = self.not_reachable(x, w, max);
+            }
+        }
+        self.exponentiate(max)
+    }
+
+    /// The first frame with currents that fit some state sets the posterior
+    /// with full weight.
+    fn initialise(&mut self, x: Option<[f32; 2]>) -> Option<IceEstimate> {
+        let Some(x) = x else {
+            self.update = Update::Waiting;
+            return None;
+        };
+        let m = &self.model;
+        let (l, mut best_q) = m.log_lik_dry(x);
+        self.dry = l;
+        let mut max = l;
+        for k in 0..3 {
+            let (cells, table, h) = (&mut self.cells[k], table_of(k), &m.half_ln_det[k]);
+            for ((c, e), &h) in cells.iter_mut().zip(table.iter()).zip(h.iter()) {
+                let (l, q) = m.log_lik(x, e, h);
+                *c = l;
+                if q < best_q {
+                    best_q = q;
+                }
+                if l > max {
+                    max = l;
                 }
             }
         }
-        let outlier = frame.is_some() && best_q > p.outlier_distance2;
-        let measured = frame.is_some() && !outlier;
-
-        if !self.initialised {
-            if !measured {
-                self.update = Update::Waiting;
-                return None;
-            }
-            // The first valid frame, with full weight.
-            self.dry = ln_l_dry;
-            for (cells, ls) in self.cells.iter_mut().zip(&ln_l) {
-                cells.copy_from_slice(ls);
-            }
-            self.initialised = true;
-            self.update = Update::Initialised;
-            return self.normalise_from_log();
+        if !(best_q <= self.params.outlier_distance2) {
+            self.reset();
+            return None;
         }
-
-        self.predict(dt_s);
-        let alpha = libm::expf(-dt_s / p.forget_time_s);
-        let w = if measured { 1.0 - alpha } else { 0.0 };
-        let tempered = |pred: f32, ln_l: f32| -> f32 {
-            if pred > 0.0 {
-                alpha * libm::logf(pred) + w * ln_l
-            } else {
-                f32::NEG_INFINITY
-            }
-        };
-        self.dry = tempered(self.dry, ln_l_dry);
-        for (cells, ls) in self.cells.iter_mut().zip(&ln_l) {
-            for (c, l) in cells.iter_mut().zip(ls) {
-                *c = tempered(*c, *l);
-            }
-        }
-        self.update = if measured {
-            Update::Measured
-        } else if outlier {
-            Update::Outlier
-        } else {
-            Update::NoCurrents
-        };
-        self.normalise_from_log()
+        self.initialised = true;
+        self.update = Update::Initialised;
+        self.exponentiate(max)
     }
 
-    /// Transitions over `dt_s`: growth / shrinkage (lattice walk), shedding,
-    /// change of medium. Probability is conserved.
+    /// The currents fit no state the filter holds possible. If they fit
+    /// states it had ruled out, those come back with a small probability
+    /// (the face changed in a way the transitions do not model: cleaned,
+    /// a chunk fell off, …); if they fit no state at all, the frame is an
+    /// outlier and its evidence is taken back. Returns the new largest ℓ.
+    fn not_reachable(&mut self, x: [f32; 2], w: f32, max: f32) -> f32 {
+        let m = &self.model;
+        let limit = self.params.outlier_distance2;
+        let mut fits = m.log_lik_dry(x).1 <= limit;
+        for k in 0..3 {
+            for (e, &h) in table_of(k).iter().zip(m.half_ln_det[k].iter()) {
+                fits |= m.log_lik(x, e, h).1 <= limit;
+            }
+        }
+        let mut new_max = f32::NEG_INFINITY;
+        if fits {
+            let floor = max - REBIRTH_NATS;
+            let (l, q) = m.log_lik_dry(x);
+            if q <= limit && self.dry == f32::NEG_INFINITY {
+                self.dry = floor + w * l;
+            }
+            new_max = new_max.max(self.dry);
+            for k in 0..3 {
+                let (cells, table, h) = (&mut self.cells[k], table_of(k), &m.half_ln_det[k]);
+                for ((c, e), &h) in cells.iter_mut().zip(table.iter()).zip(h.iter()) {
+                    let (l, q) = m.log_lik(x, e, h);
+                    if q <= limit && *c == f32::NEG_INFINITY {
+                        *c = floor + w * l;
+                    }
+                    new_max = new_max.max(*c);
+                }
+            }
+        } else {
+            self.update = Update::Outlier;
+            if self.dry > f32::NEG_INFINITY {
+                self.dry -= w * m.log_lik_dry(x).0;
+            }
+            new_max = new_max.max(self.dry);
+            for k in 0..3 {
+                let (cells, table, h) = (&mut self.cells[k], table_of(k), &m.half_ln_det[k]);
+                for ((c, e), &h) in cells.iter_mut().zip(table.iter()).zip(h.iter()) {
+                    if *c > f32::NEG_INFINITY {
+                        *c -= w * m.log_lik(x, e, h).0;
+                    }
+                    new_max = new_max.max(*c);
+                }
+            }
+        }
+        new_max
+    }
+
+    /// Transitions over `dt_s`: growth / shrinkage (lattice walk), change of
+    /// medium, shedding; one pass over the rows per sub-step. Probability is
+    /// conserved.
     fn predict(&mut self, dt_s: f32) {
         if dt_s <= 0.0 {
             return;
@@ -467,73 +595,60 @@ impl Estimator {
         let up = p.max_growth_mm_per_h * rows_per_s * dt_s;
         let down = p.max_shrink_mm_per_h * rows_per_s * dt_s;
         let n = libm::ceilf((up + down) / 0.5).clamp(1.0, MAX_SUBSTEPS as f32);
-        let (u, v) = ((up / n).min(0.25), (down / n).min(0.25));
+        let u = (up / n).min(0.25);
+        let v = (down / n).min(0.25);
+        let shed = -libm::expm1f(-p.shed_per_h * dt_s / 3600.0 / n);
+        let switch = -libm::expm1f(-p.switch_per_h * dt_s / 3600.0 / n);
         for _ in 0..n as u32 {
-            self.walk(u, v);
+            self.substep(u, v, shed, switch);
         }
-        let shed = -libm::expm1f(-p.shed_per_h * dt_s / 3600.0);
-        let switch = -libm::expm1f(-p.switch_per_h * dt_s / 3600.0);
-        let mut shed_mass = 0.0;
-        for r in 0..ROWS {
-            let (a, b, c) = (self.cells[0][r], self.cells[1][r], self.cells[2][r]);
-            let keep = (1.0 - shed) * (1.0 - switch);
-            let share = (1.0 - shed) * switch * 0.5;
-            self.cells[0][r] = a * keep + (b + c) * share;
-            self.cells[1][r] = b * keep + (a + c) * share;
-            self.cells[2][r] = c * keep + (a + b) * share;
-            shed_mass += (a + b + c) * shed;
-        }
-        self.dry += shed_mass;
     }
 
     /// One lattice step: each row moves up with probability `u`, down with
-    /// `v`; dry is row −1 of every medium (a third of its upward flow starts
-    /// each medium); the top row keeps what would grow beyond it.
-    fn walk(&mut self, u: f32, v: f32) {
-        let from_dry = u * self.dry / 3.0;
+    /// `v` (dry is row −1 of every medium: a third of its upward flow starts
+    /// each medium; the top row keeps what would grow beyond it); then each
+    /// row changes medium with probability `switch` (shared by the two
+    /// others) and sheds with probability `shed`.
+    fn substep(&mut self, u: f32, v: f32, shed: f32, switch: f32) {
+        let keep = (1.0 - shed) * (1.0 - switch);
+        let share = (1.0 - shed) * switch * 0.5;
+        let from_dry = u * self.dry * (1.0 / 3.0);
+        let mut below = [from_dry; 3]; // what flows up into the current row
         let mut to_dry = 0.0;
-        for cells in self.cells.iter_mut() {
-            let mut below = from_dry; // what flows up into the current row
-            let mut i = 0;
-            while i < ROWS {
+        for i in 0..ROWS {
+            let mut new = [0.0f32; 3];
+            for k in 0..3 {
+                let cells = &self.cells[k];
                 let here = cells[i];
-                let above = if i + 1 < ROWS { cells[i + 1] } else { 0.0 };
-                let out_up = if i + 1 < ROWS { u * here } else { 0.0 };
-                if i == 0 {
-                    to_dry += v * here;
-                }
-                cells[i] = here - out_up - v * here + below + v * above;
-                below = u * here;
-                i += 1;
+                let (above, out_up) = match cells.get(i + 1) {
+                    Some(&a) => (a, u * here),
+                    None => (0.0, 0.0),
+                };
+                new[k] = here - out_up - v * here + below[k] + v * above;
+                below[k] = u * here;
             }
+            if i == 0 {
+                to_dry = v * (self.cells[0][0] + self.cells[1][0] + self.cells[2][0]);
+            }
+            let [a, b, c] = new;
+            self.cells[0][i] = a * keep + (b + c) * share;
+            self.cells[1][i] = b * keep + (a + c) * share;
+            self.cells[2][i] = c * keep + (a + b) * share;
+            to_dry += (a + b + c) * shed;
         }
         self.dry += to_dry - u * self.dry;
     }
 
-    /// The cells hold log-probabilities: exponentiate relative to the largest,
-    /// normalise, and summarise. A state that cannot be normalised (never
-    /// expected) restarts the filter instead of reporting nonsense.
-    fn normalise_from_log(&mut self) -> Option<IceEstimate> {
-        let mut max = self.dry;
-        for c in self.cells.iter().flatten() {
-            max = max.max(*c);
-        }
+    /// p = exp(ℓ − max) for every state (the largest becomes 1), and the
+    /// output posterior from it. A state that cannot be normalised (never
+    /// expected) restarts the filter rather than report nonsense.
+    fn exponentiate(&mut self, max: f32) -> Option<IceEstimate> {
         if !max.is_finite() {
             return self.restart();
         }
-        self.dry = libm::expf(self.dry - max);
-        let mut sum = self.dry;
+        self.dry = fast_math::exp(self.dry - max);
         for c in self.cells.iter_mut().flatten() {
-            *c = libm::expf(*c - max);
-            sum += *c;
-        }
-        if !(sum.is_finite() && sum > 0.0) {
-            return self.restart();
-        }
-        let inv = 1.0 / sum;
-        self.dry *= inv;
-        for c in self.cells.iter_mut().flatten() {
-            *c *= inv;
+            *c = fast_math::exp(*c - max);
         }
         self.summarise()
     }
@@ -553,8 +668,7 @@ impl Estimator {
             None => (0.0, 0.0),
         };
         // Prior: dry PRIOR_DRY; each medium (1 − PRIOR_DRY)/3, flat in
-        // thickness for ice, ∝ exp(−d / scale) for water. Each medium's
-        // factor per row below is relative; the constants make them absolute.
+        // thickness for ice, ∝ exp(−d / scale) for water.
         let medium = (1.0 - PRIOR_DRY) / 3.0;
         let ice_row = medium / ROWS as f32;
         let water_ratio = libm::expf(-STEP_MM / p.water_scale_mm);
@@ -567,19 +681,18 @@ impl Estimator {
         let mut total = dry;
         let mut p_medium = [dry, 0.0, 0.0, 0.0];
         let (mut m1, mut m2) = (0.0f32, 0.0f32);
-        for (k, cells) in self.cells.iter().enumerate() {
-            let f = factor.get(k).copied().unwrap_or(0.0);
+        for (k, (cells, f)) in self.cells.iter().zip(factor).enumerate() {
             let mut row_factor = if k == 0 { water_ratio } else { 1.0 };
+            let step = row_factor;
             let (mut pk, mut s1, mut s2) = (0.0f32, 0.0f32, 0.0f32);
-            for (i, &c) in cells.iter().enumerate() {
+            let mut d = STEP_MM;
+            for &c in cells.iter() {
                 let q = c * row_factor;
-                if k == 0 {
-                    row_factor *= water_ratio;
-                }
-                let d = row_mm(i);
+                row_factor *= step;
                 pk += q;
                 s1 += q * d;
                 s2 += q * d * d;
+                d += STEP_MM;
             }
             if let Some(slot) = p_medium.get_mut(k + 1) {
                 *slot = pk * f;
@@ -612,6 +725,34 @@ impl Estimator {
         self.update = update;
         None
     }
+}
+
+/// One state's tempered update: α ln p̂ + (1 − α) ln L (ln L = 0 without
+/// currents), −∞ where p̂ = 0 (a state no transition reaches stays
+/// impossible). Tracks the best fit and the largest ℓ.
+#[inline(always)]
+fn tempered(
+    pred: f32,
+    alpha: f32,
+    w: f32,
+    lik: Option<(f32, f32)>,
+    best_q: &mut f32,
+    max: &mut f32,
+) -> f32 {
+    if !(pred > 0.0) {
+        return f32::NEG_INFINITY;
+    }
+    let mut l = alpha * fast_math::ln(pred);
+    if let Some((ln_l, q)) = lik {
+        l += w * ln_l;
+        if q < *best_q {
+            *best_q = q;
+        }
+    }
+    if l > *max {
+        *max = l;
+    }
+    l
 }
 
 /// Thickness of row `i`, mm.

@@ -61,8 +61,12 @@ pub struct TableSpec {
     pub geometry: Geometry,
     /// Largest thickness, mm.
     pub max_mm: f64,
-    /// Thickness step, mm.
+    /// Thickness step of the Monte Carlo, mm.
     pub step_mm: f64,
+    /// Keep every `every`-th smoothed thickness in the table: the estimator's
+    /// grid is `every · step_mm` (the smoothing half-width is several steps,
+    /// so the dropped rows carry no extra information).
+    pub every: usize,
     /// Half-width of the smoothing kernels, mm.
     pub half_width_mm: f64,
     /// The media, in the order of `fois_protocol::Medium` (water, glazed, rime).
@@ -70,8 +74,8 @@ pub struct TableSpec {
 }
 
 impl Default for TableSpec {
-    /// The table the firmware embeds: Sensor B, thesis chapter-5 geometry, 0.1–15 mm in
-    /// 0.1 mm; rime 256 accretions, glazed 64 (its spread is large and the thesis finds its
+    /// The table the firmware embeds: Sensor B, thesis chapter-5 geometry, Monte Carlo over
+    /// 0–15 mm in 0.1 mm, smoothed, kept every 0.2 mm (the estimator's grid); rime 256 accretions, glazed 64 (its spread is large and the thesis finds its
     /// thickness not measurable, so a coarser Σ costs nothing), water one run (deterministic)
     /// with a 10 % + 0.1 µA floor.
     fn default() -> Self {
@@ -82,6 +86,7 @@ impl Default for TableSpec {
             geometry: Geometry::ThesisCh5,
             max_mm: 15.0,
             step_mm: 0.1,
+            every: 2,
             half_width_mm: DEFAULT_FIT_HALF_WIDTH_MM,
             media: vec![
                 MediumSpec {
@@ -132,7 +137,7 @@ pub struct TableRow {
 pub struct MediumTable {
     /// What it was built from.
     pub spec: MediumSpec,
-    /// Rows at step, 2·step, …, max (thickness 0, the dry face, is not a row).
+    /// Rows at every·step, 2·every·step, …, max (thickness 0, the dry face, is not a row).
     pub rows: Vec<TableRow>,
 }
 
@@ -189,7 +194,12 @@ pub fn build_table(
     on_done: &(dyn Fn() + Sync),
 ) -> Result<ResponseTable, SimError> {
     if spec.media.is_empty() {
-        return Err(SimError::BadParam("the table needs at least one medium".into()));
+        return Err(SimError::BadParam(
+            "the table needs at least one medium".into(),
+        ));
+    }
+    if spec.every == 0 {
+        return Err(SimError::BadParam("every must be ≥ 1".into()));
     }
     if !(spec.half_width_mm.is_finite() && spec.half_width_mm > 0.0) {
         return Err(SimError::BadParam(format!(
@@ -219,7 +229,8 @@ pub fn build_table(
         let fit = crlb(&mc.points, spec.half_width_mm);
         let rows = fit
             .iter()
-            .skip(1) // thickness 0: the dry face
+            .skip(spec.every) // thickness 0 is the dry face
+            .step_by(spec.every)
             .map(|f| {
                 let mu = [f.mu_ua[0].max(0.0), f.mu_ua[1].max(0.0)];
                 let var = [f.sigma_ua2[0][0].max(0.0), f.sigma_ua2[1][1].max(0.0)];
@@ -261,7 +272,7 @@ pub fn to_rust_source(table: &ResponseTable, regenerate: &str) -> Result<String,
             "every medium needs the same number of rows".into(),
         ));
     }
-    let step_um = (spec.step_mm * 1000.0).round();
+    let step_um = (spec.step_mm * spec.every as f64 * 1000.0).round();
     if !(1.0..=65_535.0).contains(&step_um) {
         return Err(SimError::BadParam(format!(
             "step {} mm does not fit",
@@ -292,8 +303,8 @@ pub fn to_rust_source(table: &ResponseTable, regenerate: &str) -> Result<String,
     );
     let _ = writeln!(
         w,
-        "//! thesis fibre spread (default fibre seed); thickness {}–{} mm in {} mm (thesis §5.3, §5.4).",
-        spec.step_mm, spec.max_mm, spec.step_mm
+        "//! thesis fibre spread (default fibre seed); thickness 0–{} mm in {} mm (thesis §5.3, §5.4).",
+        spec.max_mm, spec.step_mm
     );
     let _ = writeln!(
         w,
@@ -317,8 +328,13 @@ pub fn to_rust_source(table: &ResponseTable, regenerate: &str) -> Result<String,
     }
     let _ = writeln!(
         w,
-        "//! Smoothing: μ local quadratic, Σ tricube kernel average, half-width {} mm (as the CRLB).",
+        "//! Smoothing: μ local quadratic, Σ tricube kernel average, half-width {} mm (as the CRLB);",
         spec.half_width_mm
+    );
+    let _ = writeln!(
+        w,
+        "//! kept every {} mm (the estimator's grid).",
+        step_um / 1000.0
     );
     let _ = writeln!(
         w,
@@ -379,7 +395,9 @@ mod tests {
 
     #[test]
     fn packing_rounds_to_nanoamps_and_refuses_what_does_not_fit() {
-        let p = row([12.3456, 0.0004], [0.2104, 65.535], -0.5).pack().unwrap();
+        let p = row([12.3456, 0.0004], [0.2104, 65.535], -0.5)
+            .pack()
+            .unwrap();
         assert_eq!(p.mu_na, [12_346, 0]);
         assert_eq!(p.sd_na, [210, 65_535]);
         assert_eq!(p.rho_q15, -16_384);
@@ -393,6 +411,7 @@ mod tests {
     fn water_gets_its_floor_and_the_source_names_version_seed_and_runs() {
         let spec = TableSpec {
             max_mm: 2.0,
+            every: 1,
             media: vec![MediumSpec {
                 kind: IceKind::Water,
                 runs: 2,
@@ -432,6 +451,11 @@ mod tests {
         assert!(build_table(&spec, &|| {}).is_err());
         let spec = TableSpec {
             half_width_mm: 0.0,
+            ..TableSpec::default()
+        };
+        assert!(build_table(&spec, &|| {}).is_err());
+        let spec = TableSpec {
+            every: 0,
             ..TableSpec::default()
         };
         assert!(build_table(&spec, &|| {}).is_err());

@@ -112,19 +112,23 @@ pub fn curve(kind: IceKind, seed: u64) -> Curve {
         fois_sim::table::TABLE_SEED,
         "evaluation seeds must differ from the table's"
     );
-    accretion_curve(&SimConfig::new(kind, SensorKind::B, Geometry::default()), seed, 0)
+    accretion_curve(
+        &SimConfig::new(kind, SensorKind::B, Geometry::default()),
+        seed,
+        0,
+    )
 }
 
 /// Run the estimator over the run's frames; every frame is recorded.
 pub fn simulate(run: &Run, params: EstimatorParams) -> Vec<FrameRecord> {
     let mut kinds: Vec<IceKind> = run.segments.iter().filter_map(|s| s.cover).collect();
     kinds.dedup();
-    let curves: Vec<(IceKind, Curve)> = kinds
-        .iter()
-        .map(|&k| (k, curve(k, run.seed)))
-        .collect();
+    let curves: Vec<(IceKind, Curve)> = kinds.iter().map(|&k| (k, curve(k, run.seed))).collect();
     let mut rng = Pcg32::new(run.seed ^ 0x5EED_E571, 0xE57);
-    let offset = [gaussian(&mut rng) * run.offset_ua, gaussian(&mut rng) * run.offset_ua];
+    let offset = [
+        gaussian(&mut rng) * run.offset_ua,
+        gaussian(&mut rng) * run.offset_ua,
+    ];
     let mut est = Estimator::new(params);
     let mut out = Vec::new();
     let mut d = 0.0f64;
@@ -145,11 +149,18 @@ pub fn simulate(run: &Run, params: EstimatorParams) -> Vec<FrameRecord> {
                     [a, b]
                 }
             };
-            let x = [0, 1].map(|ch| {
-                signal[ch] * run.led + offset[ch] + run.noise_ua * gaussian(&mut rng)
-            });
-            let temp_in = if run.ntc_failed { None } else { Some(temp as f32) };
-            let dt = if out.is_empty() { 0.0 } else { run.frame_s as f32 };
+            let x = [0, 1]
+                .map(|ch| signal[ch] * run.led + offset[ch] + run.noise_ua * gaussian(&mut rng));
+            let temp_in = if run.ntc_failed {
+                None
+            } else {
+                Some(temp as f32)
+            };
+            let dt = if out.is_empty() {
+                0.0
+            } else {
+                run.frame_s as f32
+            };
             est.step(dt, Some([x[0] as f32, x[1] as f32]), temp_in);
             out.push(FrameRecord {
                 t_s: t,
@@ -202,7 +213,9 @@ impl Stats {
         for ((target, errs), (_, sigs)) in self.errors.iter_mut().zip(self.sigmas.iter_mut()) {
             let near: Vec<&FrameRecord> = frames
                 .iter()
-                .filter(|f| f.medium != Medium::Dry && (f.thickness_mm - *target).abs() <= window_mm)
+                .filter(|f| {
+                    f.medium != Medium::Dry && (f.thickness_mm - *target).abs() <= window_mm
+                })
                 .filter(|f| f.est.is_some())
                 .collect();
             if near.is_empty() {
