@@ -14,7 +14,7 @@ fn main() {
     }
     let seeds: u64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(8);
     let frame_s: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(0.1);
-    let params = EstimatorParams::default();
+    let params = params_from_env();
     let crlb = rime_crlb(256, 4242);
     let classes: Vec<(&str, IceKind, f64, f64, f64)> = vec![
         ("rime 2 mm/h", IceKind::Rime, 2.0, -8.0, 1.0),
@@ -85,7 +85,7 @@ pub fn trace(args: &[String]) {
     );
     run.led = led;
     run.frame_s = 1.0;
-    let frames = simulate(&run, EstimatorParams::default());
+    let frames = simulate(&run, params_from_env());
     for f in frames.iter().step_by(60) {
         if let Some(e) = f.est {
             println!(
@@ -103,4 +103,23 @@ pub fn trace(args: &[String]) {
             );
         }
     }
+}
+
+/// Defaults, with overrides from `EST_GAIN`, `EST_NOISE`, `EST_TAU`, `EST_GROWTH` (tuning).
+fn params_from_env() -> EstimatorParams {
+    let mut p = EstimatorParams::default();
+    let get = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f32>().ok());
+    if let Some(v) = get("EST_GAIN") {
+        p.gain_sd = v;
+    }
+    if let Some(v) = get("EST_NOISE") {
+        p.noise_ua = [v, v];
+    }
+    if let Some(v) = get("EST_TAU") {
+        p.forget_time_s = v;
+    }
+    if let Some(v) = get("EST_GROWTH") {
+        p.max_growth_mm_per_h = v;
+    }
+    p
 }

@@ -281,7 +281,7 @@ fn softplus(x: f32) -> f32 {
     if x > 20.0 {
         x
     } else {
-        libm::log1pf(libm::expf(x))
+        fast_math::ln(1.0 + fast_math::exp(x))
     }
 }
 
@@ -325,6 +325,7 @@ struct Model {
 }
 
 impl Model {
+    #[inline(never)]
     fn new(p: &EstimatorParams) -> Self {
         let r_na2 = [
             (p.noise_ua[0] * 1000.0) * (p.noise_ua[0] * 1000.0),
@@ -335,13 +336,13 @@ impl Model {
         for (k, row) in half_ln_det.iter_mut().enumerate() {
             for (h, e) in row.iter_mut().zip(table_of(k).iter()) {
                 let (_, c) = covariance(e, r_na2, g2);
-                *h = 0.5 * libm::logf(det(c, r_na2));
+                *h = 0.5 * fast_math::ln(det(c, r_na2));
             }
         }
         Model {
             r_na2,
             g2,
-            half_ln_det_dry: 0.5 * libm::logf(r_na2[0] * r_na2[1]),
+            half_ln_det_dry: 0.5 * fast_math::ln(r_na2[0] * r_na2[1]),
             half_ln_det,
         }
     }
@@ -352,6 +353,25 @@ impl Model {
         let (mu, c) = covariance(e, self.r_na2, self.g2);
         let q = distance2(x, mu, c, det(c, self.r_na2));
         (-0.5 * q - half_ln_det, q)
+    }
+
+    /// `f(state, ln L, q)` for every state (dry first, then each medium's
+    /// rows; `state` indexes like [`Estimator::state_mut`]). Not inlined: the
+    /// rare paths (first frame, states out of reach) share this one loop.
+    #[inline(never)]
+    fn for_each(&self, x: [f32; 2], f: &mut dyn FnMut(usize, f32, f32)) {
+        let (l, q) = self.log_lik_dry(x);
+        f(0, l, q);
+        for k in 0..3 {
+            for (i, (e, &h)) in table_of(k)
+                .iter()
+                .zip(self.half_ln_det[k].iter())
+                .enumerate()
+            {
+                let (l, q) = self.log_lik(x, e, h);
+                f(1 + k * ROWS + i, l, q);
+            }
+        }
     }
 
     /// The same for the dry face: N(0, R).
@@ -392,18 +412,19 @@ impl Default for Estimator {
 
 impl Estimator {
     /// A filter with these settings (sanitised), waiting for its first frame.
+    #[inline(never)]
     pub fn new(params: EstimatorParams) -> Self {
         let params = params.sanitized();
         let mut sum = 0.0f32;
         for i in 0..ROWS {
-            sum += libm::expf(-row_mm(i) / params.water_scale_mm);
+            sum += fast_math::exp(-row_mm(i) / params.water_scale_mm);
         }
         Estimator {
             model: Model::new(&params),
             params,
             dry: 0.0,
             cells: [[0.0; ROWS]; 3],
-            water_log_norm: libm::logf(if sum > 0.0 { sum } else { 1.0 }),
+            water_log_norm: fast_math::ln(if sum > 0.0 { sum } else { 1.0 }),
             initialised: false,
             air_temp_c: None,
             update: Update::Waiting,
@@ -470,7 +491,7 @@ impl Estimator {
         self.predict(dt_s);
 
         // Tempered update: ℓ = α ln p̂ + (1 − α) ln L, and the largest ℓ.
-        let alpha = libm::expf(-dt_s / self.params.forget_time_s);
+        let alpha = fast_math::exp(-dt_s / self.params.forget_time_s);
         let w = 1.0 - alpha;
         let m = &self.model;
         let mut best_q = f32::INFINITY;
@@ -498,33 +519,42 @@ impl Estimator {
         self.exponentiate(max)
     }
 
+    /// State `s` (0 dry, then medium k row i at 1 + k·ROWS + i).
+    fn state_mut(&mut self, s: usize) -> Option<&mut f32> {
+        match s.checked_sub(1) {
+            None => Some(&mut self.dry),
+            Some(j) => self.cells.get_mut(j / ROWS)?.get_mut(j % ROWS),
+        }
+    }
+
     /// The first frame with currents that fit some state sets the posterior
     /// with full weight.
+    #[inline(never)]
     fn initialise(&mut self, x: Option<[f32; 2]>) -> Option<IceEstimate> {
         let Some(x) = x else {
             self.update = Update::Waiting;
             return None;
         };
-        let m = &self.model;
-        let (l, mut best_q) = m.log_lik_dry(x);
-        self.dry = l;
-        let mut max = l;
-        for k in 0..3 {
-            let (cells, table, h) = (&mut self.cells[k], table_of(k), &m.half_ln_det[k]);
-            for ((c, e), &h) in cells.iter_mut().zip(table.iter()).zip(h.iter()) {
-                let (l, q) = m.log_lik(x, e, h);
-                *c = l;
-                if q < best_q {
-                    best_q = q;
-                }
-                if l > max {
-                    max = l;
-                }
-            }
-        }
+        let mut best_q = f32::INFINITY;
+        let mut max = f32::NEG_INFINITY;
+        self.model.for_each(x, &mut |_, l, q| {
+            best_q = best_q.min(q);
+            max = max.max(l);
+        });
         if !(best_q <= self.params.outlier_distance2) {
             self.reset();
             return None;
+        }
+        let mut values = [0.0f32; 1 + 3 * ROWS];
+        self.model.for_each(x, &mut |s, l, _| {
+            if let Some(v) = values.get_mut(s) {
+                *v = l;
+            }
+        });
+        for (s, v) in values.iter().enumerate() {
+            if let Some(c) = self.state_mut(s) {
+                *c = *v;
+            }
         }
         self.initialised = true;
         self.update = Update::Initialised;
@@ -536,47 +566,38 @@ impl Estimator {
     /// (the face changed in a way the transitions do not model: cleaned,
     /// a chunk fell off, …); if they fit no state at all, the frame is an
     /// outlier and its evidence is taken back. Returns the new largest ℓ.
+    #[inline(never)]
     fn not_reachable(&mut self, x: [f32; 2], w: f32, max: f32) -> f32 {
-        let m = &self.model;
         let limit = self.params.outlier_distance2;
-        let mut fits = m.log_lik_dry(x).1 <= limit;
-        for k in 0..3 {
-            for (e, &h) in table_of(k).iter().zip(m.half_ln_det[k].iter()) {
-                fits |= m.log_lik(x, e, h).1 <= limit;
-            }
-        }
-        let mut new_max = f32::NEG_INFINITY;
-        if fits {
-            let floor = max - REBIRTH_NATS;
-            let (l, q) = m.log_lik_dry(x);
-            if q <= limit && self.dry == f32::NEG_INFINITY {
-                self.dry = floor + w * l;
-            }
-            new_max = new_max.max(self.dry);
-            for k in 0..3 {
-                let (cells, table, h) = (&mut self.cells[k], table_of(k), &m.half_ln_det[k]);
-                for ((c, e), &h) in cells.iter_mut().zip(table.iter()).zip(h.iter()) {
-                    let (l, q) = m.log_lik(x, e, h);
-                    if q <= limit && *c == f32::NEG_INFINITY {
-                        *c = floor + w * l;
-                    }
-                    new_max = new_max.max(*c);
-                }
-            }
-        } else {
+        let mut fits = false;
+        self.model.for_each(x, &mut |_, _, q| fits |= q <= limit);
+        if !fits {
             self.update = Update::Outlier;
-            if self.dry > f32::NEG_INFINITY {
-                self.dry -= w * m.log_lik_dry(x).0;
+        }
+        let floor = max - REBIRTH_NATS;
+        let mut values = [0.0f32; 1 + 3 * ROWS];
+        self.model.for_each(x, &mut |s, l, q| {
+            if let Some(v) = values.get_mut(s) {
+                // Reseed: a state out of reach that fits; outlier: take
+                // back the frame's evidence (NaN marks "unchanged").
+                *v = if fits {
+                    if q <= limit { floor + w * l } else { f32::NAN }
+                } else {
+                    -w * l
+                };
             }
-            new_max = new_max.max(self.dry);
-            for k in 0..3 {
-                let (cells, table, h) = (&mut self.cells[k], table_of(k), &m.half_ln_det[k]);
-                for ((c, e), &h) in cells.iter_mut().zip(table.iter()).zip(h.iter()) {
-                    if *c > f32::NEG_INFINITY {
-                        *c -= w * m.log_lik(x, e, h).0;
+        });
+        let mut new_max = f32::NEG_INFINITY;
+        for (s, v) in values.iter().enumerate() {
+            if let Some(c) = self.state_mut(s) {
+                if fits {
+                    if *c == f32::NEG_INFINITY && !v.is_nan() {
+                        *c = *v;
                     }
-                    new_max = new_max.max(*c);
+                } else if *c > f32::NEG_INFINITY {
+                    *c += *v;
                 }
+                new_max = new_max.max(*c);
             }
         }
         new_max
@@ -594,11 +615,11 @@ impl Estimator {
         let rows_per_s = 1.0 / (3600.0 * 2.0 * STEP_MM);
         let up = p.max_growth_mm_per_h * rows_per_s * dt_s;
         let down = p.max_shrink_mm_per_h * rows_per_s * dt_s;
-        let n = libm::ceilf((up + down) / 0.5).clamp(1.0, MAX_SUBSTEPS as f32);
+        let n = fast_math::ceil((up + down) / 0.5).clamp(1.0, MAX_SUBSTEPS as f32);
         let u = (up / n).min(0.25);
         let v = (down / n).min(0.25);
-        let shed = -libm::expm1f(-p.shed_per_h * dt_s / 3600.0 / n);
-        let switch = -libm::expm1f(-p.switch_per_h * dt_s / 3600.0 / n);
+        let shed = fast_math::one_minus_exp_neg(p.shed_per_h * dt_s / 3600.0 / n);
+        let switch = fast_math::one_minus_exp_neg(p.switch_per_h * dt_s / 3600.0 / n);
         for _ in 0..n as u32 {
             self.substep(u, v, shed, switch);
         }
@@ -648,7 +669,7 @@ impl Estimator {
         }
         self.dry = fast_math::exp(self.dry - max);
         for c in self.cells.iter_mut().flatten() {
-            *c = fast_math::exp(*c - max);
+            *c = fast_math::exp_inline(*c - max);
         }
         self.summarise()
     }
@@ -658,6 +679,7 @@ impl Estimator {
     /// They act at once (a film at +5 °C is never ice, not after τ) and do
     /// not accumulate from frame to frame (the air temperature persists just
     /// like the optical deviations do).
+    #[inline(never)]
     fn summarise(&mut self) -> Option<IceEstimate> {
         let p = self.params;
         let (ln_water_t, ln_ice_t) = match self.air_temp_c {
@@ -671,11 +693,11 @@ impl Estimator {
         // thickness for ice, ∝ exp(−d / scale) for water.
         let medium = (1.0 - PRIOR_DRY) / 3.0;
         let ice_row = medium / ROWS as f32;
-        let water_ratio = libm::expf(-STEP_MM / p.water_scale_mm);
+        let water_ratio = fast_math::exp(-STEP_MM / p.water_scale_mm);
         let factor = [
-            medium * libm::expf(ln_water_t - self.water_log_norm),
-            ice_row * libm::expf(ln_ice_t),
-            ice_row * libm::expf(ln_ice_t),
+            medium * fast_math::exp(ln_water_t - self.water_log_norm),
+            ice_row * fast_math::exp(ln_ice_t),
+            ice_row * fast_math::exp(ln_ice_t),
         ];
         let dry = self.dry * PRIOR_DRY;
         let mut total = dry;
@@ -712,7 +734,7 @@ impl Estimator {
         let var = (m2 - m1 * m1).max(0.0) + (1.0 - p_medium[0]) * STEP_MM * STEP_MM / 12.0;
         let post = Posterior {
             thickness_mm: m1,
-            sigma_mm: libm::sqrtf(var),
+            sigma_mm: fast_math::sqrt(var),
             p_medium,
         };
         self.posterior = Some(post);
@@ -742,7 +764,7 @@ fn tempered(
     if !(pred > 0.0) {
         return f32::NEG_INFINITY;
     }
-    let mut l = alpha * fast_math::ln(pred);
+    let mut l = alpha * fast_math::ln_inline(pred);
     if let Some((ln_l, q)) = lik {
         l += w * ln_l;
         if q < *best_q {

@@ -662,6 +662,30 @@ fn main() -> ! {
     let e_2f = bench_estimator(&mut est, 2 * F, &mut lcg);
     let est_frame = ((e_2f.saturating_sub(e_f) as f32 / F as f32) * insn_per_tick + 0.5) as u32;
     hprintln!("estimator instructions per step: {}", est_frame);
+    // Worst case: every state alive (a weak signal that several media at
+    // several thicknesses explain, after a long gap that spread the
+    // posterior over the grid), then 10 Hz frames of the same signal.
+    let mut est = Estimator::default();
+    let _ = est.step(0.0, Some([0.4, 0.5]), Some(0.0));
+    for _ in 0..20 {
+        let _ = est.step(3_600.0, None, Some(0.0));
+    }
+    let mut worst = 0u32;
+    let mut alive = 0usize;
+    for _ in 0..5 {
+        let t0 = ticks();
+        let _ = est.step(0.1, Some([0.4, 0.5]), Some(0.0));
+        let t = ((ticks() - t0) as f32 * insn_per_tick) as u32;
+        worst = worst.max(t);
+        let (dry, cells) = est.cells();
+        alive = usize::from(dry > 0.0) + cells.iter().flatten().filter(|c| **c > 0.0).count();
+    }
+    hprintln!(
+        "estimator worst case: {} instructions per step ({} of {} states alive; ±1 tick = ±40)",
+        worst,
+        alive,
+        1 + 3 * fois_firmware::estimator::ROWS
+    );
 
     if failed == 0 && per_frame > 0 && est_frame > 0 {
         debug::exit(debug::EXIT_SUCCESS);

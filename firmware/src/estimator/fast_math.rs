@@ -1,11 +1,11 @@
 //! `exp` and `ln` in `f32` arithmetic only, for the estimator's inner loop
-//! (three per state and frame, ~1 350 per frame).
+//! (two per live state and frame), and the few helpers built on them.
 //!
-//! Why not `libm`: its `expf`/`logf` are exact to an ulp but take several
-//! dozen instructions with their special cases and argument reduction, which
-//! put one estimator step at ~160 000 instructions on the Cortex-M4F; its
-//! `exp2f`/`log2f` compute in `f64`, which the M4F's single-precision FPU
-//! does in software. The filter needs a relative accuracy of ~10⁻⁶ (its
+//! Why not `libm`: its `expf`/`logf` are exact to an ulp but cost more
+//! instructions and flash (with `log1pf`, `expm1f`, `sqrtf` ≈ 2 KiB) than
+//! the filter needs; its `exp2f`/`log2f` compute in `f64`, which the M4F's
+//! single-precision FPU does in software. The filter needs a relative
+//! accuracy of ~10⁻⁶ (its
 //! forgetting carries an error of ln p into the next frames with weight
 //! α/(1 − α) ≈ 300 at most), so short polynomials suffice:
 //!
@@ -25,8 +25,22 @@ const LN_2_HI: f32 = 0.693_145_75;
 const LN_2_LO: f32 = 1.428_606_8e-6;
 
 /// eˣ. 0 for x < −87.3 (and for −∞), +∞ above 88.7, NaN for NaN.
-#[inline]
+/// One copy in flash for the rare calls; the filter's per-state loops use
+/// [`exp_inline`].
+#[inline(never)]
 pub fn exp(x: f32) -> f32 {
+    exp_inline(x)
+}
+
+/// ln x, see [`ln_inline`]. One copy in flash for the rare calls.
+#[inline(never)]
+pub fn ln(x: f32) -> f32 {
+    ln_inline(x)
+}
+
+/// [`exp`], inlined (the per-state loops).
+#[inline(always)]
+pub fn exp_inline(x: f32) -> f32 {
     if x.is_nan() {
         return x;
     }
@@ -61,9 +75,9 @@ pub fn exp(x: f32) -> f32 {
 }
 
 /// ln x. −∞ for 0, NaN for x < 0 or NaN, +∞ for +∞; subnormals are exact
-/// enough (they are scaled up first).
-#[inline]
-pub fn ln(x: f32) -> f32 {
+/// enough (they are scaled up first). Inlined (the per-state loops).
+#[inline(always)]
+pub fn ln_inline(x: f32) -> f32 {
     if x.is_nan() || x < 0.0 {
         return f32::NAN;
     }
@@ -91,6 +105,37 @@ pub fn ln(x: f32) -> f32 {
         s * (1.0 + s2 * (1.0 / 3.0 + s2 * (1.0 / 5.0 + s2 * (1.0 / 7.0 + s2 * (1.0 / 9.0)))));
     let ef = e as f32;
     (ef * LN_2_HI + 2.0 * atanh) + ef * LN_2_LO
+}
+
+/// 1 − e⁻ˣ for x ≥ 0 (a probability of an event at rate λ over Δt,
+/// x = λΔt), accurate also for tiny x where 1 − exp(−x) would cancel.
+#[inline]
+pub fn one_minus_exp_neg(x: f32) -> f32 {
+    if !(x > 0.0) {
+        0.0
+    } else if x < 0.1 {
+        // Series to x⁵ (truncation < x⁵/720 relative: 1.4·10⁻⁸ at 0.1).
+        x * (1.0 - x * (0.5 - x * (1.0 / 6.0 - x * (1.0 / 24.0 - x * (1.0 / 120.0)))))
+    } else {
+        1.0 - exp(-x)
+    }
+}
+
+/// √x for x ≥ 0 (0 for x ≤ 0 or NaN): e^(½ ln x), relative error < 10⁻⁶.
+#[inline]
+pub fn sqrt(x: f32) -> f32 {
+    if !(x > 0.0) { 0.0 } else { exp(0.5 * ln(x)) }
+}
+
+/// The smallest integer ≥ x, for 0 ≤ x < 2²⁴ (0 below, NaN → 0).
+#[inline]
+pub fn ceil(x: f32) -> f32 {
+    if !(x > 0.0) {
+        return 0.0;
+    }
+    let x = x.min(16_777_216.0);
+    let t = x as u32 as f32;
+    if t < x { t + 1.0 } else { t }
 }
 
 #[cfg(test)]
@@ -135,5 +180,30 @@ mod tests {
         assert!(ln(-1.0).is_nan());
         assert!(ln(f32::NAN).is_nan());
         assert_eq!(ln(f32::INFINITY), f32::INFINITY);
+    }
+
+    #[test]
+    fn helpers_match_std() {
+        for x in [1e-9f32, 1e-5, 1e-3, 0.0999, 0.1, 0.5, 3.0, 40.0] {
+            let want = -(-f64::from(x)).exp_m1();
+            let got = f64::from(one_minus_exp_neg(x));
+            assert!(
+                ((got - want) / want).abs() < 2e-6,
+                "1 − e^−{x}: {got} vs {want}"
+            );
+        }
+        assert_eq!(one_minus_exp_neg(0.0), 0.0);
+        assert_eq!(one_minus_exp_neg(f32::NAN), 0.0);
+        for x in [1e-30f32, 1e-6, 0.25, 2.0, 1e6, 3e38] {
+            let want = f64::from(x).sqrt();
+            assert!(((f64::from(sqrt(x)) - want) / want).abs() < 1e-6, "√{x}");
+        }
+        assert_eq!(sqrt(0.0), 0.0);
+        assert_eq!(sqrt(-1.0), 0.0);
+        assert_eq!(ceil(0.0), 0.0);
+        assert_eq!(ceil(0.2), 1.0);
+        assert_eq!(ceil(3.0), 3.0);
+        assert_eq!(ceil(3.000_001), 4.0);
+        assert_eq!(ceil(f32::NAN), 0.0);
     }
 }

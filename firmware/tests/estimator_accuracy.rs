@@ -1,0 +1,162 @@
+//! Accuracy of the ice estimator on ray-traced accretions the response table
+//! was not built from (run 0 of seeds 101–106; the table uses seed 900 001),
+//! with frame noise and a persistent offset per run. The goals of the ice
+//! characterisation that the estimator meets are asserted here; the figures
+//! of every class, met or not, are printed
+//! (`cargo test -p fois-firmware --test estimator_accuracy -- --nocapture`)
+//! and the larger sweep is `examples/estimator_eval.rs`.
+//!
+//! Frames come at 1 Hz here (10 Hz in the example): the errors that matter
+//! persist for a whole accretion, so the frame rate barely changes the
+//! figures, and the test stays fast.
+
+#[path = "estimator_eval/mod.rs"]
+mod estimator_eval;
+
+use estimator_eval::*;
+use fois_firmware::estimator::EstimatorParams;
+use fois_sim::IceKind;
+
+const SEEDS: std::ops::RangeInclusive<u64> = 101..=106;
+
+fn class(kind: IceKind, rate: f64, temp_c: f64, max_mm: f64) -> Stats {
+    let mut st = Stats::new();
+    for seed in SEEDS {
+        let mut run = Run::new(
+            seed,
+            vec![
+                Segment::dry(120.0, temp_c),
+                Segment::grow(kind, 0.0, max_mm, rate, temp_c),
+            ],
+        );
+        run.frame_s = 1.0;
+        st.add(&simulate(&run, EstimatorParams::default()), 0.05);
+    }
+    st
+}
+
+fn print(name: &str, st: &Stats, crlb: &[(f64, f64)]) {
+    println!("{name}:");
+    for d in TARGETS_MM {
+        if let Some((bias, rms, sig, n)) = st.at(d) {
+            println!(
+                "  {d:4.1} mm  bias {bias:+.3}  rms {rms:.3}  mean σ {sig:.3}  √CRLB {:.3}  ({n} runs)",
+                crlb_at(crlb, d)
+            );
+        }
+    }
+    println!(
+        "  |error| ≤ 2σ beyond 0.5 mm: {:.1} % of {} frames; medium right from 1 mm: {:.1} % of {}",
+        100.0 * st.calibration(),
+        st.calib.0,
+        100.0 * st.medium_accuracy(),
+        st.medium.0
+    );
+}
+
+#[test]
+fn rime_thickness_is_within_the_goal_from_5_mm_and_its_sigma_is_honest() {
+    let crlb = rime_crlb(128, 4242);
+    let st = class(IceKind::Rime, 2.0, -8.0, 11.0);
+    print("rime, 2 mm/h, -8 °C", &st, &crlb);
+    // Goal: RMS ≤ 1.5 √CRLB and |bias| ≤ 0.3 mm for 2–10 mm; met at 5 and
+    // 10 mm, missed at 2 mm (see firmware/README.md).
+    for d in [5.0, 10.0] {
+        let (bias, rms, _, n) = st.at(d).expect("frames at the target");
+        assert_eq!(n, 6);
+        let bound = 1.5 * crlb_at(&crlb, d);
+        assert!(rms <= bound, "{d} mm: rms {rms:.3} > 1.5 √CRLB {bound:.3}");
+        assert!(bias.abs() <= 0.3, "{d} mm: bias {bias:+.3}");
+    }
+    let (bias, _, _, _) = st.at(2.0).expect("frames at 2 mm");
+    assert!(bias.abs() <= 0.3, "2 mm: bias {bias:+.3}");
+    // Goal: |error| ≤ 2σ in ≥ 90 % of the frames beyond 0.5 mm.
+    assert!(st.calibration() >= 0.90, "calibration {}", st.calibration());
+    // Goal 95 % (missed); this guards the figure the README states.
+    assert!(
+        st.medium_accuracy() >= 0.90,
+        "medium {}",
+        st.medium_accuracy()
+    );
+}
+
+#[test]
+fn glazed_sigma_is_honest() {
+    let crlb = rime_crlb(128, 4242);
+    let st = class(IceKind::Glazed, 2.0, -5.0, 11.0);
+    print("glazed, 2 mm/h, -5 °C (thickness: report only)", &st, &crlb);
+    assert!(st.calibration() >= 0.90, "calibration {}", st.calibration());
+    // Goal 95 % (missed); this guards the figure the README states.
+    assert!(
+        st.medium_accuracy() >= 0.85,
+        "medium {}",
+        st.medium_accuracy()
+    );
+}
+
+#[test]
+fn water_at_plus_5_c_is_never_ice_and_water_that_freezes_becomes_glaze() {
+    let crlb = rime_crlb(128, 4242);
+    let st = class(IceKind::Water, 2.0, 5.0, 3.0);
+    print("water, 2 mm/h, +5 °C", &st, &crlb);
+    assert!(st.water_frames > 30_000);
+    assert_eq!(st.water_called_ice, 0, "water at +5 °C called ice");
+    assert!(
+        st.medium_accuracy() >= 0.95,
+        "medium {}",
+        st.medium_accuracy()
+    );
+    assert!(st.calibration() >= 0.90, "calibration {}", st.calibration());
+
+    // The scenario of the hardware-in-loop suite: 0.3 mm of water at +5 °C,
+    // the air cools to 0 °C, the film freezes and glaze grows on it while
+    // the air falls to −5 °C.
+    let mut st = Stats::new();
+    let mut glazed_right = (0u64, 0u64);
+    for seed in SEEDS {
+        let mut run = Run::new(
+            seed,
+            vec![
+                Segment::dry(600.0, 5.0),
+                Segment::grow(IceKind::Water, 0.0, 0.3, 1.8, 5.0),
+                Segment {
+                    cover: Some(IceKind::Water),
+                    duration_s: 1200.0,
+                    rate_mm_per_h: 0.0,
+                    temp_c: (5.0, 0.0),
+                },
+                Segment {
+                    cover: Some(IceKind::Glazed),
+                    duration_s: 3600.0,
+                    rate_mm_per_h: 1.0,
+                    temp_c: (0.0, -5.0),
+                },
+            ],
+        );
+        run.frame_s = 1.0;
+        let frames = simulate(&run, EstimatorParams::default());
+        for f in &frames {
+            let Some(e) = f.est else { continue };
+            if f.medium == fois_protocol::Medium::Glazed && f.temp_c <= -1.0 {
+                glazed_right.0 += 1;
+                if e.medium().0 == fois_protocol::Medium::Glazed {
+                    glazed_right.1 += 1;
+                }
+            }
+        }
+        st.add(&frames, 0.05);
+    }
+    let share = glazed_right.1 as f64 / glazed_right.0.max(1) as f64;
+    println!(
+        "water that freezes: water frames called ice {} of {}; glaze below −1 °C called glaze {:.1} % of {} frames",
+        st.water_called_ice,
+        st.water_frames,
+        100.0 * share,
+        glazed_right.0
+    );
+    assert!(
+        st.water_called_ice == 0,
+        "the film called ice while still water"
+    );
+    assert!(share >= 0.95, "frozen film called glaze in {share:.3}");
+}
