@@ -12,16 +12,49 @@ fn main() {
     if args.get(1).map(String::as_str) == Some("trace") {
         return trace(&args);
     }
+    if args.get(1).map(String::as_str) == Some("trace-freeze") {
+        let seed = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(101);
+        let mut run = freeze_run(seed);
+        run.frame_s = 1.0;
+        for f in simulate(&run, params_from_env()).iter().step_by(120) {
+            if let Some(e) = f.est {
+                println!(
+                    "t {:6.0} {:?} d {:5.2} T {:5.1} x ({:6.2},{:6.2}) est {:5.2} ± {:5.2} p {:.3} {:.3} {:.3} {:.3}",
+                    f.t_s,
+                    f.medium,
+                    f.thickness_mm,
+                    f.temp_c,
+                    f.currents_ua[0],
+                    f.currents_ua[1],
+                    e.thickness_mm,
+                    e.sigma_mm,
+                    e.p_medium[0],
+                    e.p_medium[1],
+                    e.p_medium[2],
+                    e.p_medium[3]
+                );
+            }
+        }
+        return;
+    }
     let seeds: u64 = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(8);
     let frame_s: f64 = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(0.1);
     let params = params_from_env();
     let crlb = rime_crlb(256, 4242);
     let classes: Vec<(&str, IceKind, f64, f64, f64)> = vec![
-        ("rime 2 mm/h", IceKind::Rime, 2.0, -8.0, 1.0),
-        ("rime 5 mm/h", IceKind::Rime, 5.0, -8.0, 1.0),
-        ("glazed 2 mm/h", IceKind::Glazed, 2.0, -5.0, 1.0),
-        ("water +5C 2 mm/h", IceKind::Water, 2.0, 5.0, 1.0),
-        ("rime 2 mm/h LED-30%", IceKind::Rime, 2.0, -8.0, 0.7),
+        ("rime 0.5 mm/h, -8 °C", IceKind::Rime, 0.5, -8.0, 1.0),
+        ("rime 2 mm/h, -8 °C", IceKind::Rime, 2.0, -8.0, 1.0),
+        ("rime 10 mm/h, -8 °C", IceKind::Rime, 10.0, -8.0, 1.0),
+        ("glazed 2 mm/h, -5 °C", IceKind::Glazed, 2.0, -5.0, 1.0),
+        ("glazed 10 mm/h, -5 °C", IceKind::Glazed, 10.0, -5.0, 1.0),
+        ("water 2 mm/h, +5 °C", IceKind::Water, 2.0, 5.0, 1.0),
+        (
+            "rime 2 mm/h, -8 °C, LED -30 %",
+            IceKind::Rime,
+            2.0,
+            -8.0,
+            0.7,
+        ),
     ];
     for (name, kind, rate, temp, led) in classes {
         let mut st = Stats::new();
@@ -122,4 +155,27 @@ fn params_from_env() -> EstimatorParams {
         p.max_growth_mm_per_h = v;
     }
     p
+}
+
+/// The water-that-freezes timeline of the accuracy test (for `trace-freeze SEED`).
+pub fn freeze_run(seed: u64) -> Run {
+    Run::new(
+        seed,
+        vec![
+            Segment::dry(600.0, 5.0),
+            Segment::grow(IceKind::Water, 0.0, 0.3, 1.8, 5.0),
+            Segment {
+                cover: Some(IceKind::Water),
+                duration_s: 1200.0,
+                rate_mm_per_h: 0.0,
+                temp_c: (5.0, 0.0),
+            },
+            Segment {
+                cover: Some(IceKind::Glazed),
+                duration_s: 3600.0,
+                rate_mm_per_h: 1.0,
+                temp_c: (0.0, -5.0),
+            },
+        ],
+    )
 }

@@ -381,6 +381,15 @@ impl Model {
     }
 }
 
+/// A state whose probability falls below this (relative to the most likely
+/// one, e^−27.6) is ruled out: set to exactly zero, it returns only through
+/// the transitions from a live neighbour, or when the currents fit nothing
+/// else ([`REBIRTH_NATS`]). Without the cut, the forgetting would lift any
+/// leak, however small, back to the level its likelihood allows within a
+/// few τ — thick clear ice (which reads almost like a dry face) would seep
+/// through thin water states into the posterior of a clean dry face.
+const PRUNE: f32 = 1e-12;
+
 /// Log-probability given back to states the filter had ruled out when the
 /// currents fit only those (relative to the best state), nats: such a state
 /// is then unlikely but reachable, and the evidence decides within ~τ.
@@ -447,6 +456,18 @@ impl Estimator {
         self.posterior = None;
     }
 
+    /// The face is known to be clean and dry (a dark calibration has just
+    /// been taken on it): all probability on *dry*. Ice must then grow
+    /// through thin layers, which the currents show, before the filter can
+    /// believe in a thick one (thick clear ice reads almost like a dry face).
+    pub fn set_dry(&mut self) {
+        self.dry = 1.0;
+        self.cells = [[0.0; ROWS]; 3];
+        self.initialised = true;
+        self.update = Update::Initialised;
+        let _ = self.summarise();
+    }
+
     /// What the last step did.
     pub fn last_update(&self) -> Update {
         self.update
@@ -485,8 +506,28 @@ impl Estimator {
         self.air_temp_c = air_temp_c
             .filter(|t| t.is_finite())
             .map(|t| t.clamp(-100.0, 200.0));
+        // Below zero by more than 6σ of the noise fits no state (Sensor B
+        // reads ≥ 0; the Gaussian tails of a broad state would otherwise
+        // take it): e.g. a baseline taken with ice on the face.
+        let r = self.params.noise_ua;
+        let negative = x.is_some_and(|x| x[0] < -6000.0 * r[0] || x[1] < -6000.0 * r[1]);
         if !self.initialised {
-            return self.initialise(x);
+            return if negative {
+                self.initialise(None)
+            } else {
+                self.initialise(x)
+            };
+        }
+        if negative {
+            self.predict(dt_s);
+            let alpha = fast_math::exp(-dt_s / self.params.forget_time_s);
+            let (mut best_q, mut max) = (f32::INFINITY, f32::NEG_INFINITY);
+            self.dry = tempered(self.dry, alpha, 0.0, None, &mut best_q, &mut max);
+            for c in self.cells.iter_mut().flatten() {
+                *c = tempered(*c, alpha, 0.0, None, &mut best_q, &mut max);
+            }
+            self.update = Update::Outlier;
+            return self.exponentiate(max);
         }
         self.predict(dt_s);
 
@@ -541,7 +582,7 @@ impl Estimator {
             best_q = best_q.min(q);
             max = max.max(l);
         });
-        if !(best_q <= self.params.outlier_distance2) {
+        if best_q.is_nan() || best_q > self.params.outlier_distance2 {
             self.reset();
             return None;
         }
@@ -667,9 +708,10 @@ impl Estimator {
         if !max.is_finite() {
             return self.restart();
         }
-        self.dry = fast_math::exp(self.dry - max);
+        let prune = |p: f32| if p < PRUNE { 0.0 } else { p };
+        self.dry = prune(fast_math::exp(self.dry - max));
         for c in self.cells.iter_mut().flatten() {
-            *c = fast_math::exp_inline(*c - max);
+            *c = prune(fast_math::exp_inline(*c - max));
         }
         self.summarise()
     }
@@ -761,7 +803,7 @@ fn tempered(
     best_q: &mut f32,
     max: &mut f32,
 ) -> f32 {
-    if !(pred > 0.0) {
+    if pred.is_nan() || pred <= 0.0 {
         return f32::NEG_INFINITY;
     }
     let mut l = alpha * fast_math::ln_inline(pred);

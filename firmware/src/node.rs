@@ -356,9 +356,9 @@ where
         self.last_frame_ms = Some(now_ms);
         let base2 = self.baseline.map_or(0, |b| b.i2_na);
         let rise2_na = values.currents.net_na[1].saturating_sub(base2);
-        let currents_ua = valid.then(|| [rise1_na as f32 * 1e-3, rise2_na as f32 * 1e-3]);
+        let currents_ua = valid.then_some([rise1_na as f32 * 1e-3, rise2_na as f32 * 1e-3]);
         let ntc_ok = values.flags & (flags::NTC_OPEN | flags::NTC_SHORT) == 0;
-        let air_temp_c = ntc_ok.then(|| f32::from(values.temperature_centi_c) * 0.01);
+        let air_temp_c = ntc_ok.then_some(f32::from(values.temperature_centi_c) * 0.01);
         self.estimator.step(dt_s, currents_ua, air_temp_c)
     }
 
@@ -545,6 +545,8 @@ where
             i2_na: (sum[1] / n) as i32,
         };
         self.baseline = Some(baseline);
+        // A clean, dry face: the estimator starts from "dry".
+        self.estimator.set_dry();
         self.persist()?;
         Ok(AckResult::DarkCalibrated(baseline))
     }

@@ -46,6 +46,11 @@ pub struct MediumSpec {
     pub floor_rel: f64,
     /// Absolute standard-deviation floor a, µA.
     pub floor_ua: f64,
+    /// Take the spread Σ of this other medium of the table (added to the
+    /// floor): a water film has the surface slopes of glaze, which the
+    /// simulator's flat water lacks (thesis §5.2.3: water and glazed ice are
+    /// optically alike).
+    pub spread_like: Option<IceKind>,
 }
 
 /// What the table is built from.
@@ -76,8 +81,8 @@ pub struct TableSpec {
 impl Default for TableSpec {
     /// The table the firmware embeds: Sensor B, thesis chapter-5 geometry, Monte Carlo over
     /// 0–15 mm in 0.1 mm, smoothed, kept every 0.2 mm (the estimator's grid); rime 256 accretions, glazed 64 (its spread is large and the thesis finds its
-    /// thickness not measurable, so a coarser Σ costs nothing), water one run (deterministic)
-    /// with a 10 % + 0.1 µA floor.
+    /// thickness not measurable, so a coarser Σ costs nothing), water one run (deterministic:
+    /// flat, no bubbles) with the spread of glaze plus a 10 % ⊕ 0.1 µA floor.
     fn default() -> Self {
         TableSpec {
             version: TABLE_VERSION,
@@ -94,18 +99,21 @@ impl Default for TableSpec {
                     runs: 1,
                     floor_rel: 0.10,
                     floor_ua: 0.10,
+                    spread_like: Some(IceKind::Glazed),
                 },
                 MediumSpec {
                     kind: IceKind::Glazed,
                     runs: 64,
                     floor_rel: 0.0,
                     floor_ua: 0.0,
+                    spread_like: None,
                 },
                 MediumSpec {
                     kind: IceKind::Rime,
                     runs: 256,
                     floor_rel: 0.0,
                     floor_ua: 0.0,
+                    spread_like: None,
                 },
             ],
         }
@@ -207,7 +215,8 @@ pub fn build_table(
             spec.half_width_mm
         )));
     }
-    let mut media = Vec::with_capacity(spec.media.len());
+    // Smoothed μ and Σ of every medium first (a medium may borrow another's Σ).
+    let mut smoothed = Vec::with_capacity(spec.media.len());
     for m in &spec.media {
         if m.runs == 0 {
             return Err(SimError::BadParam(format!(
@@ -226,21 +235,48 @@ pub fn build_table(
         cfg.step_mm = spec.step_mm;
         cfg.validate()?;
         let mc = monte_carlo(&cfg, m.runs, spec.seed, on_done);
-        let fit = crlb(&mc.points, spec.half_width_mm);
+        smoothed.push(crlb(&mc.points, spec.half_width_mm));
+    }
+    let mut media = Vec::with_capacity(spec.media.len());
+    for (m, fit) in spec.media.iter().zip(&smoothed) {
+        let borrowed = match m.spread_like {
+            None => None,
+            Some(kind) => Some(
+                spec.media
+                    .iter()
+                    .position(|o| o.kind == kind)
+                    .and_then(|j| smoothed.get(j))
+                    .ok_or_else(|| {
+                        SimError::BadParam(format!(
+                            "{} borrows the spread of {}, which the table does not have",
+                            m.kind.name(),
+                            kind.name()
+                        ))
+                    })?,
+            ),
+        };
         let rows = fit
             .iter()
+            .enumerate()
             .skip(spec.every) // thickness 0 is the dry face
             .step_by(spec.every)
-            .map(|f| {
+            .map(|(i, f)| {
                 let mu = [f.mu_ua[0].max(0.0), f.mu_ua[1].max(0.0)];
-                let var = [f.sigma_ua2[0][0].max(0.0), f.sigma_ua2[1][1].max(0.0)];
+                let mut cov = f.sigma_ua2;
+                if let Some(b) = borrowed.and_then(|b| b.get(i)) {
+                    for (row, brow) in cov.iter_mut().zip(&b.sigma_ua2) {
+                        for (x, y) in row.iter_mut().zip(brow) {
+                            *x += y;
+                        }
+                    }
+                }
                 let floor = |k: usize| (m.floor_rel * mu[k]).hypot(m.floor_ua);
-                let sd_raw = [var[0].sqrt(), var[1].sqrt()];
+                let sd_raw = [cov[0][0].max(0.0).sqrt(), cov[1][1].max(0.0).sqrt()];
                 let sd = [sd_raw[0].max(floor(0)), sd_raw[1].max(floor(1))];
                 // The correlation of the smoothed Σ; a floored channel keeps the raw
                 // covariance, so ρ shrinks with it. Zero where a channel has no spread.
                 let rho = if sd[0] > 0.0 && sd[1] > 0.0 {
-                    (f.sigma_ua2[0][1] / (sd[0] * sd[1])).clamp(-0.999, 0.999)
+                    (cov[0][1] / (sd[0] * sd[1])).clamp(-0.999, 0.999)
                 } else {
                     0.0
                 };
@@ -315,7 +351,7 @@ pub fn to_rust_source(table: &ResponseTable, regenerate: &str) -> Result<String,
         let p = m.spec.kind.params();
         let _ = writeln!(
             w,
-            "//! - {}: M = {} runs; n = {}, P_B = {}, δ_S ~ U(±{:.0}°), δ_R ~ U(±{:.0}°); σ floor {} % of μ ⊕ {} µA.",
+            "//! - {}: M = {} runs; n = {}, P_B = {}, δ_S ~ U(±{:.0}°), δ_R ~ U(±{:.0}°); σ floor {} % of μ ⊕ {} µA{}.",
             m.spec.kind.name(),
             m.spec.runs,
             p.n_medium,
@@ -323,9 +359,14 @@ pub fn to_rust_source(table: &ResponseTable, regenerate: &str) -> Result<String,
             p.slope_max_rad.to_degrees(),
             p.diffuse_max_rad.to_degrees(),
             m.spec.floor_rel * 100.0,
-            m.spec.floor_ua
+            m.spec.floor_ua,
+            m.spec
+                .spread_like
+                .map(|k| format!("; Σ of {} added", k.name()))
+                .unwrap_or_default()
         );
     }
+    let _ = writeln!(w, "//!");
     let _ = writeln!(
         w,
         "//! Smoothing: μ local quadratic, Σ tricube kernel average, half-width {} mm (as the CRLB);",
@@ -417,6 +458,7 @@ mod tests {
                 runs: 2,
                 floor_rel: 0.1,
                 floor_ua: 0.1,
+                spread_like: None,
             }],
             ..TableSpec::default()
         };
@@ -458,6 +500,11 @@ mod tests {
             every: 0,
             ..TableSpec::default()
         };
+        assert!(build_table(&spec, &|| {}).is_err());
+        // Water borrows the spread of glaze, which this spec lacks.
+        let mut spec = TableSpec::default();
+        spec.media.remove(1);
+        spec.max_mm = 1.0;
         assert!(build_table(&spec, &|| {}).is_err());
     }
 }

@@ -111,7 +111,7 @@ pub fn ln_inline(x: f32) -> f32 {
 /// x = λΔt), accurate also for tiny x where 1 − exp(−x) would cancel.
 #[inline]
 pub fn one_minus_exp_neg(x: f32) -> f32 {
-    if !(x > 0.0) {
+    if x.is_nan() || x <= 0.0 {
         0.0
     } else if x < 0.1 {
         // Series to x⁵ (truncation < x⁵/720 relative: 1.4·10⁻⁸ at 0.1).
@@ -124,13 +124,17 @@ pub fn one_minus_exp_neg(x: f32) -> f32 {
 /// √x for x ≥ 0 (0 for x ≤ 0 or NaN): e^(½ ln x), relative error < 10⁻⁶.
 #[inline]
 pub fn sqrt(x: f32) -> f32 {
-    if !(x > 0.0) { 0.0 } else { exp(0.5 * ln(x)) }
+    if x.is_nan() || x <= 0.0 {
+        0.0
+    } else {
+        exp(0.5 * ln(x))
+    }
 }
 
 /// The smallest integer ≥ x, for 0 ≤ x < 2²⁴ (0 below, NaN → 0).
 #[inline]
 pub fn ceil(x: f32) -> f32 {
-    if !(x > 0.0) {
+    if x.is_nan() || x <= 0.0 {
         return 0.0;
     }
     let x = x.min(16_777_216.0);
