@@ -1,4 +1,4 @@
-//! The hardware seams (DESIGN §1). The board module implements these with
+//! The hardware seams (ARCHITECTURE.md). The board module implements these with
 //! embassy-stm32; host tests, the virtual node and the HIL suite implement
 //! them with a simulated ADC. LED (PB0), alarm output (PA9) and LD2 (PA5) are
 //! `embedded_hal::digital::OutputPin`s; settle waits use

@@ -1,15 +1,14 @@
-//! FOIS node logic, free of any HAL: measurement maths, the ice rule, config
-//! handling and command dispatch. Runs on the board, in host tests, in the
-//! host's virtual node, in the hardware-in-loop suite and on an emulated
-//! Cortex-M4F (`firmware/qemu-test`).
+#![doc = include_str!("../README.md")]
+//!
+//! ## Modules
 //!
 //! - [`hal`]: the hardware seams ([`hal::PhotoAdc`], [`hal::Storage`], board info).
 //! - [`node::Node`]: the whole node behind them.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
 //! - [`estimator`]: ice thickness ± σ and medium (grid Bayes filter on the simulator's table).
+//! - `sim_board` (feature `sim-board`): a scripted simulated board for tests.
+
 #![cfg_attr(not(test), no_std)]
-#![deny(missing_docs)]
-#![deny(clippy::unwrap_used, clippy::expect_used)]
 
 pub mod dispatch;
 pub mod estimator;
@@ -19,6 +18,8 @@ pub mod node;
 pub mod ntc;
 pub mod persist;
 pub mod rule;
+#[cfg(feature = "sim-board")]
+pub mod sim_board;
 pub mod vref;
 
 pub use hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc, Storage, StorageError};

@@ -7,6 +7,8 @@
 //! one ADC step of quantisation. With Δ = 200 µs settle + 15 µs conversion and
 //! f = 100 Hz that is 0.91 % of A: for A = 25 µA (a 50 µA ambient modulated
 //! ±50 %), ≤ 228 nA + 81 nA = 309 nA, under a third of the 1 µA onset rise.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 

@@ -1,4 +1,6 @@
 //! The node as the host sees it: frames out, commands in, outputs, storage.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 

@@ -1,5 +1,7 @@
 //! Every path of the ice rule, each with its one-field-wrong twins: the same
 //! frames with one value just on the wrong side of its limit must not fire.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use fois_firmware::rule::{Rule, RuleInput, Transition};
 use fois_protocol::{Config, DetectorState, EventKind};

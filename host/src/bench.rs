@@ -125,9 +125,8 @@ pub fn long_run(frames: u64, log: &std::path::Path) -> anyhow::Result<LongRun> {
     use std::sync::atomic::{AtomicBool, Ordering};
     use std::time::Duration;
 
-    use crate::virtual_hw::{Cover, Environment, Segment, Timeline};
-    use crate::virtual_node::{NodeOptions, VirtualNode};
     use fois_sim::{Curve, CurvePoint};
+    use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
     use serialport::SerialPort;
 
     let (mut master, slave) = serialport::TTYPort::pair()?;

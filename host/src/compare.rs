@@ -1,5 +1,5 @@
-//! `foisctl compare`: logged currents beside the simulator's Monte Carlo
-//! band μ(d) ± k·σ(d), with the RMS deviation and the fraction of samples
+//! The maths of `foisctl compare`: logged currents beside the simulator's
+//! Monte Carlo band μ(d) ± k·σ(d), with the RMS deviation and the fraction of samples
 //! inside the band.
 //!
 //! The reference thickness of each logged sample comes from a column of the
@@ -49,8 +49,6 @@ pub struct CompareOptions {
     /// Measurement noise of one logged sample, rms µA: added in quadrature
     /// to the Monte Carlo spread (which holds only the ice's randomness).
     pub noise_ua: f64,
-    /// Also draw the comparison here.
-    pub plot: Option<PathBuf>,
 }
 
 /// One logged sample with its reference thickness.
@@ -164,9 +162,9 @@ pub fn samples_from_log(path: &Path, src: &ThicknessSource) -> anyhow::Result<Ve
         _ => None,
     };
     let mut out = Vec::new();
-    let mut r = Vec::new();
+    let mut r = csv::StringRecord::new();
     while rd.next_row(&mut r)? {
-        if kind.is_some_and(|k| r[k] != "measurement") {
+        if kind.is_some_and(|k| &r[k] != "measurement") {
             continue;
         }
         if valid.is_some_and(|v| r[v].trim() == "0") {
@@ -208,11 +206,7 @@ pub fn run(opts: &CompareOptions) -> anyhow::Result<Comparison> {
     let cfg = SimConfig::new(opts.ice, opts.sensor, Geometry::default());
     let mc = monte_carlo(&cfg, opts.runs, opts.seed, &|| {});
     let band = with_noise(mc.points, opts.noise_ua);
-    let cmp = compare_samples(samples, band, opts.k_sigma);
-    if let Some(p) = &opts.plot {
-        crate::plot::plot_comparison(&cmp, opts.ice.name(), p)?;
-    }
-    Ok(cmp)
+    Ok(compare_samples(samples, band, opts.k_sigma))
 }
 
 /// The band widened by a sample's measurement noise: σ² + noise² on the

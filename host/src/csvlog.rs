@@ -26,15 +26,15 @@
 //! | `detail` | | event kind, error, answer, reason |
 
 use std::fs::{File, OpenOptions};
-use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use fois_protocol::{
-    Ack, AckResult, DetectorState, DeviceMsg, ErrorReply, Event, EventKind, Hello, Measurement,
-    flags,
-};
+use anyhow::Context;
+use csv::StringRecord;
+use fois_protocol::{DetectorState, DeviceMsg, Event, Measurement, flags};
 
+use crate::text::{ack_text, error_text, event_name, hello_text, na_to_ua};
 use crate::timefmt::{iso_utc, unix_ms_now};
 
 /// The header line (without newline).
@@ -53,6 +53,14 @@ pub enum LogError {
         path: PathBuf,
         /// Why.
         source: std::io::Error,
+    },
+    /// A row could not be written.
+    #[error("log file {path}: {source}")]
+    Csv {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: csv::Error,
     },
     /// The file exists with another first line.
     #[error(
@@ -96,10 +104,6 @@ pub struct Row {
     pub frames_lost: Option<u64>,
     /// Free text.
     pub detail: String,
-}
-
-fn na_to_ua(na: i64) -> f64 {
-    na as f64 / 1000.0
 }
 
 impl Row {
@@ -182,63 +186,19 @@ impl Row {
     }
 }
 
-/// Short name of an event kind (`IceOnset`, `FaultRaised(0x0004)`).
-pub fn event_name(kind: &EventKind) -> String {
-    match kind {
-        EventKind::FaultRaised(b) => format!("FaultRaised(0x{b:04x})"),
-        EventKind::FaultCleared(b) => format!("FaultCleared(0x{b:04x})"),
-        other => format!("{other:?}"),
-    }
-}
-
-/// One line describing a node.
-pub fn hello_text(h: &Hello) -> String {
-    let [a, b, c] = h.firmware_version;
-    let id: String = h.unique_id.iter().map(|b| format!("{b:02x}")).collect();
-    format!(
-        "board={} firmware={a}.{b}.{c} protocol={} id={id} reset={:?}",
-        h.board_name(),
-        h.protocol_version,
-        h.reset_reason
-    )
-}
-
-/// One line describing an answer.
-pub fn ack_text(a: &Ack) -> String {
-    let what = match &a.result {
-        AckResult::Info(h) => format!("Info {}", hello_text(h)),
-        AckResult::Config(c) => format!("Config {c:?}"),
-        AckResult::Streaming { frame_period_ms } => {
-            format!("Streaming frame_period_ms={frame_period_ms}")
-        }
-        AckResult::Stopped => "Stopped".into(),
-        AckResult::DarkCalibrated(b) => format!(
-            "DarkCalibrated i1_ua={:.3} i2_ua={:.3}",
-            na_to_ua(b.i1_na.into()),
-            na_to_ua(b.i2_na.into())
-        ),
-        AckResult::AlarmAcknowledged => "AlarmAcknowledged".into(),
-        AckResult::Resetting => "Resetting".into(),
-    };
-    format!("id={} {what}", a.id)
-}
-
-/// One line describing an error reply.
-pub fn error_text(e: &ErrorReply) -> String {
-    let id = e.id.map_or("none".to_string(), |i| i.to_string());
-    let why = match &e.code {
-        fois_protocol::ErrorCode::InvalidConfig(c) => format!("InvalidConfig: {c}"),
-        other => format!("{other:?}"),
-    };
-    format!("id={id} {why}")
-}
-
 /// The CSV log file.
 pub struct CsvLog {
     path: PathBuf,
-    out: BufWriter<File>,
+    out: csv::Writer<File>,
     last_flush: Instant,
     rows: u64,
+}
+
+fn csv_writer<W: std::io::Write>(w: W) -> csv::Writer<W> {
+    csv::WriterBuilder::new()
+        .has_headers(false)
+        .buffer_capacity(64 * 1024)
+        .from_writer(w)
 }
 
 impl CsvLog {
@@ -258,35 +218,56 @@ impl CsvLog {
         let len = file.metadata().map_err(io)?.len();
         let mut needs_newline = false;
         if len > 0 {
-            let mut first = String::new();
-            BufReader::new(File::open(path).map_err(io)?)
-                .read_line(&mut first)
-                .map_err(io)?;
-            if first.trim_end() != HEADER {
+            let mut first = StringRecord::new();
+            let mut rd = csv::ReaderBuilder::new()
+                .has_headers(false)
+                .flexible(true)
+                .from_path(path)
+                .map_err(|e| LogError::Csv {
+                    path: path.to_path_buf(),
+                    source: e,
+                })?;
+            let header_ok =
+                rd.read_record(&mut first).unwrap_or(false) && first.iter().eq(HEADER.split(','));
+            if !header_ok {
                 return Err(LogError::ForeignHeader(path.to_path_buf()));
             }
             // A logger killed mid-row leaves a partial last line: end it so
             // the next row starts on its own line.
-            use std::io::{Read, Seek, SeekFrom};
             let mut f = File::open(path).map_err(io)?;
             f.seek(SeekFrom::End(-1)).map_err(io)?;
             let mut last = [0u8; 1];
             f.read_exact(&mut last).map_err(io)?;
             needs_newline = last[0] != b'\n';
         }
+        if needs_newline {
+            use std::io::Write;
+            (&file).write_all(b"\n").map_err(io)?;
+        }
         let mut log = CsvLog {
             path: path.to_path_buf(),
-            out: BufWriter::with_capacity(64 * 1024, file),
+            out: csv_writer(file),
             last_flush: Instant::now(),
             rows: 0,
         };
         if len == 0 {
-            writeln!(log.out, "{HEADER}").map_err(io)?;
+            log.record(HEADER.split(','))?;
             log.flush()?;
-        } else if needs_newline {
-            writeln!(log.out).map_err(io)?;
         }
         Ok(log)
+    }
+
+    fn record<I, T>(&mut self, fields: I) -> Result<(), LogError>
+    where
+        I: IntoIterator<Item = T>,
+        T: AsRef<[u8]>,
+    {
+        self.out
+            .write_record(fields)
+            .map_err(|source| LogError::Csv {
+                path: self.path.clone(),
+                source,
+            })
     }
 
     /// The file's path.
@@ -307,13 +288,7 @@ impl CsvLog {
         } else {
             row.host_unix_ms
         };
-        let line = format_row(ms, row);
-        self.out
-            .write_all(line.as_bytes())
-            .map_err(|source| LogError::Io {
-                path: self.path.clone(),
-                source,
-            })?;
+        self.record(row_fields(ms, row))?;
         self.rows += 1;
         self.tick()
     }
@@ -356,21 +331,12 @@ fn fixed(v: Option<f64>, decimals: usize) -> String {
     v.map_or(String::new(), |v| format!("{v:.decimals$}"))
 }
 
-fn csv_field(s: &str) -> String {
-    if s.contains([',', '"', '\n', '\r']) {
-        format!("\"{}\"", s.replace('"', "\"\""))
-    } else {
-        s.to_string()
-    }
-}
-
-/// The CSV line of a row (with newline).
-pub fn format_row(host_unix_ms: u64, r: &Row) -> String {
-    format!(
-        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+/// The fields of a row, in the order of [`HEADER`].
+pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 17] {
+    [
         iso_utc(host_unix_ms),
-        host_unix_ms,
-        r.kind,
+        host_unix_ms.to_string(),
+        r.kind.to_string(),
         opt(r.seq),
         opt(r.uptime_ms),
         fixed(r.i1_ua, 3),
@@ -384,8 +350,17 @@ pub fn format_row(host_unix_ms: u64, r: &Row) -> String {
         opt(r.valid.map(u8::from)),
         opt(r.flags),
         opt(r.frames_lost),
-        csv_field(&r.detail)
-    )
+        r.detail.clone(),
+    ]
+}
+
+/// The CSV line of a row (with newline), as [`CsvLog::write`] writes it.
+pub fn format_row(host_unix_ms: u64, r: &Row) -> String {
+    let mut w = csv_writer(Vec::new());
+    // Writing to memory cannot fail.
+    let _ = w.write_record(row_fields(host_unix_ms, r));
+    let bytes = w.into_inner().unwrap_or_default();
+    String::from_utf8_lossy(&bytes).into_owned()
 }
 
 /// A log read back: the header's columns and every row as text fields
@@ -418,9 +393,9 @@ impl LogTable {
         };
         let columns = keep.iter().map(|&i| header[i].clone()).collect();
         let mut rows = Vec::new();
-        let mut fields = Vec::new();
+        let mut fields = StringRecord::new();
         while rd.next_row(&mut fields)? {
-            rows.push(keep.iter().map(|&i| fields[i].clone()).collect());
+            rows.push(keep.iter().map(|&i| fields[i].to_string()).collect());
         }
         Ok(LogTable {
             header,
@@ -443,36 +418,70 @@ impl LogTable {
     }
 }
 
+/// A reader that remembers the last byte it delivered (at the end of the
+/// file: whether the last line was ended).
+struct LastByte<R> {
+    inner: R,
+    last: Option<u8>,
+}
+
+impl<R: Read> Read for LastByte<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        if let Some(&b) = buf[..n].last() {
+            self.last = Some(b);
+        }
+        Ok(n)
+    }
+}
+
 /// Reads a CSV log row by row without keeping it (a day at 10 Hz is
 /// 864 000 rows).
 pub struct LogReader {
     path: PathBuf,
-    reader: BufReader<File>,
+    reader: csv::Reader<LastByte<File>>,
     header: Vec<String>,
-    line: String,
+    /// The row read ahead: the last one is dropped if its line was not ended.
+    ahead: Option<StringRecord>,
 }
 
 impl LogReader {
     /// Open a CSV file and read its header.
     pub fn open(path: &Path) -> anyhow::Result<LogReader> {
-        use anyhow::Context;
         let file =
             File::open(path).with_context(|| format!("cannot read log {}", path.display()))?;
-        let mut reader = BufReader::with_capacity(1 << 16, file);
-        let mut line = String::new();
-        let n = reader
-            .read_line(&mut line)
-            .with_context(|| format!("cannot read log {}", path.display()))?;
-        if n == 0 {
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .buffer_capacity(1 << 16)
+            .from_reader(LastByte {
+                inner: file,
+                last: None,
+            });
+        let mut first = StringRecord::new();
+        if !reader
+            .read_record(&mut first)
+            .with_context(|| format!("cannot read log {}", path.display()))?
+        {
             anyhow::bail!("log {} is empty", path.display());
         }
-        let header = split_csv(line.trim_end_matches(['\n', '\r']));
-        Ok(LogReader {
+        let mut rd = LogReader {
             path: path.to_path_buf(),
             reader,
-            header,
-            line,
-        })
+            header: first.iter().map(str::to_string).collect(),
+            ahead: None,
+        };
+        rd.ahead = rd.read_ahead()?;
+        Ok(rd)
+    }
+
+    fn read_ahead(&mut self) -> anyhow::Result<Option<StringRecord>> {
+        let mut rec = StringRecord::new();
+        let more = self
+            .reader
+            .read_record(&mut rec)
+            .with_context(|| format!("cannot read log {}", self.path.display()))?;
+        Ok(more.then_some(rec))
     }
 
     /// The header's columns.
@@ -499,91 +508,26 @@ impl LogReader {
     /// The next complete row with as many fields as the header, into
     /// `fields`; `false` at the end. A last line cut short (a killed
     /// logger) is ignored, and so are rows of the wrong width.
-    pub fn next_row(&mut self, fields: &mut Vec<String>) -> anyhow::Result<bool> {
-        use anyhow::Context;
-        loop {
-            self.line.clear();
-            let n = self
-                .reader
-                .read_line(&mut self.line)
-                .with_context(|| format!("cannot read log {}", self.path.display()))?;
-            if n == 0 {
+    pub fn next_row(&mut self, fields: &mut StringRecord) -> anyhow::Result<bool> {
+        while let Some(row) = self.ahead.take() {
+            self.ahead = self.read_ahead()?;
+            let cut_short = self.ahead.is_none() && self.reader.get_ref().last != Some(b'\n');
+            if cut_short {
                 return Ok(false);
             }
-            let Some(text) = self.line.strip_suffix('\n') else {
-                return Ok(false);
-            };
-            let text = text.strip_suffix('\r').unwrap_or(text);
-            if text.is_empty() {
-                continue;
-            }
-            split_csv_into(text, fields);
-            if fields.len() == self.header.len() {
+            if row.len() == self.header.len() {
+                *fields = row;
                 return Ok(true);
             }
         }
+        Ok(false)
     }
-}
-
-/// Split one CSV line into `out`, reusing its strings.
-pub fn split_csv_into(line: &str, out: &mut Vec<String>) {
-    let mut n = 0;
-    let mut quoted = false;
-    let mut chars = line.chars().peekable();
-    let field = |n: usize, out: &mut Vec<String>| {
-        if out.len() <= n {
-            out.push(String::new());
-        }
-        out[n].clear();
-    };
-    field(0, out);
-    let mut fresh = true;
-    while let Some(c) = chars.next() {
-        match (c, quoted) {
-            ('"', true) if chars.peek() == Some(&'"') => {
-                out[n].push('"');
-                chars.next();
-            }
-            ('"', true) => quoted = false,
-            ('"', false) if fresh => quoted = true,
-            (',', false) => {
-                n += 1;
-                field(n, out);
-                fresh = true;
-                continue;
-            }
-            (c, _) => out[n].push(c),
-        }
-        fresh = false;
-    }
-    out.truncate(n + 1);
-}
-
-/// Split one CSV line (RFC 4180 quoting).
-pub fn split_csv(line: &str) -> Vec<String> {
-    let mut out = Vec::new();
-    let mut cur = String::new();
-    let mut quoted = false;
-    let mut chars = line.chars().peekable();
-    while let Some(c) = chars.next() {
-        match (c, quoted) {
-            ('"', true) if chars.peek() == Some(&'"') => {
-                cur.push('"');
-                chars.next();
-            }
-            ('"', true) => quoted = false,
-            ('"', false) if cur.is_empty() => quoted = true,
-            (',', false) => out.push(std::mem::take(&mut cur)),
-            (c, _) => cur.push(c),
-        }
-    }
-    out.push(cur);
-    out
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::io::Write;
 
     fn meas() -> Measurement {
         Measurement {
@@ -606,29 +550,50 @@ mod tests {
             line,
             "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,\n"
         );
-        assert_eq!(split_csv(line.trim_end()).len(), split_csv(HEADER).len());
+        assert_eq!(fields(&line).len(), HEADER.split(',').count());
         let g = format_row(5, &Row::gap(10, 3));
-        let f = split_csv(g.trim_end());
+        let f = fields(&g);
         assert_eq!(f[2], "gap");
         assert_eq!(f[15], "3");
     }
 
-    #[test]
-    fn split_into_reuses_and_matches_split() {
-        let mut v = vec!["old".to_string(); 5];
-        for line in ["a,b,,\"c,\"\"d\"\"\",e", "", "x", ",", "\"\",1"] {
-            split_csv_into(line, &mut v);
-            assert_eq!(v, split_csv(line), "{line:?}");
-        }
+    /// One CSV line read back by the csv crate.
+    fn fields(line: &str) -> Vec<String> {
+        let mut rd = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .from_reader(line.as_bytes());
+        let mut r = StringRecord::new();
+        assert!(rd.read_record(&mut r).unwrap());
+        r.iter().map(str::to_string).collect()
     }
 
     #[test]
     fn quoting_round_trips() {
-        let r = Row::note("note", "a, \"b\"");
+        let r = Row::note("note", "a, \"b\"\nc");
         let line = format_row(1, &r);
-        let f = split_csv(line.trim_end());
-        assert_eq!(f.last().unwrap(), "a, \"b\"");
+        let f = fields(&line);
+        assert_eq!(f.last().unwrap(), "a, \"b\"\nc");
         assert_eq!(f.len(), 17);
+    }
+
+    #[test]
+    fn reader_skips_a_cut_last_line_and_rows_of_another_width() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("t.csv");
+        for (text, want) in [
+            ("a,b\n1,2\n3,4\n", vec!["1", "3"]),
+            ("a,b\n1,2\n3,4", vec!["1"]),
+            ("a,b\n1,2\n\n5\n\"6,x\",7\n8,", vec!["1", "6,x"]),
+            ("a,b\n", vec![]),
+        ] {
+            std::fs::write(&p, text).unwrap();
+            let t = LogTable::read(&p).unwrap();
+            let got: Vec<&str> = t.rows.iter().map(|r| r[0].as_str()).collect();
+            assert_eq!(got, want, "{text:?}");
+        }
+        std::fs::write(&p, "").unwrap();
+        let err = LogReader::open(&p).err().map(|e| e.to_string());
+        assert!(err.is_some_and(|e| e.contains("empty")));
     }
 
     #[test]

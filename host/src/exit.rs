@@ -1,6 +1,9 @@
-//! Exit codes of `foisctl` and the error type that carries them.
+//! Exit codes of `foisctl`, the error type that carries one, and the codes
+//! of the link's errors.
 
 use std::fmt;
+
+use crate::link::LinkError;
 
 /// Success.
 pub const OK: i32 = 0;
@@ -52,15 +55,59 @@ impl fmt::Display for Exit {
 
 impl std::error::Error for Exit {}
 
-/// The exit code of an `anyhow` error: the [`Exit`] code inside it, else 1.
+/// The exit code of a link error.
+pub fn link_code(e: &LinkError) -> i32 {
+    match e {
+        LinkError::Open { .. } => PORT,
+        LinkError::Lost(..) | LinkError::Timeout { .. } => TIMEOUT,
+        LinkError::Incompatible { .. } => INCOMPATIBLE,
+    }
+}
+
+/// The exit code of an `anyhow` error: the [`Exit`] code inside it, else
+/// that of a [`LinkError`] inside it, else 1.
 pub fn code_of(err: &anyhow::Error) -> i32 {
     err.chain()
         .find_map(|e| e.downcast_ref::<Exit>().map(|x| x.code))
         .or_else(|| {
-            err.chain().find_map(|e| {
-                e.downcast_ref::<crate::link::LinkError>()
-                    .map(|l| l.exit_code())
-            })
+            err.chain()
+                .find_map(|e| e.downcast_ref::<LinkError>().map(link_code))
         })
         .unwrap_or(FAILURE)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn link_errors_and_wrapped_exits_map_to_their_codes() {
+        let open = LinkError::Open {
+            port: "p".into(),
+            reason: "r".into(),
+        };
+        let timeout = LinkError::Timeout {
+            port: "p".into(),
+            waited_ms: 1,
+            hint: String::new(),
+        };
+        let other = LinkError::Incompatible {
+            node: 9,
+            host: 2,
+            hello: String::new(),
+        };
+        let lost = LinkError::Lost("p".into(), "gone".into());
+        for (e, code) in [
+            (open, PORT),
+            (timeout, TIMEOUT),
+            (lost, TIMEOUT),
+            (other, INCOMPATIBLE),
+        ] {
+            let wrapped = anyhow::Error::from(e).context("while talking to the node");
+            assert_eq!(code_of(&wrapped), code);
+        }
+        let e = anyhow::Error::from(Exit::new(REFUSED, "no")).context("config set");
+        assert_eq!(code_of(&e), REFUSED);
+        assert_eq!(code_of(&anyhow::anyhow!("disk full")), FAILURE);
+    }
 }

@@ -1,16 +1,22 @@
-//! `foisctl` as a library: every subcommand lives in its own module so the
-//! hardware-in-loop suite and the benchmarks can drive the same code.
+#![doc = include_str!("../README.md")]
+//!
+//! ## Modules
+//!
+//! - [`cmd`]: one module per command, each owning its arguments and its `run`.
+//! - [`link`]: the serial link (handshake, commands, sequence tracking).
+//! - [`monitor`]: the live session behind `monitor` and `demo`; [`csvlog`] its durable CSV log.
+//! - [`serve`]: a virtual node on a pseudo-terminal.
+//! - [`compare`]: a log against the simulator's band; [`plot`]: every figure.
+//! - [`exit`]: the exit codes; [`text`], [`timefmt`], [`mod@bench`]: helpers.
 
 pub mod bench;
-pub mod commands;
+pub mod cmd;
 pub mod compare;
 pub mod csvlog;
 pub mod exit;
 pub mod link;
 pub mod monitor;
 pub mod plot;
-pub mod sim_cmd;
+pub mod serve;
+pub mod text;
 pub mod timefmt;
-pub mod virtual_hw;
-pub mod virtual_node;
-pub mod vnode_cmd;

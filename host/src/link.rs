@@ -13,8 +13,6 @@ use fois_protocol::{
     FrameError, Hello, HostFrame, PROTOCOL_VERSION, encode_to_vec,
 };
 
-use crate::exit;
-
 /// Errors of the link.
 #[derive(Debug, thiserror::Error)]
 pub enum LinkError {
@@ -52,17 +50,6 @@ pub enum LinkError {
         /// The node's hello, as text.
         hello: String,
     },
-}
-
-impl LinkError {
-    /// The process exit code of this error.
-    pub fn exit_code(&self) -> i32 {
-        match self {
-            LinkError::Open { .. } => exit::PORT,
-            LinkError::Lost(..) | LinkError::Timeout { .. } => exit::TIMEOUT,
-            LinkError::Incompatible { .. } => exit::INCOMPATIBLE,
-        }
-    }
 }
 
 /// What one frame's sequence number says.
@@ -380,7 +367,7 @@ fn incompatible(h: &Hello) -> LinkError {
     LinkError::Incompatible {
         node: h.protocol_version,
         host: PROTOCOL_VERSION,
-        hello: crate::csvlog::hello_text(h),
+        hello: crate::text::hello_text(h),
     }
 }
 
@@ -463,7 +450,9 @@ mod tests {
             "script",
         );
         let err = link.handshake(Duration::from_millis(200)).unwrap_err();
-        assert_eq!(err.exit_code(), exit::INCOMPATIBLE);
+        assert!(
+            matches!(err, LinkError::Incompatible { node, .. } if node == PROTOCOL_VERSION + 1)
+        );
         let text = err.to_string();
         assert!(
             text.contains(&format!("version {}", PROTOCOL_VERSION + 1)),
@@ -496,7 +485,7 @@ mod tests {
     }
 
     #[test]
-    fn silent_port_times_out_with_exit_code_4() {
+    fn silent_port_times_out() {
         let mut link = Link::new(
             Script {
                 chunks: Default::default(),
@@ -507,6 +496,9 @@ mod tests {
         let err = link
             .request(Command::AckAlarm, Duration::from_millis(30))
             .unwrap_err();
-        assert_eq!(err.exit_code(), exit::TIMEOUT);
+        assert!(
+            matches!(err, LinkError::Timeout { waited_ms: 30, .. }),
+            "{err}"
+        );
     }
 }

@@ -9,9 +9,10 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use fois_protocol::{Command, DetectorState, DeviceMsg, Measurement, flags};
 
-use crate::csvlog::{CsvLog, Row, ack_text, error_text, event_name, hello_text};
+use crate::csvlog::{CsvLog, Row};
 use crate::exit;
 use crate::link::{Incoming, Link, LinkError, SeqEvent, SeqTracker, open_port};
+use crate::text::{ack_text, error_text, event_name, hello_text};
 
 /// What `monitor` does.
 #[derive(Debug, Clone)]

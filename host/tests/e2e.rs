@@ -1,5 +1,7 @@
 //! End to end over pseudo-terminals: `foisctl virtual-node` ↔ `foisctl
 //! monitor` / commands as separate processes, and an in-process lossy link.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
@@ -295,8 +297,7 @@ fn logger_killed_with_sigkill_keeps_all_but_the_last_second() {
 #[test]
 fn lossy_wire_gap_and_garbage_are_counted_not_fatal() {
     use fois_host::monitor::{MonitorOptions, run};
-    use fois_host::virtual_hw::{Cover, Environment, Segment, Timeline};
-    use fois_host::virtual_node::{NodeOptions, VirtualNode};
+    use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
     use serialport::SerialPort;
     use std::io::{Read, Write};
 
@@ -399,9 +400,8 @@ fn ctrl_c_stops_the_monitor_cleanly() {
 /// rime at 36 mm/h for 5 min of virtual time (0..3 mm).
 fn make_rime_log(path: &Path) -> usize {
     use fois_host::csvlog::{CsvLog, Row};
-    use fois_host::virtual_hw::{Cover, Environment, Segment, Timeline};
-    use fois_host::virtual_node::{NodeOptions, VirtualNode};
     use fois_protocol::{DeviceFrame, FrameDecoder};
+    use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
 
     let tl = Timeline::new(vec![
         Segment::new(10.0, Cover::Dry),

@@ -1,5 +1,7 @@
 //! A simulated day at 10 Hz (864 000 frames) through the host pipeline in
 //! virtual time: the monitor's memory must stay flat.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use fois_host::bench::long_run;
 

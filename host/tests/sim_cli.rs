@@ -1,4 +1,6 @@
 //! `foisctl sim ...` end to end: the real binary on small runs.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::PathBuf;
 use std::process::{Command, Output};
@@ -16,33 +18,47 @@ fn tmp(name: &str) -> PathBuf {
     dir.join(name)
 }
 
+/// The header line and every record of a CSV file, as text.
+fn records(path: &PathBuf) -> (String, Vec<csv::StringRecord>) {
+    let mut rd = csv::Reader::from_path(path).unwrap();
+    let header = rd.headers().unwrap().iter().collect::<Vec<_>>().join(",");
+    let data = rd.records().map(Result::unwrap).collect();
+    (header, data)
+}
+
 fn rows(path: &PathBuf) -> (String, Vec<Vec<f64>>) {
-    let text = std::fs::read_to_string(path).unwrap();
-    let mut lines = text.lines();
-    let header = lines.next().unwrap().to_owned();
-    let data = lines
-        .map(|l| l.split(',').map(|v| v.parse::<f64>().unwrap()).collect())
+    let (header, recs) = records(path);
+    let data = recs
+        .iter()
+        .map(|r| r.iter().map(|v| v.parse::<f64>().unwrap()).collect())
         .collect();
     (header, data)
 }
 
 #[test]
-fn curve_writes_the_issue_header_and_values() {
+fn curve_writes_its_header_and_values() {
     let out = tmp("curve.csv");
     let png = tmp("curve.png");
-    let o = foisctl(&[
-        "sim",
-        "curve",
-        "--ice",
-        "rime",
-        "--runs",
-        "2",
-        "--max-mm",
-        "3",
-        "--step-mm",
-        "0.5",
-        "--seed",
-        "4",
+    // Two rime accretions of seed 4, 0–3 mm in 0.5 mm steps.
+    let small_rime = |extra: &[&str]| {
+        let mut v = vec![
+            "sim",
+            "curve",
+            "--ice",
+            "rime",
+            "--runs",
+            "2",
+            "--max-mm",
+            "3",
+            "--step-mm",
+            "0.5",
+            "--seed",
+            "4",
+        ];
+        v.extend_from_slice(extra);
+        foisctl(&v)
+    };
+    let o = small_rime(&[
         "--out",
         out.to_str().unwrap(),
         "--plot",
@@ -68,24 +84,7 @@ fn curve_writes_the_issue_header_and_values() {
     assert_eq!(&png_bytes[1..4], b"PNG");
     // Same seed → same file.
     let out2 = tmp("curve2.csv");
-    let o = foisctl(&[
-        "sim",
-        "curve",
-        "--ice",
-        "rime",
-        "--runs",
-        "2",
-        "--max-mm",
-        "3",
-        "--step-mm",
-        "0.5",
-        "--seed",
-        "4",
-        "--threads",
-        "1",
-        "--out",
-        out2.to_str().unwrap(),
-    ]);
+    let o = small_rime(&["--threads", "1", "--out", out2.to_str().unwrap()]);
     assert!(o.status.success());
     assert_eq!(std::fs::read(&out).unwrap(), std::fs::read(&out2).unwrap());
 }
@@ -110,6 +109,22 @@ fn sensor_a_shows_the_dry_offset() {
     assert!((d[0][2] - 13.0).abs() < 1.0, "{:?}", d[0]);
 }
 
+/// `foisctl sim CMD` over 20 rime accretions, 0–5 mm, into `out`.
+fn small_mc(cmd: &str, out: &std::path::Path) -> Output {
+    foisctl(&[
+        "sim",
+        cmd,
+        "--ice",
+        "rime",
+        "--runs",
+        "20",
+        "--max-mm",
+        "5",
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
 #[test]
 fn analytic_montecarlo_and_crlb_write_their_headers() {
     let a = tmp("an.csv");
@@ -128,18 +143,7 @@ fn analytic_montecarlo_and_crlb_write_their_headers() {
     assert!(d.iter().any(|r| r[1] > 5.0));
 
     let m = tmp("mc.csv");
-    let o = foisctl(&[
-        "sim",
-        "montecarlo",
-        "--ice",
-        "rime",
-        "--runs",
-        "20",
-        "--max-mm",
-        "5",
-        "--out",
-        m.to_str().unwrap(),
-    ]);
+    let o = small_mc("montecarlo", &m);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (h, d) = rows(&m);
     assert_eq!(
@@ -152,30 +156,12 @@ fn analytic_montecarlo_and_crlb_write_their_headers() {
     }
 
     let c = tmp("crlb.csv");
-    let o = foisctl(&[
-        "sim",
-        "crlb",
-        "--ice",
-        "rime",
-        "--runs",
-        "20",
-        "--max-mm",
-        "5",
-        "--out",
-        c.to_str().unwrap(),
-    ]);
+    let o = small_mc("crlb", &c);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let text = std::fs::read_to_string(&c).unwrap();
-    let mut lines = text.lines();
-    assert_eq!(
-        lines.next().unwrap(),
-        "thickness_mm,crlb_std_mm,crlb_no_dsigma_std_mm"
-    );
-    let vals: Vec<Vec<String>> = lines
-        .map(|l| l.split(',').map(str::to_owned).collect())
-        .collect();
+    let (h, vals) = records(&c);
+    assert_eq!(h, "thickness_mm,crlb_std_mm,crlb_no_dsigma_std_mm");
     assert_eq!(vals.len(), 51);
-    assert_eq!(vals[0][1], "NaN"); // dry face: Σ singular
+    assert_eq!(&vals[0][1], "NaN"); // dry face: Σ singular
     let v: f64 = vals[40][1].parse().unwrap();
     assert!(v > 0.0 && v < 5.0, "{v}");
 }
@@ -184,67 +170,58 @@ fn analytic_montecarlo_and_crlb_write_their_headers() {
 fn bad_input_exits_with_an_error_not_a_panic() {
     let out = tmp("bad.csv");
     let o = out.to_str().unwrap();
-    for args in [
-        vec![
-            "sim",
-            "curve",
-            "--ice",
-            "rime",
-            "--step-mm",
-            "0",
-            "--out",
-            o,
-        ],
-        vec![
-            "sim",
-            "curve",
-            "--ice",
-            "rime",
-            "--step-mm",
-            "-0.1",
-            "--out",
-            o,
-        ],
-        vec!["sim", "curve", "--ice", "rime", "--runs", "-3", "--out", o],
-        vec!["sim", "curve", "--ice", "rime", "--runs", "0", "--out", o],
-        vec!["sim", "curve", "--ice", "snow", "--out", o],
-        vec![
-            "sim", "curve", "--ice", "rime", "--max-mm", "nan", "--out", o,
-        ],
-        vec![
-            "sim",
-            "curve",
-            "--ice",
-            "rime",
-            "--out",
-            "/nonexistent/dir/x.csv",
-        ],
-        vec!["sim", "montecarlo", "--runs", "1", "--out", o],
-        vec![
-            "sim",
-            "crlb",
-            "--runs",
-            "10",
-            "--fit-half-width-mm",
-            "0",
-            "--out",
-            o,
-        ],
-        vec!["sim", "analytic", "--ice", "rime", "--out", o],
-        vec![
-            "sim",
-            "curve",
-            "--ice",
-            "rime",
-            "--threads",
-            "0",
-            "--out",
-            o,
-        ],
+    let curve = |extra: &[&'static str]| {
+        let mut v = vec!["sim", "curve", "--ice", "rime", "--out", o];
+        v.extend_from_slice(extra);
+        v
+    };
+    // (arguments, exit code): 2 for a bad command line, 1 for an I/O failure.
+    for (args, code) in [
+        (curve(&["--step-mm", "0"]), 2),
+        (curve(&["--step-mm", "-0.1"]), 2),
+        (curve(&["--runs", "-3"]), 2),
+        (curve(&["--runs", "0"]), 2),
+        (vec!["sim", "curve", "--ice", "snow", "--out", o], 2),
+        (curve(&["--max-mm", "nan"]), 2),
+        (curve(&["--max-mm", "101"]), 2),
+        (curve(&["--max-mm", "15", "--step-mm", "0.0001"]), 2),
+        (curve(&["--diffuse-deg", "61"]), 2),
+        (curve(&["--threads", "0"]), 2),
+        (curve(&["--sensor", "c"]), 2),
+        (curve(&["--geometry", "thesis-ch4"]), 2),
+        (
+            vec![
+                "sim",
+                "curve",
+                "--ice",
+                "rime",
+                "--out",
+                "/nonexistent/dir/x.csv",
+            ],
+            1,
+        ),
+        (vec!["sim", "montecarlo", "--runs", "1", "--out", o], 2),
+        (
+            vec![
+                "sim",
+                "crlb",
+                "--runs",
+                "10",
+                "--fit-half-width-mm",
+                "0",
+                "--out",
+                o,
+            ],
+            2,
+        ),
+        (vec!["sim", "analytic", "--ice", "rime", "--out", o], 2),
+        (vec!["sim", "bench", "--runs", "0"], 2),
+        (vec!["sim", "bench", "--threads", "0"], 2),
+        (vec!["sim", "gallery", "--runs", "1"], 2),
     ] {
         let r = foisctl(&args);
-        assert!(!r.status.success(), "{args:?} should fail");
         let err = String::from_utf8_lossy(&r.stderr);
+        assert_eq!(r.status.code(), Some(code), "{args:?}: {err}");
         assert!(!err.contains("panicked"), "{args:?}: {err}");
         assert!(!err.trim().is_empty(), "{args:?}: no message");
     }

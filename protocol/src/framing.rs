@@ -1,4 +1,4 @@
-//! Framing (DESIGN §4): postcard payload, CRC-32 (little-endian) appended,
+//! Framing (the wire-format rules of ARCHITECTURE.md): postcard payload, CRC-32 (little-endian) appended,
 //! COBS-encoded, terminated by one 0x00.
 //!
 //! ```text

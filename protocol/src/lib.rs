@@ -1,10 +1,12 @@
-//! The FOIS node ↔ host contract: message types, config rules and framing.
+#![doc = include_str!("../README.md")]
 //!
-//! `no_std`, no allocation on the device side. Enable `std` on the host
-//! (adds [`framing::encode_to_vec`]) and `defmt` for `defmt::Format` derives.
-//! The wire format and the compatibility rules are in `protocol/README.md`.
+//! ## Modules
+//!
+//! - [`messages`]: every message of both directions, the flags.
+//! - [`config`]: the node's configuration and its one validation rule.
+//! - [`framing`]: COBS + CRC-32 frames, the streaming decoder.
+
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
-#![deny(missing_docs)]
 
 pub mod config;
 pub mod framing;

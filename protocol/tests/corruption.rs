@@ -3,6 +3,8 @@
 //! included), and long runs that overflow the decoder. Every frame that
 //! arrived intact must come out, in order; no damaged frame may ever be
 //! accepted.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 

@@ -3,6 +3,8 @@
 //! changes these bytes and fails here: that is a breaking change (bump
 //! `PROTOCOL_VERSION`, see protocol/README.md) — never "fix" a snapshot
 //! without one.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use fois_protocol::*;
 

@@ -1,5 +1,7 @@
 //! Every message survives encode → frame → decode unchanged, and no frame is
 //! ever longer than `MAX_FRAME`.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 

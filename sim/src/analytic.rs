@@ -46,7 +46,11 @@ pub fn overlap_areas_mm2(geo: Geometry, shift_mm: f64) -> (f64, f64) {
 /// The analytic curve (thickness_mm, flux1_w, flux2_w) on flat ice of index `n_medium`.
 pub fn analytic_flux(geo: Geometry, n_medium: f64, thicknesses_mm: &[f64]) -> Vec<(f64, f64, f64)> {
     let incl = INCLINATION_DEG.to_radians();
-    let th_ice = snell_angle(incl, N_FIBRE, n_medium).expect("30° enters ice");
+    // Total internal reflection at the fibre face: no light enters the
+    // medium (never for a medium of index > 1: n_fibre · sin 30° < 1).
+    let Some(th_ice) = snell_angle(incl, N_FIBRE, n_medium) else {
+        return thicknesses_mm.iter().map(|&d| (d, 0.0, 0.0)).collect();
+    };
     let t_in = fresnel_transmittance(incl.cos(), N_FIBRE, n_medium);
     let r_surf = fr_dielectric(th_ice.cos(), n_medium, N_AIR);
     let t_out = fresnel_transmittance(th_ice.cos(), n_medium, N_FIBRE);

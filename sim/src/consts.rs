@@ -2,7 +2,7 @@
 
 /// Refractive index of the fibre core (thesis §3.1.1).
 pub const N_FIBRE: f64 = 1.581;
-/// Refractive index of the fibre cladding (issue 3; the thesis uses NA directly).
+/// Refractive index of the fibre cladding (a project value: the thesis uses NA directly).
 pub const N_CLAD: f64 = 1.487;
 /// Numerical aperture of the fibres (thesis §3.2.2, eq. 3.17).
 pub const NA: f64 = 0.55;

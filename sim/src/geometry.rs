@@ -1,4 +1,4 @@
-//! Sensor face geometry (thesis Fig. 3.13, DESIGN §5).
+//! Sensor face geometry (thesis Fig. 3.13; the coordinates of ARCHITECTURE.md).
 //!
 //! Sensor face at z = 0. Source bundle: half-disc of radius R centred at the origin, x ≤ 0.
 //! Signal bundle 1: rectangle 0 ≤ x ≤ B, |y| ≤ R. Signal bundle 2: half-disc of radius R

@@ -1,11 +1,13 @@
-//! FOIS ray tracer: the fibre-optic ice sensor of the thesis (chapters 3 and 5).
+#![doc = include_str!("../README.md")]
 //!
-//! * [`laws`]: Snell, Fresnel, Beer–Lambert, fibre acceptance (thesis §3.1).
-//! * [`accretion_curve`]: one physical accretion, currents I1(d), I2(d) in µA.
-//! * [`analytic`]: the conventional overlap model (thesis §2.1, §3.3).
-//! * [`montecarlo`]: mean μ(d), covariance Σ(d), fits and the Cramér–Rao bound (§5.4).
-//! * [`table`]: the node estimator's response table (μ, Σ per medium, fixed point, Rust source).
-#![warn(missing_docs)]
+//! ## Modules
+//!
+//! - [`laws`]: Snell, Fresnel, Beer–Lambert, fibre acceptance (thesis §3.1).
+//! - [`model`]: the ray tracer; [`accretion_curve`] gives one physical accretion, currents I1(d), I2(d) in µA.
+//! - [`analytic`]: the conventional overlap model (thesis §2.1, §3.3).
+//! - [`montecarlo`]: mean μ(d), covariance Σ(d), fits and the Cramér–Rao bound (§5.4).
+//! - [`geometry`], [`consts`]: the sensor face, every constant once.
+//! - [`table`]: the node estimator's response table (μ, Σ per medium, fixed point, Rust source).
 
 pub mod analytic;
 pub mod consts;

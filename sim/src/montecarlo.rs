@@ -103,7 +103,7 @@ fn tricube(u: f64) -> f64 {
 /// Local quadratic regression (LOESS with a tricube kernel of half-width `half_width_mm`):
 /// the fitted value and first derivative at every x. A local fit follows the sharp peak
 /// and dip of the mean curves between 1 and 4 mm, which one global polynomial cannot
-/// (DESIGN §5).
+/// (ARCHITECTURE.md, simulator conventions).
 pub fn local_quadratic(x: &[f64], y: &[f64], half_width_mm: f64) -> Vec<(f64, f64)> {
     x.iter()
         .map(|&x0| {

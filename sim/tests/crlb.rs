@@ -1,4 +1,6 @@
 //! Fits and the Cramér–Rao bound (thesis §5.4) against closed forms.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use fois_sim::montecarlo::*;
 use fois_sim::*;
@@ -88,7 +90,7 @@ fn rime_crlb_is_finite_and_the_local_fit_beats_a_global_polynomial() {
     for k in 0..2 {
         assert!(q.rms_residual_ua[k] < 1.5 * q.rms_std_error_ua[k], "{q:?}");
     }
-    // One global polynomial of moderate degree follows the peak and dip badly (DESIGN §5).
+    // One global polynomial of moderate degree follows the peak and dip badly.
     let x: Vec<f64> = mc.points.iter().map(|p| p.thickness_mm).collect();
     let y: Vec<f64> = mc.points.iter().map(|p| p.mean_ua[0]).collect();
     let g = global_polynomial_fit(&x, &y, 6);

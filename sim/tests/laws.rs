@@ -1,4 +1,6 @@
 //! The optical laws against closed form and against the thesis's own numbers (§3.1).
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use fois_sim::consts::*;
 use fois_sim::laws::*;

@@ -1,4 +1,6 @@
 //! The ray tracer against the analytic model and the thesis's qualitative results.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use fois_sim::analytic::analytic_curve;
 use fois_sim::consts::*;

@@ -29,6 +29,7 @@ use fois_firmware::estimator::Estimator;
 use fois_firmware::hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc};
 use fois_firmware::node::Node;
 use fois_firmware::rule::{Rule, RuleInput};
+use fois_firmware::sim_board::{self, SimBoard};
 use fois_firmware::{ntc, persist, vref};
 use fois_protocol::{
     Ack, AckResult, Command, Config, DetectorState, DeviceFrame, DeviceMsg, ErrorCode, ErrorReply,
@@ -74,123 +75,12 @@ fn known_loop(n: u32) {
 
 // ------------------------------------------------------- simulated board --
 
-const NA_PER_LSB: f32 = 3.3e9 / (4095.0 * 10_000.0); // 80.6 nA at 3.3 V, 10 kΩ
+// The firmware's scripted board (`fois_firmware::sim_board`, the same one the
+// host tests use), borrowed by the node's ADC, pins and delay.
+type SimNode<'a> = sim_board::SimNode<&'a SimBoard, MemStorage>;
 
-struct World {
-    t_ns: Cell<u64>,
-    led: Cell<bool>,
-    alarm: Cell<bool>,
-    ind: Cell<bool>,
-    signal_na: Cell<[f32; 2]>,
-    ambient_na: Cell<[f32; 2]>,
-    flicker_na: Cell<f32>,
-    flicker_phase: Cell<f32>,
-    ntc_code: Cell<u16>,
-}
-
-impl World {
-    const fn new() -> Self {
-        World {
-            t_ns: Cell::new(0),
-            led: Cell::new(false),
-            alarm: Cell::new(false),
-            ind: Cell::new(false),
-            signal_na: Cell::new([0.0; 2]),
-            ambient_na: Cell::new([0.0; 2]),
-            flicker_na: Cell::new(0.0),
-            flicker_phase: Cell::new(0.0),
-            ntc_code: Cell::new(2738), // 10 °C
-        }
-    }
-}
-
-/// sin for the flicker model (range-reduced odd polynomial, |err| < 1e-5).
-fn sin(x: f32) -> f32 {
-    const TAU: f32 = core::f32::consts::TAU;
-    const PI: f32 = core::f32::consts::PI;
-    let mut x = x - ((x / TAU) as i64 as f32) * TAU; // x ≥ 0 here
-    if x > PI {
-        x -= TAU;
-    }
-    // Fold into [-π/2, π/2].
-    if x > PI / 2.0 {
-        x = PI - x;
-    } else if x < -PI / 2.0 {
-        x = -PI - x;
-    }
-    let x2 = x * x;
-    x * (1.0 - x2 / 6.0 * (1.0 - x2 / 20.0 * (1.0 - x2 / 42.0 * (1.0 - x2 / 72.0))))
-}
-
-struct SimAdc<'a>(&'a World);
-
-impl PhotoAdc for SimAdc<'_> {
-    fn read_photo(&mut self) -> [u16; 2] {
-        let w = self.0;
-        let t = w.t_ns.get() as f32 * 1e-9;
-        let fl = w.flicker_na.get()
-            * sin(2.0 * core::f32::consts::PI * 100.0 * t + w.flicker_phase.get());
-        let (s, a) = (w.signal_na.get(), w.ambient_na.get());
-        let mut out = [0u16; 2];
-        for ((o, s), a) in out.iter_mut().zip(s).zip(a) {
-            let i = a + fl + if w.led.get() { s } else { 0.0 };
-            let code = i / NA_PER_LSB + 0.5;
-            *o = if code < 0.0 {
-                0
-            } else if code > 4095.0 {
-                4095
-            } else {
-                code as u16
-            };
-        }
-        w.t_ns.set(w.t_ns.get() + 15_000);
-        out
-    }
-    fn read_ntc(&mut self) -> u16 {
-        self.0.ntc_code.get()
-    }
-    fn read_vrefint(&mut self) -> u16 {
-        FactoryCal::TYPICAL.vrefint_cal
-    }
-    fn read_internal_temp(&mut self) -> u16 {
-        FactoryCal::TYPICAL.ts_cal1
-    }
-}
-
-struct Pin<'a>(&'a Cell<bool>);
-impl ErrorType for Pin<'_> {
-    type Error = Infallible;
-}
-impl OutputPin for Pin<'_> {
-    fn set_low(&mut self) -> Result<(), Infallible> {
-        self.0.set(false);
-        Ok(())
-    }
-    fn set_high(&mut self) -> Result<(), Infallible> {
-        self.0.set(true);
-        Ok(())
-    }
-}
-
-struct Delay<'a>(&'a Cell<u64>);
-impl DelayNs for Delay<'_> {
-    fn delay_ns(&mut self, ns: u32) {
-        self.0.set(self.0.get() + u64::from(ns));
-    }
-}
-
-type SimNode<'a> = Node<SimAdc<'a>, Pin<'a>, Pin<'a>, Pin<'a>, Delay<'a>, MemStorage>;
-
-fn sim_node<'a>(w: &'a World, storage: MemStorage) -> SimNode<'a> {
-    Node::new(
-        SimAdc(w),
-        Pin(&w.led),
-        Pin(&w.alarm),
-        Pin(&w.ind),
-        Delay(&w.t_ns),
-        storage,
-        BoardInfo::simulated("qemu"),
-    )
+fn sim_node(w: &SimBoard, storage: MemStorage) -> SimNode<'_> {
+    sim_board::sim_node(w, storage, "qemu")
 }
 
 /// Collects what a node sends and decodes it.
@@ -232,11 +122,9 @@ impl Sink {
     }
 }
 
-/// One frame; the clock then moves to the end of the 100 ms period.
-fn step(node: &mut SimNode<'_>, w: &World, sink: &mut Sink) {
-    let start = w.t_ns.get();
-    node.run_frame(start / 1_000_000, &mut |b| sink.push(b));
-    w.t_ns.set(start + 100_000_000);
+/// One frame; the clock then moves to the end of the frame period.
+fn step(node: &mut SimNode<'_>, w: &SimBoard, sink: &mut Sink) {
+    w.run_frame(node, &mut |b| sink.push(b));
 }
 
 fn measurement(sink: &mut Sink) -> Option<fois_protocol::Measurement> {
@@ -353,11 +241,13 @@ fn t_rule() -> TestResult {
 }
 
 fn t_node_currents_and_commands() -> TestResult {
-    let w = World::new();
+    let w = SimBoard::new();
     let mut node = sim_node(&w, MemStorage::new());
     let mut sink = Sink::new();
-    w.signal_na.set([12_000.0, 4_000.0]);
-    w.ambient_na.set([30_000.0, 5_000.0]);
+    w.set(|s| {
+        s.signal_na = [12_000.0, 4_000.0];
+        s.ambient_na = [30_000.0, 5_000.0];
+    });
     step(&mut node, &w, &mut sink);
     let Some(m) = measurement(&mut sink) else {
         return Err("no measurement");
@@ -416,11 +306,13 @@ fn t_node_currents_and_commands() -> TestResult {
 }
 
 fn t_node_ice_onset_drives_the_alarm() -> TestResult {
-    let w = World::new();
+    let w = SimBoard::new();
     let mut node = sim_node(&w, MemStorage::new());
     let mut sink = Sink::new();
-    w.ntc_code.set(3194); // -1 °C
-    w.signal_na.set([2_500.0, 800.0]);
+    w.set(|s| {
+        s.ntc_code = Some(3194); // -1 °C
+        s.signal_na = [2_500.0, 800.0];
+    });
     let n = node.config().onset_frames;
     for i in 1..=n {
         step(&mut node, &w, &mut sink);
@@ -433,29 +325,30 @@ fn t_node_ice_onset_drives_the_alarm() -> TestResult {
         check!(onset == (i == n), "    frame {}: onset {}", i, onset);
     }
     check!(node.state() == DetectorState::Ice, "    state");
-    check!(w.alarm.get() && w.ind.get(), "    alarm pins");
+    check!(w.alarm.get() && w.indicator.get(), "    alarm pins");
     Ok(())
 }
 
 fn t_flicker_bound() -> TestResult {
     // 50 µA DC + 25 µA at 100 Hz: |ΔI| ≤ A·(2πfΔ)²/2 + 1 LSB = 309 nA.
-    let w = World::new();
+    let w = SimBoard::new();
     let mut node = sim_node(&w, MemStorage::new());
     let mut sink = Sink::new();
-    w.signal_na.set([5_000.0, 1_500.0]);
+    w.set(|s| s.signal_na = [5_000.0, 1_500.0]);
     step(&mut node, &w, &mut sink);
     let Some(dark) = measurement(&mut sink) else {
         return Err("no measurement");
     };
     let mut worst = 0i32;
     for k in 0..16 {
-        let w = World::new();
+        let w = SimBoard::new();
         let mut node = sim_node(&w, MemStorage::new());
-        w.signal_na.set([5_000.0, 1_500.0]);
-        w.ambient_na.set([50_000.0, 50_000.0]);
-        w.flicker_na.set(25_000.0);
-        w.flicker_phase
-            .set(k as f32 * core::f32::consts::TAU / 16.0);
+        w.set(|s| {
+            s.signal_na = [5_000.0, 1_500.0];
+            s.ambient_na = [50_000.0, 50_000.0];
+            s.flicker_na = [25_000.0; 2];
+            s.flicker_phase = f64::from(k) * core::f64::consts::TAU / 16.0;
+        });
         for _ in 0..2 {
             step(&mut node, &w, &mut sink);
             let Some(m) = measurement(&mut sink) else {
@@ -475,6 +368,25 @@ fn t_flicker_bound() -> TestResult {
 }
 
 // -------------------------------------------------------------- benchmark --
+
+// The benchmark's own fakes, not the simulated board: the count must be the
+// node's work, so the ADC is a few integer operations and the pins and the
+// delay do nothing but store a level.
+
+struct Pin<'a>(&'a Cell<bool>);
+impl ErrorType for Pin<'_> {
+    type Error = Infallible;
+}
+impl OutputPin for Pin<'_> {
+    fn set_low(&mut self) -> Result<(), Infallible> {
+        self.0.set(false);
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Infallible> {
+        self.0.set(true);
+        Ok(())
+    }
+}
 
 struct BenchAdc<'a> {
     led: &'a Cell<bool>,

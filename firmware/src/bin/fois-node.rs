@@ -144,7 +144,7 @@ mod app {
                     defmt::panic!("node missing")
                 };
                 let now = Instant::now();
-                // Issue 2: Hello at boot and every second until streaming starts.
+                // Hello at boot and every second until streaming starts.
                 if now >= next_hello && (!booted || !node.is_streaming()) {
                     node.send_hello(&mut queue);
                     next_hello = now + hello_every;

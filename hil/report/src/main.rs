@@ -1,0 +1,80 @@
+//! `cargo run --release -p fois-hil-report [-- FILE_OR_DIR...]`: run
+//! hardware-in-loop scenarios and print the results table, the goals and
+//! notes. Exit code 1 if an asserted expectation fails, 2 for a bad command
+//! line or an invalid scenario file.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use clap::Parser;
+use fois_hil::{report, run, scenario};
+
+/// Run hardware-in-loop scenarios (the firmware's own Node on the virtual
+/// hardware, in virtual time) on all cores and print a Markdown table of the
+/// results, the goals (met or missed, by how much) and one line of notes per
+/// run.
+#[derive(Debug, Parser)]
+#[command(
+    name = "hil-report",
+    version,
+    after_help = "Exit codes: 0 every expectation met; 1 an asserted expectation failed; \
+                  2 bad command line or invalid scenario file."
+)]
+struct Args {
+    /// Scenario files (.toml) and directories of them [default: the
+    /// scenarios shipped in hil/scenarios].
+    #[arg(value_name = "FILE_OR_DIR")]
+    paths: Vec<PathBuf>,
+}
+
+fn main() {
+    let args = Args::parse();
+    if let Err(e) = report(args) {
+        eprintln!("error: {e:#}");
+        std::process::exit(2);
+    }
+}
+
+fn report(args: Args) -> anyhow::Result<()> {
+    let paths = if args.paths.is_empty() {
+        vec![scenario::default_dir()]
+    } else {
+        args.paths
+    };
+    let mut scenarios = Vec::new();
+    for p in &paths {
+        if p.is_dir() {
+            scenarios.extend(scenario::load_dir(p)?);
+        } else {
+            scenarios.extend(scenario::load(p)?);
+        }
+    }
+    let start = Instant::now();
+    let threads = run::default_threads();
+    let results = run::run_all(&scenarios, threads);
+    let wall = start.elapsed();
+    let mut outcomes = Vec::new();
+    for (sc, r) in scenarios.iter().zip(results) {
+        match r {
+            Ok(o) => outcomes.push(o),
+            Err(e) => eprintln!("{}: {e:#}", sc.name),
+        }
+    }
+    println!("{}", report::table(&outcomes));
+    println!("Goals:\n{}", report::goals_summary(&outcomes));
+    println!("Notes:\n{}", report::notes(&outcomes));
+    let frames: u64 = outcomes.iter().map(|o| o.node_frames).sum();
+    let virt: f64 = outcomes.iter().map(|o| o.virtual_s).sum();
+    println!(
+        "{} runs, {:.1} h virtual, {frames} frames, {:.1} s wall on {threads} threads",
+        outcomes.len(),
+        virt / 3600.0,
+        wall.as_secs_f64()
+    );
+    let failed = outcomes.iter().filter(|o| !o.failures.is_empty()).count();
+    if failed > 0 {
+        eprintln!("{failed} scenario(s) failed their expectations");
+        std::process::exit(1);
+    }
+    Ok(())
+}

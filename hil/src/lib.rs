@@ -1,0 +1,16 @@
+#![doc = include_str!("../README.md")]
+//!
+//! ## Modules
+//!
+//! - [`scenario`]: the TOML format (`hil/scenarios/*.toml`) → a timeline.
+//! - [`mod@run`]: one scenario → an [`run::Outcome`] (decoded frames only).
+//! - [`check`]: the file's expectations against the outcome.
+//! - [`report`]: the results table and the goals.
+
+pub mod check;
+pub mod report;
+pub mod run;
+pub mod scenario;
+
+pub use run::{Outcome, run, run_all};
+pub use scenario::{Scenario, load, load_dir};

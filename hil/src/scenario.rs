@@ -1,0 +1,637 @@
+//! The scenario file format (TOML, one file per case) and its translation
+//! into a [`Timeline`] of the virtual hardware.
+//!
+//! The timeline keys (`sensor`, `seed`, `[[segment]]`) are the host's
+//! scenario format (`fois_vnode::scenario`, also read by
+//! `foisctl virtual-node --scenario`): the segment tables are the host's own
+//! `SegmentSpec`, checked by its `timeline`; this module adds the name, class, config, overlays, commands,
+//! sweep, lossy link and expectations.
+//!
+//! Every table is `deny_unknown_fields`: a misspelt key is an error naming
+//! the file and the key. The format is documented key by key in
+//! `hil/README.md`.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail, ensure};
+use fois_vnode::scenario::{self, SegmentSpec};
+use fois_vnode::{Cover, Segment, Timeline};
+
+use fois_protocol::Config;
+use serde::Deserialize;
+
+/// What kind of case a scenario is: decides which goal the report applies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Class {
+    /// A dry face: zero false alarms.
+    Dry,
+    /// Water on the face above freezing: `wet`, zero false alarms.
+    Wet,
+    /// Ambient-light disturbances on a dry face: zero false alarms.
+    Ambient,
+    /// Glazed ice: first alarm at ≤ 0.5 mm.
+    Glazed,
+    /// Rime ice: first alarm at ≤ 0.2 mm.
+    Rime,
+    /// Anything else: no goal, only the file's expectations.
+    Other,
+}
+
+impl Class {
+    /// Lower-case name.
+    pub fn name(self) -> &'static str {
+        match self {
+            Class::Dry => "dry",
+            Class::Wet => "wet",
+            Class::Ambient => "ambient",
+            Class::Glazed => "glazed",
+            Class::Rime => "rime",
+            Class::Other => "other",
+        }
+    }
+
+    /// Largest thickness at the first alarm the project's goals allow, mm.
+    pub fn alarm_goal_mm(self) -> Option<f64> {
+        match self {
+            Class::Glazed => Some(GLAZED_GOAL_MM),
+            Class::Rime => Some(RIME_GOAL_MM),
+            _ => None,
+        }
+    }
+
+    /// True for the classes whose goal is zero false alarms (no ice at all).
+    pub fn no_ice(self) -> bool {
+        matches!(self, Class::Dry | Class::Wet | Class::Ambient)
+    }
+}
+
+/// Goal: first alarm at or below this much rime, mm.
+pub const RIME_GOAL_MM: f64 = 0.2;
+/// Goal: first alarm at or below this much glazed ice, mm (the Rosemount
+/// 0871 trips at 0.5 mm).
+pub const GLAZED_GOAL_MM: f64 = 0.5;
+
+/// One scenario file.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioFile {
+    /// Display name (default: the file's stem).
+    pub name: Option<String>,
+    /// One line on what the case shows.
+    #[serde(default)]
+    pub description: String,
+    /// Which goal applies.
+    pub class: Class,
+    /// Sensor `"a"` or `"b"` (host format; default b).
+    pub sensor: Option<String>,
+    /// Seed of the accretion curves and the ADC noise (default 1).
+    pub seed: Option<u64>,
+    /// Run until this virtual time, s (default: the end of the last segment).
+    pub end_s: Option<f64>,
+    /// Config fields (names of `foisctl config set`) sent in a `SetConfig`
+    /// right after boot; the others keep their defaults.
+    #[serde(default)]
+    pub config: BTreeMap<String, toml::Value>,
+    /// The timeline: the host's `[[segment]]` tables, checked by the host.
+    #[serde(default, rename = "segment")]
+    pub segments: Vec<SegmentSpec>,
+    /// Temporary changes laid over the segments (sun steps, noise bursts).
+    #[serde(default, rename = "overlay")]
+    pub overlays: Vec<OverlaySpec>,
+    /// Commands and button presses at given times.
+    #[serde(default, rename = "command")]
+    pub commands: Vec<CommandSpec>,
+    /// Run the scenario once per value (noise sweep).
+    pub sweep: Option<SweepSpec>,
+    /// A lossy UART between node and decoder.
+    pub link: Option<LinkSpec>,
+    /// What must hold.
+    #[serde(default)]
+    pub expect: Expect,
+    /// The file's text (for error messages).
+    #[serde(skip)]
+    pub source: String,
+}
+
+fn one() -> u64 {
+    1
+}
+
+/// A temporary change: from `start_s` for `duration_s`, repeated `repeat`
+/// times every `period_s`. Sets the given keys over whatever the segments say.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OverlaySpec {
+    /// First start, s.
+    pub start_s: f64,
+    /// Length of each occurrence, s.
+    pub duration_s: f64,
+    /// Occurrences (default 1).
+    #[serde(default = "one_u32")]
+    pub repeat: u32,
+    /// Start-to-start period when `repeat` > 1, s.
+    pub period_s: Option<f64>,
+    /// Ambient DC per channel during the overlay, µA.
+    pub ambient_ua: Option<[f64; 2]>,
+    /// Flicker amplitude per channel during the overlay, µA.
+    pub flicker_ua: Option<[f64; 2]>,
+    /// ADC noise during the overlay, rms LSB.
+    pub adc_noise_lsb: Option<f64>,
+}
+
+fn one_u32() -> u32 {
+    1
+}
+
+/// What a [`CommandSpec`] sends.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Send {
+    /// The user button B1 (dark calibration when not iced, else alarm ack).
+    Button,
+    /// `CalibrateDark`.
+    CalibrateDark,
+    /// `AckAlarm`.
+    AckAlarm,
+    /// `GetInfo`.
+    GetInfo,
+    /// `GetConfig`.
+    GetConfig,
+    /// `StartStream` (with `frame_period_ms` if given).
+    StartStream,
+    /// `StopStream`.
+    StopStream,
+    /// `Reset`.
+    Reset,
+}
+
+/// The answer a command must get.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum Reply {
+    /// An `Ack`.
+    #[default]
+    Ack,
+    /// An `Error`.
+    Error,
+}
+
+/// A command at a given virtual time.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommandSpec {
+    /// When, s.
+    pub at_s: f64,
+    /// What.
+    pub send: Send,
+    /// For `start_stream`: the frame period, ms.
+    pub frame_period_ms: Option<u32>,
+    /// The answer expected (default ack).
+    #[serde(default)]
+    pub expect: Reply,
+}
+
+/// Run the scenario once per noise level and/or seed (every combination).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SweepSpec {
+    /// Noise levels, rms LSB: replace every segment's and overlay's noise.
+    #[serde(default)]
+    pub adc_noise_lsb: Vec<f64>,
+    /// Seeds: replace the file's seed (another ray-traced ice body, other
+    /// noise draws).
+    #[serde(default)]
+    pub seed: Vec<u64>,
+    /// The file's expectations are asserted for levels up to this; above
+    /// it the runs are only reported (default: all levels).
+    pub expect_up_to_lsb: Option<f64>,
+}
+
+/// A lossy UART between node and decoder (seeded).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LinkSpec {
+    /// Probability that a frame gets one byte corrupted.
+    #[serde(default)]
+    pub corrupt_probability: f64,
+    /// Probability that a frame is dropped whole (UART buffer full).
+    #[serde(default)]
+    pub drop_probability: f64,
+    /// Seed of the link's draws (default 1).
+    #[serde(default = "one")]
+    pub seed: u64,
+}
+
+/// What must hold. Every key is optional; absent keys are not checked,
+/// except `max_false_alarms`, `max_frames_lost` and `max_errors` (default 0).
+#[derive(Debug, Clone, Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+pub struct Expect {
+    /// An ice alarm (`IceOnset`) happens (true) or never happens (false).
+    pub alarm: Option<bool>,
+    /// The first alarm comes at or below this true thickness, mm.
+    pub alarm_by_mm: Option<f64>,
+    /// The first alarm comes at or before this virtual time, s.
+    pub alarm_by_s: Option<f64>,
+    /// No alarm before this virtual time, s.
+    pub no_alarm_before_s: Option<f64>,
+    /// Latest time of a `WetOnset`, s (and one must happen).
+    pub wet_by_s: Option<f64>,
+    /// The rule's and the faults' events, in order: ice_onset, ice_cleared,
+    /// wet_onset, wet_cleared, fault_raised, fault_cleared.
+    pub events: Option<Vec<String>>,
+    /// The states the measurements go through, repeats merged: dry|wet|ice.
+    pub states: Option<Vec<String>>,
+    /// The state of the last measurement.
+    pub final_state: Option<String>,
+    /// Most false alarms allowed (default 0).
+    #[serde(default)]
+    pub max_false_alarms: u32,
+    /// Most frames lost (sequence gaps + undecodable frames) allowed (default 0).
+    #[serde(default)]
+    pub max_frames_lost: u64,
+    /// At least this many frames lost (a lossy-link scenario proves the count).
+    pub min_frames_lost: Option<u64>,
+    /// Most `Error` replies not asked for by a command (default 0).
+    #[serde(default)]
+    pub max_errors: u32,
+    /// At least this many measurements flagged saturated.
+    pub min_saturated_frames: Option<u64>,
+    /// At least this many measurements decoded.
+    pub min_measurements: Option<u64>,
+}
+
+/// A scenario ready to run: one file, or one level of a sweep.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    /// Display name (with `@σ=…` for a sweep level).
+    pub name: String,
+    /// The file it came from.
+    pub path: PathBuf,
+    /// The parsed file (sweep levels already applied to the segments).
+    pub file: ScenarioFile,
+    /// Sensor construction.
+    pub sensor: fois_sim::SensorKind,
+    /// Seed of the curves and the ADC noise.
+    pub seed: u64,
+    /// The config sent after boot (`None`: defaults, nothing sent).
+    pub config: Option<Config>,
+    /// The timeline, overlays applied.
+    pub timeline: Timeline,
+    /// Virtual time to run to, s.
+    pub end_s: f64,
+    /// False for sweep levels above `expect_up_to_lsb`: reported only.
+    pub checked: bool,
+    /// The sweep level, rms LSB.
+    pub sweep_lsb: Option<f64>,
+}
+
+/// Parse and validate one file (all its sweep levels).
+pub fn load(path: &Path) -> anyhow::Result<Vec<Scenario>> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    parse(path, &text)
+}
+
+/// Parse and validate `text` as the file `path`.
+pub fn parse(path: &Path, text: &str) -> anyhow::Result<Vec<Scenario>> {
+    let mut file: ScenarioFile =
+        toml::from_str(text).map_err(|e| anyhow::anyhow!("{}: {}", path.display(), e))?;
+    file.source = text.to_string();
+    build(path, file).with_context(|| format!("{}", path.display()))
+}
+
+/// Every `*.toml` in `dir`, sorted by file name.
+pub fn files_in(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).with_context(|| format!("cannot list {}", dir.display()))? {
+        let p = entry?.path();
+        if p.extension().is_some_and(|e| e == "toml") {
+            out.push(p);
+        }
+    }
+    out.sort();
+    Ok(out)
+}
+
+/// Load every scenario of `dir`.
+pub fn load_dir(dir: &Path) -> anyhow::Result<Vec<Scenario>> {
+    let mut out = Vec::new();
+    for p in files_in(dir)? {
+        out.extend(load(&p)?);
+    }
+    Ok(out)
+}
+
+/// The scenarios shipped with the suite: `hil/scenarios`.
+pub fn default_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenarios")
+}
+
+fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
+    let stem = path
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = file.name.clone().unwrap_or(stem);
+    ensure!(!file.segments.is_empty(), "no [[segment]]");
+    let config = build_config(&file.config)?;
+    validate_commands(&file.commands)?;
+    validate_expect(&file.expect)?;
+    if let Some(l) = &file.link {
+        for (k, p) in [
+            ("corrupt_probability", l.corrupt_probability),
+            ("drop_probability", l.drop_probability),
+        ] {
+            ensure!((0.0..=1.0).contains(&p), "[link] {k} = {p} is not in 0..=1");
+        }
+    }
+    let host = host_scenario(&file)?;
+    let (noises, seeds): (Vec<Option<f64>>, Vec<Option<u64>>) = match &file.sweep {
+        None => (vec![None], vec![None]),
+        Some(s) => {
+            ensure!(
+                !s.adc_noise_lsb.is_empty() || !s.seed.is_empty(),
+                "[sweep] needs adc_noise_lsb or seed values"
+            );
+            let opt_all = |v: Vec<Option<f64>>| if v.is_empty() { vec![None] } else { v };
+            let noises = opt_all(s.adc_noise_lsb.iter().map(|&x| Some(x)).collect());
+            let seeds: Vec<Option<u64>> = if s.seed.is_empty() {
+                vec![None]
+            } else {
+                s.seed.iter().map(|&x| Some(x)).collect()
+            };
+            (noises, seeds)
+        }
+    };
+    let up_to = file.sweep.as_ref().and_then(|s| s.expect_up_to_lsb);
+    let levels: Vec<(Option<f64>, Option<u64>, bool)> = noises
+        .iter()
+        .flat_map(|&x| {
+            seeds.iter().map(move |&seed| {
+                let checked = match (x, up_to) {
+                    (Some(x), Some(m)) => x <= m,
+                    _ => true,
+                };
+                (x, seed, checked)
+            })
+        })
+        .collect();
+    let mut out = Vec::new();
+    for (level, seed, checked) in levels {
+        let mut f = file.clone();
+        let mut segments = host.timeline.segments().to_vec();
+        if let Some(x) = level {
+            ensure!(x >= 0.0 && x.is_finite(), "[sweep] noise {x} is not ≥ 0");
+            for s in &mut segments {
+                s.adc_noise_lsb = x;
+            }
+            for o in &mut f.overlays {
+                o.adc_noise_lsb = o.adc_noise_lsb.map(|_| x);
+            }
+        }
+        ensure!(
+            segments.iter().all(|s| s.duration_s.is_finite()) || f.end_s.is_some(),
+            "a segment lasts \"inf\": set end_s"
+        );
+        let segments = apply_overlays(segments, &f.overlays)?;
+        let timeline = Timeline::new(segments);
+        let end_s = f.end_s.unwrap_or_else(|| timeline.duration_s());
+        ensure!(end_s > 0.0 && end_s.is_finite(), "end_s must be > 0");
+        for c in &f.commands {
+            ensure!(
+                c.at_s >= 0.0 && c.at_s <= end_s,
+                "command at {} s is outside 0..={end_s} s",
+                c.at_s
+            );
+        }
+        let mut run_name = name.clone();
+        if let Some(x) = level {
+            run_name.push_str(&format!("@{x}lsb"));
+        }
+        if let Some(k) = seed {
+            run_name.push_str(&format!("@seed{k}"));
+        }
+        out.push(Scenario {
+            name: run_name,
+            path: path.to_path_buf(),
+            file: f,
+            sensor: host.sensor,
+            seed: seed.unwrap_or(host.seed),
+            config: config.clone(),
+            timeline,
+            end_s,
+            checked,
+            sweep_lsb: level,
+        });
+    }
+    Ok(out)
+}
+
+fn build_config(table: &BTreeMap<String, toml::Value>) -> anyhow::Result<Option<Config>> {
+    if table.is_empty() {
+        return Ok(None);
+    }
+    let mut cfg = Config::default();
+    for (key, value) in table {
+        let text = match value {
+            toml::Value::Integer(i) => i.to_string(),
+            toml::Value::Boolean(b) => b.to_string(),
+            other => bail!("[config] {key} = {other}: expected an integer or a boolean"),
+        };
+        cfg.set_from_str(key, &text)
+            .map_err(|e| anyhow::anyhow!("[config] {key} = {text}: {e}"))?;
+    }
+    cfg.validate()
+        .map_err(|e| anyhow::anyhow!("[config] is refused by the node's rule: {e}"))?;
+    Ok(Some(cfg))
+}
+
+fn validate_commands(cmds: &[CommandSpec]) -> anyhow::Result<()> {
+    for (i, c) in cmds.iter().enumerate() {
+        ensure!(
+            c.frame_period_ms.is_none() || c.send == Send::StartStream,
+            "[[command]] #{}: frame_period_ms only goes with send = \"start_stream\"",
+            i + 1
+        );
+    }
+    let sorted = cmds.windows(2).all(|w| w[0].at_s <= w[1].at_s);
+    ensure!(sorted, "[[command]] entries must be in time order");
+    Ok(())
+}
+
+fn parse_state(s: &str) -> anyhow::Result<fois_protocol::DetectorState> {
+    use fois_protocol::DetectorState as D;
+    Ok(match s {
+        "dry" => D::Dry,
+        "wet" => D::Wet,
+        "ice" => D::Ice,
+        _ => bail!("state `{s}` is not one of dry|wet|ice"),
+    })
+}
+
+/// The state named `s` (dry|wet|ice).
+pub fn state_named(s: &str) -> Option<fois_protocol::DetectorState> {
+    parse_state(s).ok()
+}
+
+/// Event names accepted in `expect.events`.
+pub const EVENT_NAMES: [&str; 6] = [
+    "ice_onset",
+    "ice_cleared",
+    "wet_onset",
+    "wet_cleared",
+    "fault_raised",
+    "fault_cleared",
+];
+
+fn validate_expect(e: &Expect) -> anyhow::Result<()> {
+    for name in e.events.iter().flatten() {
+        ensure!(
+            EVENT_NAMES.contains(&name.as_str()),
+            "[expect] events: `{name}` is not one of {}",
+            EVENT_NAMES.join("|")
+        );
+    }
+    for s in e.states.iter().flatten().chain(e.final_state.iter()) {
+        parse_state(s).context("[expect]")?;
+    }
+    if e.alarm == Some(false) {
+        ensure!(
+            e.alarm_by_mm.is_none() && e.alarm_by_s.is_none(),
+            "[expect] alarm = false contradicts alarm_by_mm / alarm_by_s"
+        );
+    }
+    Ok(())
+}
+
+/// The timeline part of the file, checked and built by the host's scenario code.
+fn host_scenario(f: &ScenarioFile) -> anyhow::Result<fois_vnode::Scenario> {
+    Ok(fois_vnode::Scenario {
+        timeline: scenario::timeline(f.segments.clone())
+            .map_err(|e| anyhow::anyhow!("[[segment]] {e}"))?,
+        sensor: scenario::sensor_named(f.sensor.as_deref()).map_err(anyhow::Error::msg)?,
+        seed: f.seed.unwrap_or(1),
+    })
+}
+
+/// Occurrences of the overlays: (start, end, overlay index), validated.
+fn overlay_intervals(overlays: &[OverlaySpec]) -> anyhow::Result<Vec<(f64, f64, usize)>> {
+    let mut out = Vec::new();
+    for (i, o) in overlays.iter().enumerate() {
+        let n = i + 1;
+        ensure!(
+            o.start_s.is_finite() && o.start_s >= 0.0,
+            "[[overlay]] #{n}: start_s must be ≥ 0"
+        );
+        ensure!(
+            o.duration_s.is_finite() && o.duration_s > 0.0,
+            "[[overlay]] #{n}: duration_s must be > 0"
+        );
+        ensure!(o.repeat >= 1, "[[overlay]] #{n}: repeat must be ≥ 1");
+        let period = match (o.repeat, o.period_s) {
+            (1, p) => p.unwrap_or(0.0),
+            (_, Some(p)) if p.is_finite() && p > o.duration_s => p,
+            (_, _) => bail!("[[overlay]] #{n}: repeat > 1 needs period_s > duration_s"),
+        };
+        ensure!(
+            o.ambient_ua.is_some() || o.flicker_ua.is_some() || o.adc_noise_lsb.is_some(),
+            "[[overlay]] #{n}: sets nothing (ambient_ua, flicker_ua or adc_noise_lsb)"
+        );
+        for k in 0..o.repeat {
+            let a = o.start_s + f64::from(k) * period;
+            out.push((a, a + o.duration_s, i));
+        }
+    }
+    Ok(out)
+}
+
+/// Split the segments at every overlay edge and apply the overlays. Ramps
+/// are split into sub-ramps; thickness stays continuous.
+fn apply_overlays(
+    segments: Vec<Segment>,
+    overlays: &[OverlaySpec],
+) -> anyhow::Result<Vec<Segment>> {
+    let intervals = overlay_intervals(overlays)?;
+    if intervals.is_empty() {
+        return Ok(segments);
+    }
+    let mut cuts: Vec<f64> = intervals.iter().flat_map(|&(a, b, _)| [a, b]).collect();
+    cuts.sort_by(f64::total_cmp);
+    cuts.dedup();
+    let mut out = Vec::new();
+    let mut t0 = 0.0;
+    for seg in segments {
+        let t1 = t0 + seg.duration_s;
+        let mut edges = vec![t0];
+        edges.extend(cuts.iter().copied().filter(|&c| c > t0 && c < t1));
+        edges.push(t1);
+        for (k, w) in edges.windows(2).enumerate() {
+            let (a, b) = (w[0], w[1]);
+            if b <= a {
+                continue;
+            }
+            let frac = |t: f64| (t - t0) / seg.duration_s;
+            let lerp = |x: f64, end: Option<f64>, f: f64| end.map_or(x, |e| x + (e - x) * f);
+            let mut piece = seg.clone();
+            piece.duration_s = b - a;
+            piece.air_temp_c = lerp(seg.air_temp_c, seg.air_temp_end_c, frac(a));
+            piece.air_temp_end_c = seg
+                .air_temp_end_c
+                .map(|_| lerp(seg.air_temp_c, seg.air_temp_end_c, frac(b)));
+            piece.led_factor = lerp(seg.led_factor, seg.led_factor_end, frac(a));
+            piece.led_factor_end = seg
+                .led_factor_end
+                .map(|_| lerp(seg.led_factor, seg.led_factor_end, frac(b)));
+            if k > 0 {
+                piece.start_thickness_mm = None;
+            }
+            let mid = 0.5 * (a + b);
+            for &(oa, ob, i) in &intervals {
+                if mid >= oa && mid < ob {
+                    let o = &overlays[i];
+                    if let Some(x) = o.ambient_ua {
+                        piece.ambient_ua = x;
+                    }
+                    if let Some(x) = o.flicker_ua {
+                        piece.flicker_ua = x;
+                    }
+                    if let Some(x) = o.adc_noise_lsb {
+                        piece.adc_noise_lsb = x;
+                    }
+                }
+            }
+            out.push(piece);
+        }
+        t0 = t1;
+    }
+    Ok(out)
+}
+
+/// When ice is first on the face in `timeline` (a flat, glazed or rime
+/// cover with a thickness > 0 or growing), s.
+pub fn ice_start_s(timeline: &Timeline) -> Option<f64> {
+    let mut t0 = 0.0;
+    let mut d = 0.0;
+    for seg in timeline.segments() {
+        let start_d = match (seg.cover, seg.start_thickness_mm) {
+            (Cover::Dry, _) => 0.0,
+            (_, Some(x)) => x,
+            (_, None) => d,
+        };
+        let end_d = if seg.cover == Cover::Dry {
+            0.0
+        } else {
+            (start_d + seg.rate_mm_per_h * seg.duration_s / 3600.0).clamp(0.0, 15.0)
+        };
+        let is_ice = matches!(seg.cover, Cover::Flat | Cover::Glazed | Cover::Rime);
+        if is_ice && (start_d > 0.0 || seg.rate_mm_per_h > 0.0) {
+            return Some(t0);
+        }
+        t0 += seg.duration_s;
+        d = end_d;
+    }
+    None
+}

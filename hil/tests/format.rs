@@ -1,0 +1,186 @@
+//! The scenario format is strict: a misspelt key or a bad value is an error
+//! that names the file and the key; overlays split the timeline correctly.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::path::Path;
+
+use fois_hil::scenario::{self, ice_start_s};
+use fois_vnode::Cover;
+
+const BASE: &str = r#"
+class = "rime"
+[[segment]]
+duration_s = 100
+cover = "dry"
+[[segment]]
+duration_s = 200
+cover = "rime"
+rate_mm_per_h = 3.6
+air_temp_c = -2.0
+air_temp_end_c = -6.0
+"#;
+
+fn err(extra: &str) -> String {
+    let text = format!("{BASE}{extra}");
+    match scenario::parse(Path::new("scenarios/bad.toml"), &text) {
+        Ok(_) => panic!("accepted: {extra}"),
+        Err(e) => format!("{e:#}"),
+    }
+}
+
+#[test]
+fn unknown_keys_are_refused_naming_file_and_key() {
+    for (extra, key) in [
+        ("[expect]\nalarm_by_mmm = 0.2\n", "alarm_by_mmm"),
+        (
+            "[[command]]\nat_s = 1\nsend = \"button\"\nwhen = 2\n",
+            "when",
+        ),
+        (
+            "[[overlay]]\nstart_s = 1\nduration_s = 1\nambient = [1.0, 1.0]\n",
+            "ambient",
+        ),
+        ("[link]\ncorrupt = 0.1\n", "corrupt"),
+        ("[sweep]\nadc_noise_lsb = [1.0]\nupto = 3\n", "upto"),
+        ("colour = \"red\"\n", "colour"),
+    ] {
+        let e = err(extra);
+        assert!(
+            e.contains("scenarios/bad.toml") && e.contains(key) && e.contains("unknown field"),
+            "{extra:?} → {e}"
+        );
+    }
+    // A segment key is checked by the host's parser, with the same strictness.
+    let text = BASE.replace("rate_mm_per_h", "rate_mm_h");
+    let e = format!(
+        "{:#}",
+        scenario::parse(Path::new("scenarios/seg.toml"), &text).unwrap_err()
+    );
+    assert!(
+        e.contains("scenarios/seg.toml") && e.contains("rate_mm_h"),
+        "{e}"
+    );
+}
+
+#[test]
+fn bad_values_are_refused_with_the_reason() {
+    for (extra, words) in [
+        ("[config]\nonset_rise_nA = 5\n", "onset_rise_nA"),
+        ("[config]\nonset_rise_na = 10\n", "onset_rise_na"),
+        ("[config]\nclear_rise_na = 2000\n", "hysteresis"),
+        ("[expect]\nevents = [\"ice_onsett\"]\n", "ice_onsett"),
+        ("[expect]\nfinal_state = \"frozen\"\n", "frozen"),
+        ("[[command]]\nat_s = 1\nsend = \"press\"\n", "press"),
+        ("[[command]]\nat_s = 900\nsend = \"button\"\n", "outside"),
+        (
+            "[[overlay]]\nstart_s = 1\nduration_s = 5\nrepeat = 3\nambient_ua = [1.0, 1.0]\n",
+            "period_s",
+        ),
+        ("[[overlay]]\nstart_s = 1\nduration_s = 5\n", "sets nothing"),
+        ("[link]\ndrop_probability = 2.0\n", "drop_probability"),
+    ] {
+        let e = err(extra);
+        assert!(
+            e.contains("scenarios/bad.toml") && e.contains(words),
+            "{extra:?} → {e}"
+        );
+    }
+    let e = format!(
+        "{:#}",
+        scenario::parse(Path::new("x.toml"), "class = \"icy\"\n").unwrap_err()
+    );
+    assert!(e.contains("icy"), "{e}");
+}
+
+#[test]
+fn config_sweep_and_overlays_build_the_expected_timeline() {
+    let text = format!(
+        "{BASE}[config]\nonset_frames = 10\nstream_on_boot = true\n\
+         [sweep]\nadc_noise_lsb = [2.0, 8.0]\nexpect_up_to_lsb = 4.0\n\
+         [[overlay]]\nstart_s = 150\nduration_s = 10\nrepeat = 2\nperiod_s = 50\nambient_ua = [9.0, 8.0]\n"
+    );
+    let runs = scenario::parse(Path::new("scenarios/ok.toml"), &text).unwrap();
+    assert_eq!(runs.len(), 2);
+    assert_eq!(runs[0].name, "ok@2lsb");
+    assert_eq!((runs[0].checked, runs[1].checked), (true, false));
+    let cfg = runs[0].config.as_ref().unwrap();
+    assert_eq!(cfg.onset_frames, 10);
+    assert_eq!(
+        cfg.onset_rise_na,
+        fois_protocol::Config::default().onset_rise_na
+    );
+    let tl = &runs[1].timeline;
+    // dry 0–100 | rime 100–150 | sun 150–160 | 160–200 | sun 200–210 | 210–300.
+    let segs = tl.segments();
+    let starts: Vec<f64> = segs
+        .iter()
+        .scan(0.0, |t, s| {
+            let a = *t;
+            *t += s.duration_s;
+            Some(a)
+        })
+        .collect();
+    assert_eq!(starts, vec![0.0, 100.0, 150.0, 160.0, 200.0, 210.0]);
+    assert_eq!(tl.duration_s(), 300.0);
+    assert!(segs.iter().all(|s| s.adc_noise_lsb == 8.0));
+    assert_eq!(segs[2].ambient_ua, [9.0, 8.0]);
+    assert_eq!(segs[3].ambient_ua, [0.0, 0.0]);
+    // The -2 → -6 °C ramp over 100–300 s is split into sub-ramps.
+    assert_eq!(segs[1].air_temp_c, -2.0);
+    assert!((segs[2].air_temp_c - -3.0).abs() < 1e-12);
+    assert!((segs[2].air_temp_end_c.unwrap() - -3.2).abs() < 1e-12);
+    assert!((segs[5].air_temp_end_c.unwrap() - -6.0).abs() < 1e-12);
+    // Thickness stays continuous across the cuts: 3.6 mm/h = 1 µm/s.
+    let env = fois_vnode::Environment::with_curves(tl.clone(), [], [0.0; 2]);
+    let t = env.truth(205_000_000_000);
+    assert_eq!(t.cover, Cover::Rime);
+    assert!((t.thickness_mm - 0.105).abs() < 1e-9, "{}", t.thickness_mm);
+    assert_eq!(t.ambient_ua[0], 9.0);
+    assert_eq!(ice_start_s(tl), Some(100.0));
+}
+
+#[test]
+fn a_sweep_runs_every_noise_and_seed_combination() {
+    let text = format!(
+        "{BASE}seed = 9\n[sweep]\nadc_noise_lsb = [1.0, 50.0]\nseed = [3, 4, 5]\nexpect_up_to_lsb = 10.0\n"
+    );
+    // `seed` after [[segment]] belongs to the segment: refused by the host's parser.
+    assert!(scenario::parse(Path::new("s.toml"), &text).is_err());
+    let text = format!(
+        "seed = 9\n{BASE}[sweep]\nadc_noise_lsb = [1.0, 50.0]\nseed = [3, 4, 5]\nexpect_up_to_lsb = 10.0\n"
+    );
+    let runs = scenario::parse(Path::new("s.toml"), &text).unwrap();
+    let got: Vec<(String, u64, bool)> = runs
+        .iter()
+        .map(|r| (r.name.clone(), r.seed, r.checked))
+        .collect();
+    let want: Vec<(String, u64, bool)> = [1.0, 50.0]
+        .iter()
+        .flat_map(|&n| {
+            [3u64, 4, 5]
+                .iter()
+                .map(move |&k| (format!("s@{n}lsb@seed{k}"), k, n <= 10.0))
+        })
+        .collect();
+    assert_eq!(got, want);
+    assert!(
+        runs[3]
+            .timeline
+            .segments()
+            .iter()
+            .all(|s| s.adc_noise_lsb == 50.0)
+    );
+    let one = scenario::parse(Path::new("s.toml"), &format!("seed = 9\n{BASE}")).unwrap();
+    assert_eq!((one.len(), one[0].seed, one[0].name.as_str()), (1, 9, "s"));
+}
+
+#[test]
+fn every_shipped_file_loads() {
+    let files = scenario::files_in(&scenario::default_dir()).unwrap();
+    assert!(files.len() >= 14, "{} files", files.len());
+    for f in files {
+        let runs = scenario::load(&f).unwrap_or_else(|e| panic!("{e:#}"));
+        assert!(!runs.is_empty());
+    }
+}

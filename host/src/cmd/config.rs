@@ -1,0 +1,226 @@
+//! `foisctl config get|set`: read the node's config, or change fields
+//! checked on the host with the node's own rule before anything is sent.
+
+use clap::{Args, Subcommand};
+use fois_protocol::{AckResult, Command, Config, ConfigError, FIELDS};
+
+use super::request::{RequestArgs, expect_ack};
+use crate::exit::{self, Exit};
+use crate::link::Reply;
+
+/// `foisctl config`.
+#[derive(Debug, Args)]
+pub struct ConfigArgs {
+    /// `get` or `set`.
+    #[command(subcommand)]
+    pub cmd: ConfigCmd,
+}
+
+/// `config get` / `config set`.
+#[derive(Debug, Subcommand)]
+pub enum ConfigCmd {
+    /// Print every config field with its value, unit and allowed range.
+    #[command(after_help = exit::TABLE)]
+    Get(RequestArgs),
+    /// Change fields: KEY=VALUE ... (integers in the field's unit, see `config
+    /// get`). Checked on the host with the node's own rule before sending.
+    #[command(after_help = exit::TABLE)]
+    Set {
+        /// The port and the answer timeout.
+        #[command(flatten)]
+        args: RequestArgs,
+        /// KEY=VALUE pairs, e.g. onset_rise_na=1500 frame_period_ms=200.
+        #[arg(value_name = "KEY=VALUE", required = true)]
+        pairs: Vec<String>,
+    },
+}
+
+/// Run `foisctl config ...`.
+pub fn run(args: ConfigArgs) -> anyhow::Result<()> {
+    match args.cmd {
+        ConfigCmd::Get(a) => config_get(&a).map(|_| ()),
+        ConfigCmd::Set { args, pairs } => config_set(&args, &pairs).map(|_| ()),
+    }
+}
+
+/// A parsed `KEY=VALUE`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Assignment {
+    /// The key.
+    pub key: String,
+    /// The value text.
+    pub value: String,
+}
+
+/// Parse `KEY=VALUE` strings and check each value against its field's
+/// range (cross-field rules are checked once the node's config is known).
+pub fn parse_assignments(args: &[String]) -> Result<Vec<Assignment>, Exit> {
+    if args.is_empty() {
+        return Err(Exit::new(
+            exit::INVALID_VALUE,
+            "config set needs at least one KEY=VALUE",
+        ));
+    }
+    let mut out = Vec::new();
+    for a in args {
+        let Some((k, v)) = a.split_once('=') else {
+            return Err(Exit::new(
+                exit::INVALID_VALUE,
+                format!("`{a}` is not KEY=VALUE (keys: {})", keys()),
+            ));
+        };
+        let mut probe = Config::default();
+        probe
+            .set_from_str(k, v)
+            .map_err(|e| refused(&format!("{k}={v}"), e))?;
+        out.push(Assignment {
+            key: k.trim().to_string(),
+            value: v.trim().to_string(),
+        });
+    }
+    Ok(out)
+}
+
+fn keys() -> String {
+    FIELDS.iter().map(|f| f.name).collect::<Vec<_>>().join(", ")
+}
+
+fn refused(what: &str, e: ConfigError) -> Exit {
+    let extra = match e {
+        ConfigError::UnknownField => format!(" (keys: {})", keys()),
+        ConfigError::BelowMin(f) | ConfigError::AboveMax(f) => {
+            let s = f.spec();
+            format!(" (allowed {}..={} {})", s.min, s.max, s.unit)
+        }
+        _ => String::new(),
+    };
+    Exit::new(
+        exit::INVALID_VALUE,
+        format!("refused on the host, nothing sent: {what}: {e}{extra}"),
+    )
+}
+
+/// Apply assignments to `base` and run the node's own rule on the result.
+pub fn apply(base: &Config, sets: &[Assignment]) -> Result<Config, Exit> {
+    let mut c = base.clone();
+    for a in sets {
+        c.set_from_str(&a.key, &a.value)
+            .map_err(|e| refused(&format!("{}={}", a.key, a.value), e))?;
+    }
+    c.validate()
+        .map_err(|e| refused("the resulting config", e))?;
+    Ok(c)
+}
+
+/// The config as a table: key, value, unit, range, meaning.
+pub fn config_table(c: &Config) -> String {
+    let mut s = String::new();
+    for f in FIELDS.iter() {
+        s.push_str(&format!(
+            "{:<22} {:>8} {:<7} [{}..={}]  {}\n",
+            f.name,
+            c.get(f.field),
+            f.unit,
+            f.min,
+            f.max,
+            f.doc
+        ));
+    }
+    s
+}
+
+/// `config get`: print the node's config.
+pub fn config_get(t: &RequestArgs) -> anyhow::Result<Config> {
+    let mut link = t.connect()?;
+    let reply = link.request(Command::GetConfig, t.timeout())?;
+    match reply {
+        Reply::Ack(fois_protocol::Ack {
+            result: AckResult::Config(c),
+            ..
+        }) => {
+            print!("{}", config_table(&c));
+            Ok(c)
+        }
+        other => {
+            expect_ack(other)?;
+            Err(Exit::new(
+                exit::FAILURE,
+                "the node answered GetConfig with something else",
+            )
+            .into())
+        }
+    }
+}
+
+/// `config set`: check on the host, send, print what the node now uses.
+pub fn config_set(t: &RequestArgs, args: &[String]) -> anyhow::Result<Config> {
+    let sets = parse_assignments(args)?;
+    let mut link = t.connect()?;
+    let current = match link.request(Command::GetConfig, t.timeout())? {
+        Reply::Ack(fois_protocol::Ack {
+            result: AckResult::Config(c),
+            ..
+        }) => c,
+        other => {
+            expect_ack(other)?;
+            return Err(Exit::new(exit::FAILURE, "unexpected answer to GetConfig").into());
+        }
+    };
+    let wanted = apply(&current, &sets)?;
+    let reply = link.request(Command::SetConfig(wanted.clone()), t.timeout())?;
+    match expect_ack(reply)? {
+        AckResult::Config(now) => {
+            for f in FIELDS.iter() {
+                let (a, b) = (current.get(f.field), now.get(f.field));
+                if a != b {
+                    println!("{}: {a} -> {b} {}", f.name, f.unit);
+                }
+            }
+            if now != wanted {
+                return Err(Exit::new(
+                    exit::REFUSED,
+                    "the node's config differs from the one sent",
+                )
+                .into());
+            }
+            Ok(now)
+        }
+        _ => Err(Exit::new(exit::FAILURE, "unexpected answer to SetConfig").into()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn s(v: &[&str]) -> Vec<String> {
+        v.iter().map(|x| x.to_string()).collect()
+    }
+
+    #[test]
+    fn host_refuses_bad_assignments_with_code_7() {
+        for bad in [
+            &["nonsense"][..],
+            &["nope=1"],
+            &["settle_us=abc"],
+            &["settle_us=1"],
+            &["load_r1_ohm=2000000"],
+            &[],
+        ] {
+            let e = parse_assignments(&s(bad)).unwrap_err();
+            assert_eq!(e.code, exit::INVALID_VALUE, "{bad:?}");
+        }
+        let e = parse_assignments(&s(&["settle_us=1"])).unwrap_err();
+        assert!(e.message.contains("20..=5000"), "{}", e.message);
+    }
+
+    #[test]
+    fn cross_field_rule_is_applied_before_sending() {
+        let sets = parse_assignments(&s(&["clear_rise_na=2000"])).unwrap();
+        let e = apply(&Config::default(), &sets).unwrap_err();
+        assert!(e.message.contains("below onset"), "{}", e.message);
+        let sets = parse_assignments(&s(&["onset_rise_na=3000", "clear_rise_na=2000"])).unwrap();
+        let c = apply(&Config::default(), &sets).unwrap();
+        assert_eq!((c.onset_rise_na, c.clear_rise_na), (3000, 2000));
+    }
+}

@@ -1,0 +1,124 @@
+//! The `foisctl` commands, one module each, every one owning its clap
+//! arguments and its `run`; [`Cli`] is the whole command line and
+//! [`Cli::run`] dispatches it. The library modules they use (link, log,
+//! plots, comparison maths, exit codes) live beside `cmd`, not in it.
+
+pub mod args;
+pub mod bench_decode;
+pub mod compare;
+pub mod config;
+pub mod demo;
+pub mod monitor;
+pub mod plot;
+pub mod request;
+pub mod scene;
+pub mod sim;
+pub mod virtual_node;
+
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use clap::{Parser, Subcommand};
+
+use crate::exit;
+
+/// Monitor, log and configure a FOIS ice-sensor node; run a virtual node; run
+/// the thesis ray tracer.
+#[derive(Debug, Parser)]
+#[command(name = "foisctl", version, about, long_about = None, after_help = exit::TABLE)]
+pub struct Cli {
+    /// The command.
+    #[command(subcommand)]
+    pub cmd: Cmd,
+}
+
+/// The commands.
+#[derive(Debug, Subcommand)]
+pub enum Cmd {
+    /// Live view of a node (I1, I2, ambient, temperature, state, alarm, frames
+    /// lost and rejected), optionally logged to CSV. Reconnects when the port
+    /// returns; Ctrl-C exits.
+    #[command(after_help = exit::TABLE)]
+    Monitor(monitor::MonitorArgs),
+    /// Read or change the node's configuration.
+    Config(config::ConfigArgs),
+    /// Take the current readings of a dry, clean sensor face as the dark
+    /// baseline (the node checks that the channels are steady).
+    #[command(after_help = exit::TABLE)]
+    CalibrateDark(request::RequestArgs),
+    /// Acknowledge the ice alarm (the output stays on while ice remains).
+    #[command(after_help = exit::TABLE)]
+    Ack(request::RequestArgs),
+    /// Run the firmware's own logic on simulated hardware (ray-traced ice
+    /// accretion, analog front end, ambient light) and serve it on a
+    /// pseudo-terminal. Prints the pty path on the first line of stdout; talk
+    /// to it with `foisctl monitor --port PATH` or any serial tool. Defaults:
+    /// rime at 2 mm/h after 30 s dry, -5 °C, sensor b, real time.
+    VirtualNode(virtual_node::VirtualNodeArgs),
+    /// A virtual node and the monitor in one process: watch rime accrete and
+    /// trip the alarm. Defaults: 60 s dry, then rime at 3 mm/h, -5 °C, speed
+    /// x20, ends after 40 s (the alarm trips after about 5 s).
+    Demo(demo::DemoArgs),
+    /// Put logged currents beside the simulator's Monte Carlo band mu(d) +/-
+    /// k*sigma(d); prints the RMS deviation and the fraction of samples
+    /// inside the band. The thickness of each sample comes from a log column
+    /// (--thickness-col) or a constant rate (--rate-mm-per-h).
+    Compare(compare::CompareArgs),
+    /// Draw I1 and I2 of a log over host time, alarm periods shaded, link
+    /// breaks marked (PNG).
+    Plot(plot::PlotArgs),
+    /// Decoder throughput: encode a stream of measurement frames and decode
+    /// it, print frames/s and MB/s.
+    BenchDecode(bench_decode::BenchDecodeArgs),
+    /// Ray-trace simulator of the sensor (thesis chapters 3 and 5).
+    Sim(sim::SimArgs),
+}
+
+/// Set by Ctrl-C: the long-running commands stop cleanly.
+static STOP: AtomicBool = AtomicBool::new(false);
+
+/// The first Ctrl-C sets [`STOP`]; a second one exits at once.
+fn install_ctrlc() {
+    let _ = ctrlc::set_handler(|| {
+        if STOP.swap(true, Ordering::SeqCst) {
+            std::process::exit(130);
+        }
+    });
+}
+
+impl Cli {
+    /// Run the command.
+    pub fn run(self) -> anyhow::Result<()> {
+        match self.cmd {
+            Cmd::Monitor(a) => {
+                install_ctrlc();
+                monitor::run(a, &STOP)
+            }
+            Cmd::Config(a) => config::run(a),
+            Cmd::CalibrateDark(a) => request::calibrate_dark(&a),
+            Cmd::Ack(a) => request::ack(&a),
+            Cmd::VirtualNode(a) => {
+                install_ctrlc();
+                virtual_node::run(a, &STOP)
+            }
+            Cmd::Demo(a) => {
+                install_ctrlc();
+                demo::run(a, &STOP).map(|_| ())
+            }
+            Cmd::Compare(a) => compare::run(a),
+            Cmd::Plot(a) => plot::run(a),
+            Cmd::BenchDecode(a) => bench_decode::run(a),
+            Cmd::Sim(a) => sim::run(a),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn the_command_line_is_consistent() {
+        Cli::command().debug_assert();
+    }
+}
