@@ -1,5 +1,8 @@
 //! Accuracy of the ice estimator on ray-traced accretions (seeds the response
 //! table does not use): `cargo run --release -p fois-firmware --example estimator_eval`.
+// An evaluation tool sharing the accuracy test's harness: a missing estimate
+// there is a failed evaluation, as in the tests.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 #[path = "../tests/estimator_eval/mod.rs"]
 mod eval;
 
@@ -99,14 +102,14 @@ fn main() {
 /// `trace KIND RATE TEMP SEED [LED]`: one run, every 60 s of virtual time.
 #[allow(dead_code)]
 pub fn trace(args: &[String]) {
-    let kind = match args[2].as_str() {
+    let kind = match args.get(2).map_or("rime", String::as_str) {
         "rime" => IceKind::Rime,
         "glazed" => IceKind::Glazed,
         _ => IceKind::Water,
     };
-    let rate: f64 = args[3].parse().unwrap();
-    let temp: f64 = args[4].parse().unwrap();
-    let seed: u64 = args[5].parse().unwrap();
+    let rate: f64 = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(2.0);
+    let temp: f64 = args.get(4).and_then(|s| s.parse().ok()).unwrap_or(-8.0);
+    let seed: u64 = args.get(5).and_then(|s| s.parse().ok()).unwrap_or(101);
     let led: f64 = args.get(6).and_then(|s| s.parse().ok()).unwrap_or(1.0);
     let max = if kind == IceKind::Water { 3.0 } else { 11.0 };
     let mut run = Run::new(

@@ -2,6 +2,8 @@
 //! input: what it says on a dry face, on rime, on water at +5 °C, after a
 //! shed, with a failed NTC, across gaps, invalid frames and outliers, and
 //! that no input makes it panic or report nonsense.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use fois_firmware::estimator::{
     Estimator, EstimatorParams, Posterior, ROWS, STEP_MM, TableEntry, Update, table,

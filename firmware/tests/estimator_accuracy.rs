@@ -9,6 +9,8 @@
 //! Frames come at 1 Hz here (10 Hz in the example): the errors that matter
 //! persist for a whole accretion, so the frame rate barely changes the
 //! figures, and the test stays fast.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 #[path = "estimator_eval/mod.rs"]
 mod estimator_eval;

@@ -1,6 +1,8 @@
 //! The response table the firmware embeds (`src/estimator/table.rs`) is the
 //! simulator's: this test rebuilds it from `fois_sim::table` with the default
 //! spec and fails if the checked-in file differs. `FOIS_BLESS=1` rewrites it.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::Path;
 

@@ -2,6 +2,8 @@
 //! with the baseline-corrected currents of valid frames and the NTC's air
 //! temperature; saturated frames only predict; a dark calibration starts the
 //! estimator from "dry".
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 

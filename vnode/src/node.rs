@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 use std::sync::Mutex;
 
+use fois_firmware::estimator::EstimatorParams;
 use fois_firmware::{BoardInfo, MemStorage, Node, Storage, StorageError};
 use fois_protocol::ResetReason;
 
@@ -87,6 +88,11 @@ pub struct NodeOptions {
     /// Press the user button (dark calibration) at this virtual time, s,
     /// if the face is dry then. `None`: never.
     pub calibrate_at_s: Option<f64>,
+    /// The ice estimator's settings (library settings, not in the protocol
+    /// `Config`: defaults and meaning in firmware/README.md, "The ice
+    /// estimator"). Passed to every `Node` this runner builds, after each
+    /// reset too, as the board passes its own.
+    pub estimator: EstimatorParams,
 }
 
 impl Default for NodeOptions {
@@ -97,6 +103,7 @@ impl Default for NodeOptions {
             storage: MemStorage::new(),
             state_file: None,
             calibrate_at_s: Some(1.0),
+            estimator: EstimatorParams::default(),
         }
     }
 }
@@ -148,7 +155,7 @@ impl Hardware<'_> {
         let mut info = BoardInfo::simulated(opts.board);
         info.reset_reason = reason;
         info.unique_id = *b"FOIS-VIRTUAL";
-        Node::new(
+        let mut node = Node::new(
             adc,
             self.led.clone(),
             self.alarm.clone(),
@@ -156,7 +163,9 @@ impl Hardware<'_> {
             VirtualDelay::new(self.clock.clone()),
             storage,
             info,
-        )
+        );
+        node.set_estimator_params(opts.estimator);
+        node
     }
 }
 
