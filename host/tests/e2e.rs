@@ -416,7 +416,10 @@ fn make_rime_log(path: &Path) -> usize {
     let mut n = 0;
     dec.feed::<DeviceFrame>(&bytes, |r| {
         let f = r.unwrap();
-        if matches!(f.msg, fois_protocol::DeviceMsg::Measurement(_)) {
+        if matches!(
+            f.msg,
+            fois_protocol::DeviceMsg::Measurement(_) | fois_protocol::DeviceMsg::MeasurementV2(_)
+        ) {
             n += 1;
         }
         log.write(&Row::device(f.seq, &f.msg)).unwrap();
