@@ -6,9 +6,7 @@
 
 use std::path::Path;
 
-use fois_sim::table::{TableSpec, build_table, to_rust_source};
-
-const REGENERATE: &str = "FOIS_BLESS=1 cargo test -p fois-firmware --test estimator_table";
+use fois_sim::table::{REGENERATE, TableSpec, build_table, to_rust_source};
 
 #[test]
 fn checked_in_table_is_the_simulators() {

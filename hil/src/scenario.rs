@@ -94,6 +94,10 @@ pub struct ScenarioFile {
     /// right after boot; the others keep their defaults.
     #[serde(default)]
     pub config: BTreeMap<String, toml::Value>,
+    /// The run feeds the ice estimator's accuracy table (its estimate is
+    /// recorded beside the truth every frame; see [`crate::accuracy`]).
+    #[serde(default)]
+    pub accuracy: bool,
     /// The timeline: the host's `[[segment]]` tables, checked by the host.
     #[serde(default, rename = "segment")]
     pub segments: Vec<SegmentSpec>,

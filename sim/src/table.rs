@@ -29,6 +29,10 @@ use crate::montecarlo::{DEFAULT_FIT_HALF_WIDTH_MM, crlb, monte_carlo};
 /// physics or the packing changes, so a node's estimate can be traced to its table.
 pub const TABLE_VERSION: u16 = 1;
 
+/// The command that rewrites the checked-in table (quoted in its header;
+/// `foisctl sim table` writes the same file).
+pub const REGENERATE: &str = "FOIS_BLESS=1 cargo test -p fois-firmware --test estimator_table";
+
 /// Seed of every Monte Carlo of the table (runs 0..M). Evaluations use other seeds.
 pub const TABLE_SEED: u64 = 900_001;
 
