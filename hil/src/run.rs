@@ -541,3 +541,43 @@ pub fn run_all(scenarios: &[Scenario], threads: usize) -> Vec<anyhow::Result<Out
 pub fn default_threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
+
+/// An empty outcome for the unit tests of the modules that read outcomes.
+#[cfg(test)]
+pub(crate) mod tests_support {
+    use super::*;
+
+    pub(crate) fn outcome(name: &str) -> Outcome {
+        Outcome {
+            name: name.to_string(),
+            class: crate::scenario::Class::Rime,
+            sensor: "B",
+            checked: true,
+            sweep_lsb: None,
+            virtual_s: 0.0,
+            node_frames: 0,
+            decoded: 0,
+            measurements: 0,
+            saturated: 0,
+            hellos: 0,
+            events: Vec::new(),
+            replies: Vec::new(),
+            sent: Vec::new(),
+            stray_errors: 0,
+            states: Vec::new(),
+            final_state: None,
+            seq_missing: 0,
+            rejected: 0,
+            link_dropped: 0,
+            link_corrupted: 0,
+            ice_start_s: None,
+            inconsistencies: Vec::new(),
+            i1_range_na: None,
+            estimates: Vec::new(),
+            warm_water_frames: 0,
+            warm_water_called_ice: 0,
+            wall: Duration::ZERO,
+            failures: Vec::new(),
+        }
+    }
+}

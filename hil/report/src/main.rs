@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
-use fois_hil::{report, run, scenario};
+use fois_hil::{accuracy, report, run, scenario};
 
 /// Run hardware-in-loop scenarios (the firmware's own Node on the virtual
 /// hardware, in virtual time) on all cores and print a Markdown table of the
@@ -25,6 +25,20 @@ struct Args {
     /// scenarios shipped in hil/scenarios].
     #[arg(value_name = "FILE_OR_DIR")]
     paths: Vec<PathBuf>,
+    /// Run every accuracy scenario (`accuracy = true`) on this many seeds,
+    /// 101, 102, … instead of its file's few (the full accuracy table;
+    /// 1..=100).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=100))]
+    accuracy_seeds: Option<u64>,
+    /// Frame period of the accuracy scenarios, ms (their files use 1000 to
+    /// keep CI short; the node's default is 100; 10..=60000).
+    #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u32).range(10..=60_000))]
+    accuracy_frame_ms: Option<u32>,
+    /// Accretions of the Monte Carlo behind √CRLB in the accuracy table
+    /// (seed 4242; 2..=10000).
+    #[arg(long, value_name = "N", default_value_t = 64,
+          value_parser = clap::value_parser!(u64).range(2..=10_000))]
+    crlb_runs: u64,
 }
 
 fn main() {
@@ -49,6 +63,7 @@ fn report(args: Args) -> anyhow::Result<()> {
             scenarios.extend(scenario::load(p)?);
         }
     }
+    let scenarios = scenario::for_accuracy(scenarios, args.accuracy_seeds, args.accuracy_frame_ms);
     let start = Instant::now();
     let threads = run::default_threads();
     let results = run::run_all(&scenarios, threads);
@@ -63,6 +78,16 @@ fn report(args: Args) -> anyhow::Result<()> {
     println!("{}", report::table(&outcomes));
     println!("Goals:\n{}", report::goals_summary(&outcomes));
     println!("Notes:\n{}", report::notes(&outcomes));
+    let rows = accuracy::rows(&outcomes);
+    if !rows.is_empty() {
+        let crlb = accuracy::crlb_rows(args.crlb_runs);
+        println!(
+            "Ice estimator accuracy (bias / RMS over seeds in mm, mean σ; √CRLB from {} accretions of seed {}):\n{}",
+            args.crlb_runs,
+            accuracy::CRLB_SEED,
+            accuracy::table(&rows, &crlb)
+        );
+    }
     let frames: u64 = outcomes.iter().map(|o| o.node_frames).sum();
     let virt: f64 = outcomes.iter().map(|o| o.virtual_s).sum();
     println!(
