@@ -389,3 +389,42 @@ impl VirtualNode {
         self.advance_to(t, tx);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::{Cover, Segment, Timeline};
+    use fois_protocol::{Command, HostFrame, encode_to_vec};
+
+    #[test]
+    fn the_estimator_settings_reach_every_node_it_builds() {
+        let env = Arc::new(Environment::new(
+            Timeline::new(vec![Segment::new(60.0, Cover::Dry)]),
+            fois_sim::SensorKind::B,
+            1,
+        ));
+        let params = EstimatorParams {
+            forget_time_s: 5.0,
+            max_growth_mm_per_h: 3.0,
+            ..EstimatorParams::default()
+        };
+        assert_ne!(params, EstimatorParams::default());
+        let opts = NodeOptions {
+            estimator: params,
+            ..NodeOptions::default()
+        };
+        let mut vn = VirtualNode::new(env, opts);
+        assert_eq!(*vn.node().estimator().params(), params);
+        // After a `Reset` the runner builds a new node: same settings.
+        let reset = encode_to_vec(&HostFrame {
+            id: 1,
+            cmd: Command::Reset,
+        });
+        vn.run_until_s(2.0, &mut |_: &[u8]| {});
+        vn.handle_rx(&reset, &mut |_: &[u8]| {});
+        vn.run_until_s(4.0, &mut |_: &[u8]| {});
+        assert_eq!(vn.resets(), 1);
+        assert_eq!(*vn.node().estimator().params(), params);
+    }
+}
