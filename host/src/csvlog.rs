@@ -166,7 +166,7 @@ impl Row {
         match msg {
             DeviceMsg::Measurement(m) => Row::measurement(seq, m),
             DeviceMsg::MeasurementV2(m) => Row {
-                estimate: m.estimate.clone(),
+                estimate: m.estimate,
                 ..Row::measurement(seq, &m.measurement)
             },
             DeviceMsg::Event(e) => Row::event(seq, e),

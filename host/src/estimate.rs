@@ -112,16 +112,20 @@ pub struct ReplaySummary {
     pub last: Option<String>,
 }
 
+/// The columns of a monitor log the replay reads.
+#[derive(Clone, Copy)]
+struct LogCols {
+    kind: usize,
+    uptime: usize,
+    i: [usize; 2],
+    temp: Option<usize>,
+    valid: Option<usize>,
+    detail: Option<usize>,
+}
+
 /// The layout of the input.
 enum Layout {
-    Log {
-        kind: usize,
-        uptime: usize,
-        i: [usize; 2],
-        temp: Option<usize>,
-        valid: Option<usize>,
-        detail: Option<usize>,
-    },
+    Log(LogCols),
     Curve {
         thickness: usize,
         i: [usize; 2],
@@ -131,14 +135,14 @@ enum Layout {
 
 fn layout(rd: &LogReader) -> anyhow::Result<Layout> {
     if rd.col("kind").is_some() && rd.col("uptime_ms").is_some() {
-        Ok(Layout::Log {
+        Ok(Layout::Log(LogCols {
             kind: rd.need("kind")?,
             uptime: rd.need("uptime_ms")?,
             i: [rd.need("i1_ua")?, rd.need("i2_ua")?],
             temp: rd.col("temperature_c"),
             valid: rd.col("valid"),
             detail: rd.col("detail"),
-        })
+        }))
     } else if rd.col("thickness_mm").is_some() {
         Ok(Layout::Curve {
             thickness: rd.need("thickness_mm")?,
@@ -249,16 +253,15 @@ impl Replay {
         self.sum.restarts += 1;
     }
 
-    fn log_row(
-        &mut self,
-        f: &StringRecord,
-        kind: usize,
-        uptime: usize,
-        i: [usize; 2],
-        temp: Option<usize>,
-        valid: Option<usize>,
-        detail: Option<usize>,
-    ) -> Option<[String; 5]> {
+    fn log_row(&mut self, f: &StringRecord, c: LogCols) -> Option<[String; 5]> {
+        let LogCols {
+            kind,
+            uptime,
+            i,
+            temp,
+            valid,
+            detail,
+        } = c;
         if let Some(b) = detail
             .filter(|_| &f[kind] == "ack")
             .and_then(|d| dark_baseline(&f[d]))
@@ -346,7 +349,7 @@ pub fn replay(
     let mut rd = LogReader::open(input)?;
     let layout = layout(&rd)?;
     let mut header: Vec<String> = rd.header().to_vec();
-    if matches!(layout, Layout::Log { .. }) {
+    if matches!(layout, Layout::Log(_)) {
         for h in &mut header {
             if h.starts_with("est_") {
                 *h = format!("node_{h}");
@@ -369,7 +372,7 @@ pub fn replay(
             est: Estimator::new(opts.params),
             sum: ReplaySummary {
                 input_kind: match layout {
-                    Layout::Log { .. } => "monitor log",
+                    Layout::Log(_) => "monitor log",
                     Layout::Curve { .. } => "sim curve",
                 },
                 ..ReplaySummary::default()
@@ -385,23 +388,14 @@ pub fn replay(
         while rd.next_row(&mut fields)? {
             line += 1;
             let est = match layout {
-                Layout::Log {
-                    kind,
-                    uptime,
-                    i,
-                    temp,
-                    valid,
-                    detail,
-                } => r
-                    .log_row(&fields, kind, uptime, i, temp, valid, detail)
-                    .unwrap_or_else(empty),
+                Layout::Log(c) => r.log_row(&fields, c).unwrap_or_else(empty),
                 Layout::Curve { thickness, i, run } => {
                     r.curve_row(&fields, line, thickness, i, run, opts.curve)?
                 }
             };
             w.write_record(fields.iter().chain(est.iter().map(String::as_str)))?;
             r.sum.rows += 1;
-            if r.sum.rows % 4096 == 0 {
+            if r.sum.rows.is_multiple_of(4096) {
                 progress(r.sum.rows);
             }
         }

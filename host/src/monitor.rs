@@ -266,7 +266,7 @@ impl Session<'_> {
                     DeviceMsg::MeasurementV2(v2) => {
                         self.sum.measurements += 1;
                         self.sum.last = Some(v2.measurement.clone());
-                        self.sum.last_estimate = v2.estimate.clone();
+                        self.sum.last_estimate = v2.estimate;
                     }
                     DeviceMsg::Event(e) => {
                         if e.kind == fois_protocol::EventKind::IceOnset {

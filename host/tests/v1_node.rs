@@ -36,7 +36,7 @@ fn v1_node(mut master: serialport::TTYPort, stop: Arc<AtomicBool>) {
     let mut streaming = false;
     let mut uptime_ms = 0u64;
     let mut buf = [0u8; 256];
-    let mut send = |master: &mut serialport::TTYPort, seq: &mut u32, msg: DeviceMsg| {
+    let send = |master: &mut serialport::TTYPort, seq: &mut u32, msg: DeviceMsg| {
         let _ = master.write_all(&encode_to_vec(&DeviceFrame { seq: *seq, msg }));
         *seq += 1;
     };
