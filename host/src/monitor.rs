@@ -415,3 +415,53 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
 pub fn exit_code(err: &anyhow::Error) -> i32 {
     exit::code_of(err)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fois_protocol::Medium;
+
+    fn meas() -> Measurement {
+        Measurement {
+            uptime_ms: 1000,
+            i1_na: 123_456,
+            i2_na: 45_678,
+            ambient1_na: 300_000,
+            ambient2_na: 150_000,
+            temperature_centi_c: -2_345,
+            vdda_mv: 3300,
+            flags: flags::ALARM | flags::ALARM_ACKED,
+            state: DetectorState::Ice,
+        }
+    }
+
+    #[test]
+    fn status_shows_the_estimate_or_a_dash_within_80_columns() {
+        let mut sum = MonitorSummary {
+            frames: 9_999_999,
+            lost: 99_999,
+            rejected: 99_999,
+            ..MonitorSummary::default()
+        };
+        let lines = status_lines(Some(&meas()), &sum);
+        assert!(lines[1].contains("est —"), "{lines:?}");
+        sum.last_estimate = Some(IceEstimate {
+            thickness_um: 12_345,
+            sigma_um: 1_456,
+            medium: Medium::Glazed,
+            probability_permille: 512,
+        });
+        let lines = status_lines(Some(&meas()), &sum);
+        assert_eq!(
+            lines[1],
+            "state ICE  alarm ON (acked)  est ICE glazed 12.3 ± 1.5 mm (p 0.51)"
+        );
+        for l in &lines {
+            assert!(
+                l.chars().count() <= 80,
+                "{} columns: {l}",
+                l.chars().count()
+            );
+        }
+    }
+}

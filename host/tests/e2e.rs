@@ -182,6 +182,15 @@ fn commands_round_trip_and_monitor_logs_measurements() {
         let c: f64 = r[temp].parse().unwrap();
         assert!((c + 5.0).abs() < 0.1, "air -5 °C, got {c}");
     }
+    // The node's ice estimate (protocol 2): a dry face, with a σ.
+    let (kind, sigma) = (t.col("est_kind").unwrap(), t.col("est_sigma_mm").unwrap());
+    let dry = meas.iter().filter(|r| r[kind] == "dry").count();
+    assert_eq!(
+        dry,
+        meas.len(),
+        "every frame of a calibrated dry face reads dry"
+    );
+    assert!(meas.iter().all(|r| r[sigma].parse::<f64>().is_ok()));
     // A second run appends to the same file, header once.
     let (code, _, _) = foisctl(&[
         "monitor",
