@@ -5,27 +5,6 @@ use fois_protocol::{DetectorState, EventKind};
 use crate::run::Outcome;
 use crate::scenario::{Reply, Scenario, state_named};
 
-/// The name of an event kind in scenario files.
-pub fn event_name(k: EventKind) -> &'static str {
-    match k {
-        EventKind::IceOnset => "ice_onset",
-        EventKind::IceCleared => "ice_cleared",
-        EventKind::WetOnset => "wet_onset",
-        EventKind::WetCleared => "wet_cleared",
-        EventKind::FaultRaised(_) => "fault_raised",
-        EventKind::FaultCleared(_) => "fault_cleared",
-    }
-}
-
-/// The name of a state in scenario files.
-pub fn state_name(s: DetectorState) -> &'static str {
-    match s {
-        DetectorState::Dry => "dry",
-        DetectorState::Wet => "wet",
-        DetectorState::Ice => "ice",
-    }
-}
-
 /// Every expectation of `sc` that `o` does not meet (empty: all hold). The
 /// structural checks (sequence, alarm pin, flags vs state, stray errors,
 /// command replies) apply to every scenario.
@@ -106,7 +85,7 @@ pub fn check(sc: &Scenario, o: &Outcome) -> Vec<String> {
         }
     }
     if let Some(want) = &e.events {
-        let got: Vec<&str> = o.events.iter().map(|x| event_name(x.kind)).collect();
+        let got: Vec<&str> = o.events.iter().map(|x| x.kind.name()).collect();
         if got != want.iter().map(String::as_str).collect::<Vec<_>>() {
             fail.push(format!(
                 "events {got:?}, expected {want:?} (at {:?} s)",
@@ -118,7 +97,7 @@ pub fn check(sc: &Scenario, o: &Outcome) -> Vec<String> {
         }
     }
     if let Some(want) = &e.states {
-        let got: Vec<&str> = o.states.iter().map(|&s| state_name(s)).collect();
+        let got: Vec<&str> = o.states.iter().map(|&s| s.name()).collect();
         if got != want.iter().map(String::as_str).collect::<Vec<_>>() {
             fail.push(format!("states {got:?}, expected {want:?}"));
         }
@@ -128,8 +107,8 @@ pub fn check(sc: &Scenario, o: &Outcome) -> Vec<String> {
     {
         fail.push(format!(
             "final state {:?}, expected {}",
-            o.final_state.map(state_name),
-            state_name(want)
+            o.final_state.map(DetectorState::name),
+            want.name()
         ));
     }
     let fa = o.false_alarms();

@@ -107,7 +107,7 @@ pub fn notes(outcomes: &[Outcome]) -> String {
             .map(|e| {
                 format!(
                     "{} {:.1} s ({:.3} mm {}, {:.1} °C)",
-                    crate::check::event_name(e.kind),
+                    e.kind.name(),
                     e.t_s,
                     e.truth.thickness_mm,
                     e.truth.cover.name(),

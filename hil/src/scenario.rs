@@ -514,12 +514,10 @@ fn validate_commands(cmds: &[CommandSpec]) -> anyhow::Result<()> {
 
 fn parse_state(s: &str) -> anyhow::Result<fois_protocol::DetectorState> {
     use fois_protocol::DetectorState as D;
-    Ok(match s {
-        "dry" => D::Dry,
-        "wet" => D::Wet,
-        "ice" => D::Ice,
-        _ => bail!("state `{s}` is not one of dry|wet|ice"),
-    })
+    [D::Dry, D::Wet, D::Ice]
+        .into_iter()
+        .find(|d| d.name() == s)
+        .with_context(|| format!("state `{s}` is not one of dry|wet|ice"))
 }
 
 /// The state named `s` (dry|wet|ice).

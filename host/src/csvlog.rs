@@ -38,7 +38,7 @@ use anyhow::Context;
 use csv::StringRecord;
 use fois_protocol::{DetectorState, DeviceMsg, Event, IceEstimate, Measurement, flags};
 
-use crate::text::{ack_text, error_text, event_name, hello_text, medium_name, na_to_ua};
+use crate::text::{ack_text, centi_c_to_c, error_text, event_name, hello_text, na_to_ua};
 use crate::timefmt::{iso_utc, unix_ms_now};
 
 /// The header line (without newline).
@@ -132,7 +132,7 @@ impl Row {
             i2_ua: Some(na_to_ua(m.i2_na.into())),
             ambient1_ua: Some(na_to_ua(m.ambient1_na.into())),
             ambient2_ua: Some(na_to_ua(m.ambient2_na.into())),
-            temperature_c: Some(f64::from(m.temperature_centi_c) / 100.0),
+            temperature_c: Some(centi_c_to_c(m.temperature_centi_c)),
             vdda_mv: Some(m.vdda_mv),
             state: Some(m.state),
             alarm: Some(m.flags & flags::ALARM != 0),
@@ -150,7 +150,7 @@ impl Row {
             uptime_ms: Some(e.uptime_ms),
             i1_ua: Some(na_to_ua(e.i1_na.into())),
             i2_ua: Some(na_to_ua(e.i2_na.into())),
-            temperature_c: Some(f64::from(e.temperature_centi_c) / 100.0),
+            temperature_c: Some(centi_c_to_c(e.temperature_centi_c)),
             detail: format!(
                 "{} rise1_ua={:.3} frames={}",
                 event_name(&e.kind),
@@ -363,7 +363,7 @@ pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 21] {
         r.detail.clone(),
         opt(est.map(|e| um_to_mm(e.thickness_um))),
         opt(est.map(|e| um_to_mm(e.sigma_um))),
-        est.map_or(String::new(), |e| medium_name(e.medium).to_string()),
+        est.map_or(String::new(), |e| e.medium.name().to_string()),
         opt(est.map(|e| permille_to_p(e.probability_permille))),
     ]
 }

@@ -41,7 +41,6 @@ use csv::StringRecord;
 use fois_firmware::estimator::{Estimator, EstimatorParams, Update};
 
 use crate::csvlog::LogReader;
-use crate::text::medium_name;
 
 /// The appended columns.
 pub const EST_COLUMNS: [&str; 5] = [
@@ -233,7 +232,7 @@ impl Replay {
                 [
                     format!("{:.3}", f64::from(e.thickness_um) / 1000.0),
                     format!("{:.3}", f64::from(e.sigma_um) / 1000.0),
-                    medium_name(e.medium).to_string(),
+                    e.medium.name().to_string(),
                     format!("{:.3}", f64::from(e.probability_permille) / 1000.0),
                     what.to_string(),
                 ]

@@ -12,7 +12,9 @@ use fois_protocol::{Command, DetectorState, DeviceMsg, IceEstimate, Measurement,
 use crate::csvlog::{CsvLog, Row};
 use crate::exit;
 use crate::link::{Incoming, Link, LinkError, SeqEvent, SeqTracker, open_port};
-use crate::text::{ack_text, error_text, estimate_text, event_name, hello_text};
+use crate::text::{
+    ack_text, centi_c_to_c, error_text, estimate_text, event_name, hello_text, na_to_ua,
+};
 
 /// What `monitor` does.
 #[derive(Debug, Clone)]
@@ -162,11 +164,11 @@ pub fn status_lines(m: Option<&Measurement>, s: &MonitorSummary) -> [String; 3] 
     [
         format!(
             "I1 {:8.3} µA  I2 {:8.3} µA  ambient {:.2}/{:.2} µA  {:6.2} °C",
-            m.i1_na as f64 / 1000.0,
-            m.i2_na as f64 / 1000.0,
-            m.ambient1_na as f64 / 1000.0,
-            m.ambient2_na as f64 / 1000.0,
-            f64::from(m.temperature_centi_c) / 100.0,
+            na_to_ua(m.i1_na.into()),
+            na_to_ua(m.i2_na.into()),
+            na_to_ua(m.ambient1_na.into()),
+            na_to_ua(m.ambient2_na.into()),
+            centi_c_to_c(m.temperature_centi_c),
         ),
         format!(
             "state {state:3}  alarm {alarm:10}  est {}{}",
@@ -276,9 +278,9 @@ impl Session<'_> {
                             "* event {} at uptime {:.1} s: I1 {:.3} µA, rise {:.3} µA, {:.2} °C",
                             event_name(&e.kind),
                             e.uptime_ms as f64 / 1000.0,
-                            e.i1_na as f64 / 1000.0,
-                            e.rise1_na as f64 / 1000.0,
-                            f64::from(e.temperature_centi_c) / 100.0
+                            na_to_ua(e.i1_na.into()),
+                            na_to_ua(e.rise1_na.into()),
+                            centi_c_to_c(e.temperature_centi_c)
                         ));
                     }
                     DeviceMsg::Ack(a) => self.view.say(&format!("  ack {}", ack_text(a))),

@@ -1,11 +1,17 @@
 //! One-line texts of protocol messages (a node's identity, answers, errors,
-//! event kinds), as the monitor prints them and the log stores them.
+//! event kinds), as the monitor prints them, the log stores them and the
+//! gateway publishes them; the wire's units in the text's (µA, °C).
 
 use fois_protocol::{Ack, AckResult, ErrorReply, EventKind, Hello, IceEstimate, Medium};
 
 /// nA → µA.
 pub fn na_to_ua(na: i64) -> f64 {
     na as f64 / 1000.0
+}
+
+/// 0.01 °C (the wire's temperature unit) → °C.
+pub fn centi_c_to_c(centi_c: i16) -> f64 {
+    f64::from(centi_c) / 100.0
 }
 
 /// Short name of an event kind (`IceOnset`, `FaultRaised(0x0004)`).
@@ -59,17 +65,6 @@ pub fn error_text(e: &ErrorReply) -> String {
     format!("id={id} {why}")
 }
 
-/// The log's and the monitor's name of a medium (`dry`, `water`, `glazed`,
-/// `rime`).
-pub fn medium_name(m: Medium) -> &'static str {
-    match m {
-        Medium::Dry => "dry",
-        Medium::Water => "water",
-        Medium::Glazed => "glazed",
-        Medium::Rime => "rime",
-    }
-}
-
 /// The estimate as the monitor shows it: `ICE rime 2.3 ± 0.3 mm (p 0.97)`,
 /// `WATER 0.4 ± 0.2 mm (p 0.99)`, `DRY (p 0.99)`.
 pub fn estimate_text(e: &IceEstimate) -> String {
@@ -78,7 +73,7 @@ pub fn estimate_text(e: &IceEstimate) -> String {
     let what = match e.medium {
         Medium::Dry => return format!("DRY (p {p:.2})"),
         Medium::Water => "WATER".to_string(),
-        ice => format!("ICE {}", medium_name(ice)),
+        ice => format!("ICE {}", ice.name()),
     };
     format!(
         "{what} {:.1} ± {:.1} mm (p {p:.2})",

@@ -3,7 +3,6 @@
 // A test crate: unwrap and expect are assertions here (helpers included).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::Arc;
@@ -12,43 +11,8 @@ use std::time::{Duration, Instant};
 
 use fois_host::csvlog::{HEADER, LogTable};
 
-const BIN: &str = env!("CARGO_BIN_EXE_foisctl");
-
-/// A running `foisctl virtual-node`, killed on drop.
-struct NodeProc {
-    child: Child,
-    path: String,
-}
-
-impl NodeProc {
-    fn start(extra: &[&str]) -> NodeProc {
-        let mut child = Command::new(BIN)
-            .arg("virtual-node")
-            .args(extra)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("spawn virtual-node");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        let path = line.trim().to_string();
-        assert!(path.starts_with("/dev/pts/"), "first line: {line:?}");
-        NodeProc { child, path }
-    }
-
-    fn kill9(&mut self) {
-        let _ = self.child.kill(); // SIGKILL
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for NodeProc {
-    fn drop(&mut self) {
-        self.kill9();
-    }
-}
+mod common;
+use common::{BIN, NodeProc};
 
 /// `foisctl monitor --port PORT --log LOG --plain EXTRA...` as a child;
 /// `piped`: capture its stdout/stderr (else discard them).

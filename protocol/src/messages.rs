@@ -125,6 +125,18 @@ pub enum DetectorState {
     Ice,
 }
 
+impl DetectorState {
+    /// The state as a lower-case word, `dry`, `wet` or `ice`: its name in
+    /// text formats (scenario files, MQTT payloads).
+    pub const fn name(self) -> &'static str {
+        match self {
+            DetectorState::Dry => "dry",
+            DetectorState::Wet => "wet",
+            DetectorState::Ice => "ice",
+        }
+    }
+}
+
 /// Bits of [`Measurement::flags`]. A frame with any `SATURATED_*` bit is
 /// invalid: its currents must not be used.
 pub mod flags {
@@ -221,6 +233,18 @@ pub enum Medium {
     Rime,
 }
 
+impl Medium {
+    /// The medium as a lower-case word, `dry`, `water`, `glazed` or `rime`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Medium::Dry => "dry",
+            Medium::Water => "water",
+            Medium::Glazed => "glazed",
+            Medium::Rime => "rime",
+        }
+    }
+}
+
 /// The node's estimate of the accretion: thickness with its uncertainty and
 /// the most likely medium (posterior of the node's Bayes filter).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
@@ -272,6 +296,23 @@ pub enum EventKind {
     FaultRaised(u16),
     /// Fault bits that became clear.
     FaultCleared(u16),
+}
+
+impl EventKind {
+    /// The kind as a snake_case word without its fault bits (`ice_onset`,
+    /// `ice_cleared`, `wet_onset`, `wet_cleared`, `fault_raised`,
+    /// `fault_cleared`): its name in text formats (scenario files, MQTT
+    /// payloads).
+    pub const fn name(&self) -> &'static str {
+        match self {
+            EventKind::IceOnset => "ice_onset",
+            EventKind::IceCleared => "ice_cleared",
+            EventKind::WetOnset => "wet_onset",
+            EventKind::WetCleared => "wet_cleared",
+            EventKind::FaultRaised(_) => "fault_raised",
+            EventKind::FaultCleared(_) => "fault_cleared",
+        }
+    }
 }
 
 /// A command carried out; `id` is the command's.

@@ -9,6 +9,7 @@ pub mod compare;
 pub mod config;
 pub mod demo;
 pub mod estimate;
+pub mod gateway;
 pub mod monitor;
 pub mod plot;
 pub mod request;
@@ -22,8 +23,8 @@ use clap::{Parser, Subcommand};
 
 use crate::exit;
 
-/// Monitor, log and configure a FOIS ice-sensor node; run a virtual node; run
-/// the thesis ray tracer.
+/// Monitor, log and configure a FOIS ice-sensor node; run a virtual node;
+/// carry a fleet of nodes to an MQTT broker; run the thesis ray tracer.
 #[derive(Debug, Parser)]
 #[command(name = "foisctl", version, about, long_about = None, after_help = exit::TABLE)]
 pub struct Cli {
@@ -77,6 +78,11 @@ pub enum Cmd {
     BenchDecode(bench_decode::BenchDecodeArgs),
     /// Ray-trace simulator of the sensor (thesis chapters 3 and 5).
     Sim(sim::SimArgs),
+    /// Fleet gateway: read many nodes at once and publish them to an MQTT
+    /// broker (state, measurements, events, availability, Home Assistant
+    /// discovery), with a bounded on-disk queue while the broker is away.
+    #[command(after_help = exit::TABLE)]
+    Gateway(gateway::GatewayArgs),
 }
 
 /// Set by Ctrl-C: the long-running commands stop cleanly.
@@ -115,6 +121,10 @@ impl Cli {
             Cmd::Estimate(a) => estimate::run(a),
             Cmd::BenchDecode(a) => bench_decode::run(a),
             Cmd::Sim(a) => sim::run(a),
+            Cmd::Gateway(a) => {
+                install_ctrlc();
+                gateway::run(a, &STOP)
+            }
         }
     }
 }
