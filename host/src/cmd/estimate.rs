@@ -35,7 +35,7 @@ pub struct EstimateArgs {
     pub temperature_c: f64,
     /// Monitor log input: the node's dark baseline (I1,I2 or one value for
     /// both), µA, subtracted from the logged net currents as the node does,
-    /// until a DarkCalibrated answer in the log replaces it (default 0).
+    /// until a DarkCalibrated answer in the log replaces it.
     #[arg(long, value_name = "UA1,UA2", default_value = "0", value_parser = ua_pair)]
     pub baseline_ua: [f64; 2],
 }
