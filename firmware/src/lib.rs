@@ -12,11 +12,13 @@
 //! - [`watchdog`]: the IWDG prescaler, reload and timeout arithmetic the board
 //!   programs; [`reply_time`]: the worst time to answer a command (the
 //!   host's timeout).
+//! - [`estimator`]: ice thickness ± σ and medium (grid Bayes filter on the simulator's table).
 //! - `sim_board` (feature `sim-board`): a scripted simulated board for tests.
 
 #![cfg_attr(not(test), no_std)]
 
 pub mod dispatch;
+pub mod estimator;
 pub mod flash_store;
 pub mod hal;
 pub mod measure;

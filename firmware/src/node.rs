@@ -7,10 +7,11 @@ use embedded_hal::digital::OutputPin;
 use fois_protocol::{
     Ack, AckResult, Baseline, Command, Config, DetectorState, DeviceFrame, DeviceMsg, ErrorCode,
     ErrorReply, Event, EventKind, FrameDecoder, Hello, HostFrame, MAX_FRAME, Measurement,
-    PROTOCOL_VERSION, encode, flags,
+    MeasurementV2, PROTOCOL_VERSION, encode, flags,
 };
 
 use crate::dispatch::{self, BUTTON_ID};
+use crate::estimator::{Estimator, EstimatorParams};
 use crate::hal::{BoardInfo, PhotoAdc, Storage};
 use crate::measure::{self, Currents};
 use crate::ntc::{self, NtcReading};
@@ -103,6 +104,8 @@ where
     reported_faults: u16,
     reset_request: bool,
     last: Option<Measurement>,
+    estimator: Estimator,
+    last_frame_ms: Option<u64>,
 }
 
 impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
@@ -169,6 +172,8 @@ where
             reported_faults: 0,
             reset_request: false,
             last: None,
+            estimator: Estimator::default(),
+            last_frame_ms: None,
         };
         let _ = node.led.set_low();
         node.drive_outputs();
@@ -193,14 +198,16 @@ where
     }
 
     /// One output frame: K LED-off/LED-on cycles (settle waits through the
-    /// delay), currents, temperature, V_DDA, the ice rule, the outputs. Sends
-    /// a `Measurement` if streaming, then any `Event`s (rule transition first,
-    /// then faults raised/cleared).
+    /// delay), currents, temperature, V_DDA, the ice rule, the outputs, the
+    /// ice estimator. Sends a `MeasurementV2` (the measurement with the
+    /// estimate) if streaming, then any `Event`s (rule transition first, then
+    /// faults raised/cleared).
     pub fn run_frame(&mut self, now_ms: u64, tx: &mut impl FnMut(&[u8])) {
         let values = self.measure_frame();
         let rise1 = self.rise1(values.currents.net_na[0]);
         let valid = values.flags & flags::INVALID_MASK == 0;
         let air_known = values.flags & (flags::NTC_OPEN | flags::NTC_SHORT) == 0;
+        let estimate = self.estimate(now_ms, &values, rise1, valid);
         let transition = self.rule.step(
             &self.config,
             RuleInput {
@@ -224,7 +231,11 @@ where
             state: self.rule.state(),
         };
         if self.streaming {
-            self.send(DeviceMsg::Measurement(m.clone()), tx);
+            let msg = MeasurementV2 {
+                measurement: m.clone(),
+                estimate,
+            };
+            self.send(DeviceMsg::MeasurementV2(msg), tx);
         }
         let event = |kind: EventKind, frames: u16| Event {
             uptime_ms: now_ms,
@@ -355,6 +366,17 @@ where
         self.last.as_ref()
     }
 
+    /// The ice estimator (its posterior, its settings).
+    pub fn estimator(&self) -> &Estimator {
+        &self.estimator
+    }
+
+    /// Set the estimator's settings (library settings, not part of the
+    /// protocol `Config`); the filter starts afresh.
+    pub fn set_estimator_params(&mut self, params: EstimatorParams) {
+        self.estimator = Estimator::new(params);
+    }
+
     /// Frames sent so far (the next frame's sequence number).
     pub fn next_seq(&self) -> u32 {
         self.seq
@@ -383,6 +405,29 @@ where
     fn rise1(&self, i1_na: i32) -> i32 {
         let base = self.baseline.map_or(0, |b| b.i1_na);
         i1_na.saturating_sub(base)
+    }
+
+    /// Feed the estimator: the baseline-corrected currents of a valid frame
+    /// (an invalid or saturated one only predicts) and the NTC's air
+    /// temperature (none when the NTC is open or shorted: the internal
+    /// sensor that stands in for the rule reads the die, not the air).
+    fn estimate(
+        &mut self,
+        now_ms: u64,
+        values: &FrameValues,
+        rise1_na: i32,
+        valid: bool,
+    ) -> Option<fois_protocol::IceEstimate> {
+        let dt_s = self
+            .last_frame_ms
+            .map_or(0.0, |t| now_ms.saturating_sub(t) as f32 / 1000.0);
+        self.last_frame_ms = Some(now_ms);
+        let base2 = self.baseline.map_or(0, |b| b.i2_na);
+        let rise2_na = values.currents.net_na[1].saturating_sub(base2);
+        let currents_ua = valid.then_some([rise1_na as f32 * 1e-3, rise2_na as f32 * 1e-3]);
+        let ntc_ok = values.flags & (flags::NTC_OPEN | flags::NTC_SHORT) == 0;
+        let air_temp_c = ntc_ok.then_some(f32::from(values.temperature_centi_c) * 0.01);
+        self.estimator.step(dt_s, currents_ua, air_temp_c)
     }
 
     fn node_flags(&self) -> u16 {
@@ -575,6 +620,8 @@ where
             i2_na: (sum[1] / n) as i32,
         };
         self.baseline = Some(baseline);
+        // A clean, dry face: the estimator starts from "dry".
+        self.estimator.set_dry();
         self.changed(now_ms);
         Ok(AckResult::DarkCalibrated(baseline))
     }

@@ -12,7 +12,7 @@ use fois_protocol::*;
 fn measurement(fs: &[DeviceFrame]) -> Measurement {
     fs.iter()
         .find_map(|f| match &f.msg {
-            DeviceMsg::Measurement(m) => Some(m.clone()),
+            DeviceMsg::MeasurementV2(m) => Some(m.measurement.clone()),
             _ => None,
         })
         .expect("a measurement")
@@ -642,7 +642,7 @@ mod fuzz {
                 node.run_frame(w.now_ms(), &mut |b| bytes.extend_from_slice(b));
             }
             let fs = frames(&bytes);
-            let ms = fs.iter().filter(|f| matches!(f.msg, DeviceMsg::Measurement(_))).count();
+            let ms = fs.iter().filter(|f| matches!(f.msg, DeviceMsg::MeasurementV2(_))).count();
             prop_assert!(ms == chunks.len() || !node.is_streaming());
         }
     }

@@ -38,9 +38,10 @@ fn boot<const P: usize>(
 ) -> (Config, Option<Baseline>, bool, RamFlash<Vec<u8>, P, 2>) {
     let (mut node, w) = node_on(store(flash));
     let fs = step(&mut node, &w);
-    let defaulted = fs.iter().any(|f| match &f.msg {
-        DeviceMsg::Measurement(m) => m.flags & flags::CONFIG_DEFAULTED != 0,
-        _ => false,
+    let defaulted = fs.iter().any(|f| {
+        f.msg
+            .measurement()
+            .is_some_and(|(m, _)| m.flags & flags::CONFIG_DEFAULTED != 0)
     });
     let (config, baseline) = (node.config().clone(), node.baseline());
     let flash = node.into_parts().5.into_flash();

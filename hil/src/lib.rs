@@ -6,7 +6,9 @@
 //! - [`mod@run`]: one scenario → an [`run::Outcome`] (decoded frames only).
 //! - [`check`]: the file's expectations against the outcome.
 //! - [`report`]: the results table and the goals.
+//! - [`accuracy`]: the ice estimator's accuracy table (bias, RMS, σ honesty, √CRLB, medium).
 
+pub mod accuracy;
 pub mod check;
 pub mod report;
 pub mod run;

@@ -38,6 +38,23 @@ pub struct Seen {
     pub truth: Truth,
 }
 
+/// One frame's ice estimate beside the truth (accuracy scenarios).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EstSample {
+    /// Node uptime, s.
+    pub t_s: f64,
+    /// What covers the face and how thick it is (truth).
+    pub cover: Cover,
+    /// True thickness, mm.
+    pub true_mm: f64,
+    /// Estimated thickness, mm.
+    pub est_mm: f64,
+    /// Its σ, mm.
+    pub sigma_mm: f64,
+    /// The most likely medium the node reported.
+    pub medium: fois_protocol::Medium,
+}
+
 /// A reply to a command.
 #[derive(Debug, Clone)]
 pub struct ReplySeen {
@@ -101,6 +118,13 @@ pub struct Outcome {
     pub inconsistencies: Vec<String>,
     /// Smallest and largest I1 the measurements reported, nA.
     pub i1_range_na: Option<(i32, i32)>,
+    /// The estimates of every measurement beside the truth (scenarios with
+    /// `accuracy = true` only; empty otherwise).
+    pub estimates: Vec<EstSample>,
+    /// Measurements with water on the face above the freezing band.
+    pub warm_water_frames: u64,
+    /// … of which the node's estimate called ice (glazed or rime).
+    pub warm_water_called_ice: u64,
     /// Wall time of the run.
     pub wall: Duration,
     /// Expectations that failed (filled by [`crate::check`]).
@@ -174,6 +198,7 @@ impl SplitMix {
 
 struct Observer {
     env: Arc<Environment>,
+    record_estimates: bool,
     decoder: FrameDecoder<MAX_FRAME>,
     link: Option<(f64, f64, SplitMix)>,
     last_seq: Option<u32>,
@@ -230,6 +255,31 @@ impl Observer {
             }
         }
         self.last_seq = Some(f.seq);
+        if let DeviceMsg::MeasurementV2(v2) = &f.msg {
+            let m = &v2.measurement;
+            let truth = self.env.truth(m.uptime_ms.saturating_mul(1_000_000));
+            if truth.cover == Cover::Water && truth.air_temp_c > WATER_FREEZING_BAND_C {
+                o.warm_water_frames += 1;
+                if v2.estimate.as_ref().is_some_and(|e| {
+                    matches!(
+                        e.medium,
+                        fois_protocol::Medium::Glazed | fois_protocol::Medium::Rime
+                    )
+                }) {
+                    o.warm_water_called_ice += 1;
+                }
+            }
+            if let (true, Some(e)) = (self.record_estimates, &v2.estimate) {
+                o.estimates.push(EstSample {
+                    t_s: m.uptime_ms as f64 / 1000.0,
+                    cover: truth.cover,
+                    true_mm: truth.thickness_mm,
+                    est_mm: f64::from(e.thickness_um) / 1000.0,
+                    sigma_mm: f64::from(e.sigma_um) / 1000.0,
+                    medium: e.medium,
+                });
+            }
+        }
         match f.msg {
             DeviceMsg::Hello(_) => o.hellos += 1,
             DeviceMsg::Measurement(m)
@@ -303,6 +353,7 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
     ids.push(fois_firmware::dispatch::BUTTON_ID);
     let mut obs = Observer {
         env: env.clone(),
+        record_estimates: f.accuracy,
         decoder: FrameDecoder::new(),
         link: f
             .link
@@ -337,6 +388,9 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
             ice_start_s: ice_start_s(&sc.timeline),
             inconsistencies: Vec::new(),
             i1_range_na: None,
+            estimates: Vec::new(),
+            warm_water_frames: 0,
+            warm_water_called_ice: 0,
             wall: Duration::ZERO,
             failures: Vec::new(),
         },
@@ -486,4 +540,44 @@ pub fn run_all(scenarios: &[Scenario], threads: usize) -> Vec<anyhow::Result<Out
 /// Threads to use: the machine's parallelism.
 pub fn default_threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
+}
+
+/// An empty outcome for the unit tests of the modules that read outcomes.
+#[cfg(test)]
+pub(crate) mod tests_support {
+    use super::*;
+
+    pub(crate) fn outcome(name: &str) -> Outcome {
+        Outcome {
+            name: name.to_string(),
+            class: crate::scenario::Class::Rime,
+            sensor: "B",
+            checked: true,
+            sweep_lsb: None,
+            virtual_s: 0.0,
+            node_frames: 0,
+            decoded: 0,
+            measurements: 0,
+            saturated: 0,
+            hellos: 0,
+            events: Vec::new(),
+            replies: Vec::new(),
+            sent: Vec::new(),
+            stray_errors: 0,
+            states: Vec::new(),
+            final_state: None,
+            seq_missing: 0,
+            rejected: 0,
+            link_dropped: 0,
+            link_corrupted: 0,
+            ice_start_s: None,
+            inconsistencies: Vec::new(),
+            i1_range_na: None,
+            estimates: Vec::new(),
+            warm_water_frames: 0,
+            warm_water_called_ice: 0,
+            wall: Duration::ZERO,
+            failures: Vec::new(),
+        }
+    }
 }

@@ -94,6 +94,10 @@ pub struct ScenarioFile {
     /// right after boot; the others keep their defaults.
     #[serde(default)]
     pub config: BTreeMap<String, toml::Value>,
+    /// The run feeds the ice estimator's accuracy table (its estimate is
+    /// recorded beside the truth every frame; see [`crate::accuracy`]).
+    #[serde(default)]
+    pub accuracy: bool,
     /// The timeline: the host's `[[segment]]` tables, checked by the host.
     #[serde(default, rename = "segment")]
     pub segments: Vec<SegmentSpec>,
@@ -286,6 +290,52 @@ pub struct Scenario {
     pub checked: bool,
     /// The sweep level, rms LSB.
     pub sweep_lsb: Option<f64>,
+}
+
+/// The accuracy scenarios (`accuracy = true`) on `seeds` seeds 101, 102, …
+/// instead of their files' (one run per seed, named `NAME@seedK`) and at
+/// `frame_ms` frames; every other scenario unchanged. `None`: as the files
+/// say.
+pub fn for_accuracy(
+    scenarios: Vec<Scenario>,
+    seeds: Option<u64>,
+    frame_ms: Option<u32>,
+) -> Vec<Scenario> {
+    let mut out: Vec<Scenario> = Vec::new();
+    for mut sc in scenarios {
+        if !sc.file.accuracy {
+            out.push(sc);
+            continue;
+        }
+        if let Some(ms) = frame_ms {
+            let mut cfg = sc.config.clone().unwrap_or_default();
+            cfg.frame_period_ms = ms;
+            sc.config = Some(cfg);
+        }
+        let Some(n) = seeds else {
+            out.push(sc);
+            continue;
+        };
+        let base = sc
+            .name
+            .split("@seed")
+            .next()
+            .unwrap_or(&sc.name)
+            .to_string();
+        if out
+            .iter()
+            .any(|o| o.file.accuracy && o.name.starts_with(&format!("{base}@seed")))
+        {
+            continue; // this file's seeds are already expanded
+        }
+        for k in 101..101 + n {
+            let mut s = sc.clone();
+            s.seed = k;
+            s.name = format!("{base}@seed{k}");
+            out.push(s);
+        }
+    }
+    out
 }
 
 /// Parse and validate one file (all its sweep levels).

@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use fois_hil::{report, run, scenario};
+use fois_hil::{accuracy, report, run, scenario};
 
 #[test]
 fn every_scenario_meets_its_expectations() {
@@ -31,5 +31,41 @@ fn every_scenario_meets_its_expectations() {
     println!("{}", report::goals_summary(&outcomes));
     println!("{} runs in {:.1} s", outcomes.len(), wall.as_secs_f64());
     assert!(failed.is_empty(), "{}", failed.join("\n"));
+    accuracy_goals(&outcomes);
     let _ = Path::new(".");
+}
+
+/// The ice estimator's goals on the accuracy scenarios (3 seeds, 1 Hz in
+/// CI): those met on these seeds are asserted; the misses (rime 10 mm, the
+/// unknown LED −30 %, glazed) are printed, not asserted (hil/README.md).
+fn accuracy_goals(outcomes: &[run::Outcome]) {
+    let rows = accuracy::rows(outcomes);
+    let crlb = accuracy::crlb_rows(64);
+    println!("{}", accuracy::table(&rows, &crlb));
+    let row = |name: &str| {
+        rows.iter()
+            .find(|r| r.name == name)
+            .unwrap_or_else(|| panic!("no accuracy row {name}"))
+    };
+    let rime_crlb = crlb[0].1;
+    for name in ["accuracy-rime", "accuracy-rime-flicker"] {
+        let r = row(name);
+        assert_eq!(r.runs, 3, "{name}");
+        // σ honest: |error| ≤ 2σ in ≥ 90 % of the frames beyond 0.5 mm.
+        assert!(r.within_2sigma.unwrap() >= 0.90, "{name}: {r:?}");
+        // Medium right in ≥ 95 % of the frames from 1 mm.
+        assert!(r.medium_right.unwrap() >= 0.95, "{name}: {r:?}");
+        // Rime at 5 mm: RMS ≤ 1.5 √CRLB, |bias| ≤ 0.3 mm.
+        let e5 = r.at[3].unwrap();
+        assert!(
+            e5.rms_mm <= 1.5 * rime_crlb[3],
+            "{name} 5 mm: {e5:?} vs √CRLB {}",
+            rime_crlb[3]
+        );
+        assert!(e5.bias_mm.abs() <= 0.3, "{name} 5 mm: {e5:?}");
+    }
+    // Water at +5 °C is never called ice.
+    let w = row("accuracy-water");
+    assert!(w.warm_water_called_ice.1 > 10_000, "{w:?}");
+    assert_eq!(w.warm_water_called_ice.0, 0, "{w:?}");
 }

@@ -196,8 +196,10 @@ pub fn long_run(frames: u64, log: &std::path::Path) -> anyhow::Result<LongRun> {
             writer(&mut master, &out);
             out.clear();
         }
-        // Let the monitor drain the pty, then stop it.
-        std::thread::sleep(Duration::from_millis(500));
+        // Let the monitor drain the pty (the last batch), then stop it. 2 s:
+        // on a loaded 2-core CI machine 0.5 s once left the last 64 frames
+        // unread.
+        std::thread::sleep(Duration::from_secs(2));
         feeder_stop.store(true, Ordering::Relaxed);
         rss
     });

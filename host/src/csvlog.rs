@@ -24,6 +24,10 @@
 //! | `flags` | | raw flag bits (`fois_protocol::flags`) |
 //! | `frames_lost` | frames | `gap` rows: frames missing from the sequence |
 //! | `detail` | | event kind, error, answer, reason |
+//! | `est_thickness_mm` | mm | the node's ice estimate: posterior mean thickness (protocol v2 nodes; empty for v1) |
+//! | `est_sigma_mm` | mm | its standard deviation |
+//! | `est_kind` | | most likely medium: `dry`, `water`, `glazed`, `rime` |
+//! | `est_p` | 0–1 | posterior probability of that medium |
 
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom};
@@ -32,13 +36,13 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use csv::StringRecord;
-use fois_protocol::{DetectorState, DeviceMsg, Event, Measurement, flags};
+use fois_protocol::{DetectorState, DeviceMsg, Event, IceEstimate, Measurement, flags};
 
 use crate::text::{ack_text, centi_c_to_c, error_text, event_name, hello_text, na_to_ua};
 use crate::timefmt::{iso_utc, unix_ms_now};
 
 /// The header line (without newline).
-pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,frames_lost,detail";
+pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,frames_lost,detail,est_thickness_mm,est_sigma_mm,est_kind,est_p";
 
 /// Rows reach the kernel at least this often (kill -9 loses at most this).
 pub const FLUSH_INTERVAL: Duration = Duration::from_millis(250);
@@ -104,6 +108,8 @@ pub struct Row {
     pub frames_lost: Option<u64>,
     /// Free text.
     pub detail: String,
+    /// The node's ice estimate (protocol v2 measurements that carry one).
+    pub estimate: Option<IceEstimate>,
 }
 
 impl Row {
@@ -159,7 +165,10 @@ impl Row {
     pub fn device(seq: u32, msg: &DeviceMsg) -> Row {
         match msg {
             DeviceMsg::Measurement(m) => Row::measurement(seq, m),
-            DeviceMsg::MeasurementV2(m) => Row::measurement(seq, &m.measurement),
+            DeviceMsg::MeasurementV2(m) => Row {
+                estimate: m.estimate,
+                ..Row::measurement(seq, &m.measurement)
+            },
             DeviceMsg::Event(e) => Row::event(seq, e),
             DeviceMsg::Hello(h) => Row {
                 seq: Some(seq),
@@ -332,7 +341,8 @@ fn fixed(v: Option<f64>, decimals: usize) -> String {
 }
 
 /// The fields of a row, in the order of [`HEADER`].
-pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 17] {
+pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 21] {
+    let est = r.estimate.as_ref();
     [
         iso_utc(host_unix_ms),
         host_unix_ms.to_string(),
@@ -351,7 +361,21 @@ pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 17] {
         opt(r.flags),
         opt(r.frames_lost),
         r.detail.clone(),
+        opt(est.map(|e| um_to_mm(e.thickness_um))),
+        opt(est.map(|e| um_to_mm(e.sigma_um))),
+        est.map_or(String::new(), |e| e.medium.name().to_string()),
+        opt(est.map(|e| permille_to_p(e.probability_permille))),
     ]
+}
+
+/// µm → mm, as the log writes it (three decimals).
+fn um_to_mm(um: u16) -> String {
+    format!("{:.3}", f64::from(um) / 1000.0)
+}
+
+/// ‰ → probability 0–1 (three decimals).
+fn permille_to_p(permille: u16) -> String {
+    format!("{:.3}", f64::from(permille) / 1000.0)
 }
 
 /// The CSV line of a row (with newline), as [`CsvLog::write`] writes it.
@@ -548,7 +572,20 @@ mod tests {
         let line = format_row(0, &Row::measurement(42, &meas()));
         assert_eq!(
             line,
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,\n"
+        );
+        let v2 = DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 {
+            measurement: meas(),
+            estimate: Some(IceEstimate {
+                thickness_um: 2345,
+                sigma_um: 310,
+                medium: fois_protocol::Medium::Rime,
+                probability_permille: 970,
+            }),
+        });
+        assert_eq!(
+            format_row(0, &Row::device(42, &v2)),
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,2.345,0.310,rime,0.970\n"
         );
         assert_eq!(fields(&line).len(), HEADER.split(',').count());
         let g = format_row(5, &Row::gap(10, 3));
@@ -572,8 +609,8 @@ mod tests {
         let r = Row::note("note", "a, \"b\"\nc");
         let line = format_row(1, &r);
         let f = fields(&line);
-        assert_eq!(f.last().unwrap(), "a, \"b\"\nc");
-        assert_eq!(f.len(), 17);
+        assert_eq!(f[16], "a, \"b\"\nc");
+        assert_eq!(f.len(), 21);
     }
 
     #[test]
@@ -618,7 +655,7 @@ mod tests {
             log.close().unwrap();
         }
         let t = LogTable::read(&p).unwrap();
-        assert_eq!(t.columns.len(), 17);
+        assert_eq!(t.columns.len(), 21);
         let seqs: Vec<&str> = t.rows.iter().map(|r| r[3].as_str()).collect();
         assert_eq!(seqs, ["1", "2"]);
         let text = std::fs::read_to_string(&p).unwrap();

@@ -94,6 +94,7 @@ mod tests {
         let other = LinkError::Incompatible {
             node: 9,
             host: 2,
+            oldest: 1,
             hello: String::new(),
         };
         let lost = LinkError::Lost("p".into(), "gone".into());

@@ -39,14 +39,16 @@ pub enum LinkError {
     },
     /// The node speaks another protocol version.
     #[error(
-        "the node speaks protocol version {node}, this foisctl speaks version {host}: \
+        "the node speaks protocol version {node}, this foisctl reads versions {oldest} to {host}: \
          update foisctl or the firmware so both match ({hello})"
     )]
     Incompatible {
         /// The node's version.
         node: u16,
-        /// Ours.
+        /// Ours (the newest we read).
         host: u16,
+        /// The oldest version we read.
+        oldest: u16,
         /// The node's hello, as text.
         hello: String,
     },
@@ -277,7 +279,7 @@ impl<P: Read + Write> Link<P> {
                         DeviceMsg::Error(e) if e.id == Some(id) => {
                             found = Some(Reply::Error(e.clone()))
                         }
-                        DeviceMsg::Hello(h) if h.protocol_version != PROTOCOL_VERSION => {
+                        DeviceMsg::Hello(h) if !readable(h) => {
                             self.backlog.extend(kept);
                             return Err(incompatible(h));
                         }
@@ -352,7 +354,7 @@ impl<P: Read + Write> Link<P> {
                 kept.push(inc);
             }
             if let Some(h) = hello {
-                if h.protocol_version != PROTOCOL_VERSION {
+                if !readable(&h) {
                     break Err(incompatible(&h));
                 }
                 break Ok(h);
@@ -363,10 +365,19 @@ impl<P: Read + Write> Link<P> {
     }
 }
 
+/// Whether this foisctl reads the node's protocol version: every version
+/// from `OLDEST_READABLE_VERSION` (1) to `PROTOCOL_VERSION` (a fleet is never
+/// upgraded at once; a version-1 node streams `Measurement` without an
+/// estimate, which the monitor and the log show as empty).
+fn readable(h: &Hello) -> bool {
+    (fois_protocol::OLDEST_READABLE_VERSION..=PROTOCOL_VERSION).contains(&h.protocol_version)
+}
+
 fn incompatible(h: &Hello) -> LinkError {
     LinkError::Incompatible {
         node: h.protocol_version,
         host: PROTOCOL_VERSION,
+        oldest: fois_protocol::OLDEST_READABLE_VERSION,
         hello: crate::text::hello_text(h),
     }
 }
@@ -482,6 +493,23 @@ mod tests {
             link.handshake(Duration::from_millis(200)).unwrap(),
             hello(PROTOCOL_VERSION)
         );
+        // Every version from the oldest readable one is read; older ones are
+        // refused like newer ones.
+        for v in [fois_protocol::OLDEST_READABLE_VERSION, 0] {
+            let mut link = Link::new(
+                Script {
+                    chunks: [frame(v)].into(),
+                    written: vec![],
+                },
+                "script",
+            );
+            let got = link.handshake(Duration::from_millis(200));
+            if v == 0 {
+                assert!(matches!(got, Err(LinkError::Incompatible { node: 0, .. })));
+            } else {
+                assert_eq!(got.unwrap(), hello(v));
+            }
+        }
     }
 
     #[test]

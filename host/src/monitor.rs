@@ -7,12 +7,14 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use fois_protocol::{Command, DetectorState, DeviceMsg, Measurement, flags};
+use fois_protocol::{Command, DetectorState, DeviceMsg, IceEstimate, Measurement, flags};
 
 use crate::csvlog::{CsvLog, Row};
 use crate::exit;
 use crate::link::{Incoming, Link, LinkError, SeqEvent, SeqTracker, open_port};
-use crate::text::{ack_text, centi_c_to_c, error_text, event_name, hello_text, na_to_ua};
+use crate::text::{
+    ack_text, centi_c_to_c, error_text, estimate_text, event_name, hello_text, na_to_ua,
+};
 
 /// What `monitor` does.
 #[derive(Debug, Clone)]
@@ -67,6 +69,9 @@ pub struct MonitorSummary {
     pub log_rows: u64,
     /// The last measurement.
     pub last: Option<Measurement>,
+    /// The ice estimate of the last measurement (`None` for a protocol v1
+    /// node, which sends none, and until a v2 node has one).
+    pub last_estimate: Option<IceEstimate>,
     /// Ice onsets seen.
     pub ice_onsets: u64,
 }
@@ -107,16 +112,16 @@ impl View {
         }
     }
 
-    fn status(&mut self, [a, b]: [String; 2]) {
+    fn status(&mut self, [a, b, c]: [String; 3]) {
         if self.quiet {
             return;
         }
         match &self.bar {
-            Some(bar) => bar.set_message(format!("{a}\n  {b}")),
+            Some(bar) => bar.set_message(format!("{a}\n  {b}\n  {c}")),
             None => {
                 if self.last_line.elapsed() >= Duration::from_secs(1) {
                     self.last_line = Instant::now();
-                    println!("{a}  | {b}");
+                    println!("{a}  | {b}  | {c}");
                 }
             }
         }
@@ -129,15 +134,21 @@ impl View {
     }
 }
 
-/// The status from the last measurement and the counters: two lines of at
-/// most 80 columns (measurement; state and counters).
-pub fn status_lines(m: Option<&Measurement>, s: &MonitorSummary) -> [String; 2] {
+/// The status from the last measurement and the counters: three lines of at
+/// most 80 columns (measurement; state, alarm and the node's ice estimate;
+/// counters). The estimate reads `est ICE rime 2.3 ± 0.3 mm (p 0.97)`, or
+/// `est —` when the node sends none (protocol v1, or no valid frame yet).
+pub fn status_lines(m: Option<&Measurement>, s: &MonitorSummary) -> [String; 3] {
     let counters = format!(
         "frames {}  lost {}  rejected {}",
         s.frames, s.lost, s.rejected
     );
     let Some(m) = m else {
-        return ["waiting for measurements".to_string(), counters];
+        return [
+            "waiting for measurements".to_string(),
+            String::new(),
+            counters,
+        ];
     };
     let alarm = match (
         m.flags & flags::ALARM != 0,
@@ -162,16 +173,20 @@ pub fn status_lines(m: Option<&Measurement>, s: &MonitorSummary) -> [String; 2] 
             centi_c_to_c(m.temperature_centi_c),
         ),
         format!(
-            "state {state:3}  alarm {alarm:10}  {counters}{}",
+            "state {state:3}  alarm {alarm:10}  est {}{}",
+            s.last_estimate
+                .as_ref()
+                .map_or_else(|| "—".to_string(), estimate_text),
             if m.is_valid() { "" } else { "  SATURATED" }
         ),
+        counters,
     ]
 }
 
 /// The status on one line (plain output).
 pub fn status_line(m: Option<&Measurement>, s: &MonitorSummary) -> String {
-    let [a, b] = status_lines(m, s);
-    format!("{a}  | {b}")
+    let [a, b, c] = status_lines(m, s);
+    format!("{a}  | {b}  | {c}")
 }
 
 struct Session<'a> {
@@ -222,7 +237,11 @@ impl Session<'_> {
                 // A node that reset while we were away may have sent more
                 // frames than before: its uptime going back tells.
                 let uptime = match &f.msg {
-                    DeviceMsg::Measurement(m) => Some(m.uptime_ms),
+                    DeviceMsg::Measurement(m)
+                    | DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 {
+                        measurement: m,
+                        ..
+                    }) => Some(m.uptime_ms),
                     DeviceMsg::Event(e) => Some(e.uptime_ms),
                     _ => None,
                 };
@@ -243,13 +262,15 @@ impl Session<'_> {
                     self.last_uptime_ms = Some(u);
                 }
                 match &f.msg {
-                    DeviceMsg::Measurement(m)
-                    | DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 {
-                        measurement: m,
-                        ..
-                    }) => {
+                    DeviceMsg::Measurement(m) => {
                         self.sum.measurements += 1;
                         self.sum.last = Some(m.clone());
+                        self.sum.last_estimate = None;
+                    }
+                    DeviceMsg::MeasurementV2(v2) => {
+                        self.sum.measurements += 1;
+                        self.sum.last = Some(v2.measurement.clone());
+                        self.sum.last_estimate = v2.estimate;
                     }
                     DeviceMsg::Event(e) => {
                         if e.kind == fois_protocol::EventKind::IceOnset {
@@ -397,4 +418,54 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
 /// Map errors of `monitor` to exit codes (see [`exit`]).
 pub fn exit_code(err: &anyhow::Error) -> i32 {
     exit::code_of(err)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fois_protocol::Medium;
+
+    fn meas() -> Measurement {
+        Measurement {
+            uptime_ms: 1000,
+            i1_na: 123_456,
+            i2_na: 45_678,
+            ambient1_na: 300_000,
+            ambient2_na: 150_000,
+            temperature_centi_c: -2_345,
+            vdda_mv: 3300,
+            flags: flags::ALARM | flags::ALARM_ACKED,
+            state: DetectorState::Ice,
+        }
+    }
+
+    #[test]
+    fn status_shows_the_estimate_or_a_dash_within_80_columns() {
+        let mut sum = MonitorSummary {
+            frames: 9_999_999,
+            lost: 99_999,
+            rejected: 99_999,
+            ..MonitorSummary::default()
+        };
+        let lines = status_lines(Some(&meas()), &sum);
+        assert!(lines[1].contains("est —"), "{lines:?}");
+        sum.last_estimate = Some(IceEstimate {
+            thickness_um: 12_345,
+            sigma_um: 1_456,
+            medium: Medium::Glazed,
+            probability_permille: 512,
+        });
+        let lines = status_lines(Some(&meas()), &sum);
+        assert_eq!(
+            lines[1],
+            "state ICE  alarm ON (acked)  est ICE glazed 12.3 ± 1.5 mm (p 0.51)"
+        );
+        for l in &lines {
+            assert!(
+                l.chars().count() <= 80,
+                "{} columns: {l}",
+                l.chars().count()
+            );
+        }
+    }
 }

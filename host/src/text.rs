@@ -2,7 +2,7 @@
 //! event kinds), as the monitor prints them, the log stores them and the
 //! gateway publishes them; the wire's units in the text's (µA, °C).
 
-use fois_protocol::{Ack, AckResult, ErrorReply, EventKind, Hello};
+use fois_protocol::{Ack, AckResult, ErrorReply, EventKind, Hello, IceEstimate, Medium};
 
 /// nA → µA.
 pub fn na_to_ua(na: i64) -> f64 {
@@ -63,4 +63,55 @@ pub fn error_text(e: &ErrorReply) -> String {
         other => format!("{other:?}"),
     };
     format!("id={id} {why}")
+}
+
+/// The estimate as the monitor shows it: `ICE rime 2.3 ± 0.3 mm (p 0.97)`,
+/// `WATER 0.4 ± 0.2 mm (p 0.99)`, `DRY (p 0.99)`.
+pub fn estimate_text(e: &IceEstimate) -> String {
+    let p = f64::from(e.probability_permille) / 1000.0;
+    let mm = |um: u16| f64::from(um) / 1000.0;
+    let what = match e.medium {
+        Medium::Dry => return format!("DRY (p {p:.2})"),
+        Medium::Water => "WATER".to_string(),
+        ice => format!("ICE {}", ice.name()),
+    };
+    format!(
+        "{what} {:.1} ± {:.1} mm (p {p:.2})",
+        mm(e.thickness_um),
+        mm(e.sigma_um)
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn est(um: u16, sd: u16, medium: Medium, pm: u16) -> IceEstimate {
+        IceEstimate {
+            thickness_um: um,
+            sigma_um: sd,
+            medium,
+            probability_permille: pm,
+        }
+    }
+
+    #[test]
+    fn estimate_texts() {
+        assert_eq!(
+            estimate_text(&est(2300, 300, Medium::Rime, 970)),
+            "ICE rime 2.3 ± 0.3 mm (p 0.97)"
+        );
+        assert_eq!(
+            estimate_text(&est(12_040, 4_400, Medium::Glazed, 512)),
+            "ICE glazed 12.0 ± 4.4 mm (p 0.51)"
+        );
+        assert_eq!(
+            estimate_text(&est(400, 200, Medium::Water, 1000)),
+            "WATER 0.4 ± 0.2 mm (p 1.00)"
+        );
+        assert_eq!(
+            estimate_text(&est(30, 90, Medium::Dry, 990)),
+            "DRY (p 0.99)"
+        );
+    }
 }

@@ -146,6 +146,15 @@ fn commands_round_trip_and_monitor_logs_measurements() {
         let c: f64 = r[temp].parse().unwrap();
         assert!((c + 5.0).abs() < 0.1, "air -5 °C, got {c}");
     }
+    // The node's ice estimate (protocol 2): a dry face, with a σ.
+    let (kind, sigma) = (t.col("est_kind").unwrap(), t.col("est_sigma_mm").unwrap());
+    let dry = meas.iter().filter(|r| r[kind] == "dry").count();
+    assert_eq!(
+        dry,
+        meas.len(),
+        "every frame of a calibrated dry face reads dry"
+    );
+    assert!(meas.iter().all(|r| r[sigma].parse::<f64>().is_ok()));
     // A second run appends to the same file, header once.
     let (code, _, _) = foisctl(&[
         "monitor",
@@ -380,7 +389,10 @@ fn make_rime_log(path: &Path) -> usize {
     let mut n = 0;
     dec.feed::<DeviceFrame>(&bytes, |r| {
         let f = r.unwrap();
-        if matches!(f.msg, fois_protocol::DeviceMsg::Measurement(_)) {
+        if matches!(
+            f.msg,
+            fois_protocol::DeviceMsg::Measurement(_) | fois_protocol::DeviceMsg::MeasurementV2(_)
+        ) {
             n += 1;
         }
         log.write(&Row::device(f.seq, &f.msg)).unwrap();

@@ -242,11 +242,13 @@ fn three_nodes_every_record_arrives_once_with_discovery_and_state() {
             assert_eq!(s["state_class"], "measurement");
         }
         assert_eq!(cfg("sensor", "temperature")["device_class"], "temperature");
-        // These nodes send no ice estimate: no thickness entity.
-        assert!(
-            sub.on(&format!("homeassistant/sensor/{id}/thickness/config"))
-                .is_empty()
-        );
+        // The virtual nodes run the firmware's ice estimator (protocol 2,
+        // MeasurementV2 with an estimate): each gets a thickness entity on
+        // its state topic.
+        let t = sub.on(&format!("homeassistant/sensor/{id}/thickness/config"));
+        let t = t.last().expect("a thickness entity").json();
+        assert_eq!(t["unit_of_measurement"], "mm");
+        assert_eq!(t["state_topic"], format!("fois/gw/{n}/state"));
     }
     let gwc = sub.on("homeassistant/binary_sensor/fois_gw/connectivity/config");
     assert_eq!(gwc.last().unwrap().json()["device_class"], "connectivity");

@@ -256,3 +256,34 @@ fn help_explains_units_and_defaults() {
         assert!(h.contains(sub), "{sub}");
     }
 }
+
+#[test]
+fn table_writes_the_firmwares_checked_in_table() {
+    let out = tmp("table.rs");
+    let o = foisctl(&[
+        "sim",
+        "table",
+        "--out",
+        out.to_str().unwrap(),
+        "--threads",
+        "2",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout.contains("3 media × 75 rows, seed 900001, 321 accretions"),
+        "{stdout}"
+    );
+    let checked_in =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../firmware/src/estimator/table.rs");
+    assert_eq!(
+        std::fs::read_to_string(&out).unwrap(),
+        std::fs::read_to_string(checked_in).unwrap(),
+        "`foisctl sim table` and the firmware's stale-table test must write the same file"
+    );
+    assert!(!tmp("table.rs.partial").exists());
+    // A directory that does not exist: a clear error, nothing written.
+    let o = foisctl(&["sim", "table", "--out", "/nonexistent-dir/table.rs"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("does not exist"));
+}

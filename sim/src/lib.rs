@@ -7,6 +7,7 @@
 //! - [`analytic`]: the conventional overlap model (thesis §2.1, §3.3).
 //! - [`montecarlo`]: mean μ(d), covariance Σ(d), fits and the Cramér–Rao bound (§5.4).
 //! - [`geometry`], [`consts`]: the sensor face, every constant once.
+//! - [`table`]: the node estimator's response table (μ, Σ per medium, fixed point, Rust source).
 
 pub mod analytic;
 pub mod consts;
@@ -15,6 +16,7 @@ mod kernels;
 pub mod laws;
 pub mod model;
 pub mod montecarlo;
+pub mod table;
 
 pub use analytic::analytic_curve;
 pub use geometry::{Geometry, Region};

@@ -16,6 +16,7 @@ use std::sync::Arc;
 
 use std::sync::Mutex;
 
+use fois_firmware::estimator::EstimatorParams;
 use fois_firmware::flash_store::FlashStore;
 use fois_firmware::schedule::Schedule;
 use fois_firmware::{BoardInfo, MemStorage, Node, Storage, StorageError};
@@ -163,6 +164,11 @@ pub struct NodeOptions {
     /// Press the user button (dark calibration) at this virtual time, s,
     /// if the face is dry then. `None`: never.
     pub calibrate_at_s: Option<f64>,
+    /// The ice estimator's settings (library settings, not in the protocol
+    /// `Config`: defaults and meaning in firmware/README.md, "The ice
+    /// estimator"). Passed to every `Node` this runner builds, after each
+    /// reset too, as the board passes its own.
+    pub estimator: EstimatorParams,
 }
 
 impl Default for NodeOptions {
@@ -173,6 +179,7 @@ impl Default for NodeOptions {
             storage: MemStorage::new(),
             state_file: None,
             calibrate_at_s: Some(1.0),
+            estimator: EstimatorParams::default(),
         }
     }
 }
@@ -222,7 +229,7 @@ impl Hardware<'_> {
         let mut info = BoardInfo::simulated(opts.board);
         info.reset_reason = reason;
         info.unique_id = *b"FOIS-VIRTUAL";
-        Node::new(
+        let mut node = Node::new(
             adc,
             self.led.clone(),
             self.alarm.clone(),
@@ -230,7 +237,9 @@ impl Hardware<'_> {
             VirtualDelay::new(self.clock.clone()),
             storage,
             info,
-        )
+        );
+        node.set_estimator_params(opts.estimator);
+        node
     }
 }
 
@@ -475,5 +484,44 @@ impl VirtualNode {
             let t = self.next_due_ns();
             self.advance_to(t, tx);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+    use super::*;
+    use crate::{Cover, Segment, Timeline};
+    use fois_protocol::{Command, HostFrame, encode_to_vec};
+
+    #[test]
+    fn the_estimator_settings_reach_every_node_it_builds() {
+        let env = Arc::new(Environment::new(
+            Timeline::new(vec![Segment::new(60.0, Cover::Dry)]),
+            fois_sim::SensorKind::B,
+            1,
+        ));
+        let params = EstimatorParams {
+            forget_time_s: 5.0,
+            max_growth_mm_per_h: 3.0,
+            ..EstimatorParams::default()
+        };
+        assert_ne!(params, EstimatorParams::default());
+        let opts = NodeOptions {
+            estimator: params,
+            ..NodeOptions::default()
+        };
+        let mut vn = VirtualNode::new(env, opts);
+        assert_eq!(*vn.node().estimator().params(), params);
+        // After a `Reset` the runner builds a new node: same settings.
+        let reset = encode_to_vec(&HostFrame {
+            id: 1,
+            cmd: Command::Reset,
+        });
+        vn.run_until_s(2.0, &mut |_: &[u8]| {});
+        vn.handle_rx(&reset, &mut |_: &[u8]| {});
+        vn.run_until_s(4.0, &mut |_: &[u8]| {});
+        assert_eq!(vn.resets(), 1);
+        assert_eq!(*vn.node().estimator().params(), params);
     }
 }

@@ -27,6 +27,7 @@ use cortex_m_rt::{entry, exception};
 use cortex_m_semihosting::{debug, hprintln};
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::{ErrorType, OutputPin};
+use fois_firmware::estimator::Estimator;
 use fois_firmware::flash_store::FlashStore;
 use fois_firmware::hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc, Storage};
 use fois_firmware::node::Node;
@@ -132,7 +133,7 @@ fn step(node: &mut SimNode<'_>, w: &SimBoard, sink: &mut Sink) {
 
 fn measurement(sink: &mut Sink) -> Option<fois_protocol::Measurement> {
     sink.take().find_map(|m| match m {
-        DeviceMsg::Measurement(m) => Some(m),
+        DeviceMsg::MeasurementV2(m) => Some(m.measurement),
         _ => None,
     })
 }
@@ -482,6 +483,52 @@ impl DelayNs for NoDelay {
     fn delay_ns(&mut self, _ns: u32) {}
 }
 
+/// Ticks for `frames` steps of the ice estimator alone (10 Hz frames, rime
+/// at ~5 mm: I1 ≈ 25.2 µA, I2 ≈ 9.6 µA with a little noise, −8 °C).
+fn bench_estimator(est: &mut Estimator, frames: u32, lcg: &mut u32) -> u64 {
+    let t0 = ticks();
+    for _ in 0..frames {
+        *lcg = lcg.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+        let n = ((*lcg >> 24) as f32 - 128.0) * 1e-3; // ±0.13 µA
+        let _ = est.step(0.1, Some([25.2 + n, 9.6 - n]), Some(-8.0));
+    }
+    ticks() - t0
+}
+
+fn t_estimator_rime_and_bad_input() -> TestResult {
+    let mut est = Estimator::default();
+    check!(
+        est.step(0.0, Some([f32::NAN, 1.0]), Some(-8.0)).is_none(),
+        "    NaN gave an estimate"
+    );
+    // Rime at ~5 mm (the table's mean), 60 s of 10 Hz frames.
+    let mut last = None;
+    for _ in 0..600 {
+        last = est.step(0.1, Some([25.17, 9.64]), Some(-8.0));
+    }
+    let Some(e) = last else {
+        return Err("no estimate");
+    };
+    hprintln!(
+        "    rime mean at 5 mm: {} ± {} um, {:?} ({} permille)",
+        e.thickness_um,
+        e.sigma_um,
+        e.medium,
+        e.probability_permille
+    );
+    check!(
+        e.medium == fois_protocol::Medium::Rime && e.probability_permille > 900,
+        "    medium {:?}",
+        e
+    );
+    check!(
+        (e.thickness_um as i32 - 5_000).abs() < 600 && e.sigma_um < 800,
+        "    thickness {:?}",
+        e
+    );
+    Ok(())
+}
+
 /// Ticks for `frames` frames of a streaming node with the default config.
 fn bench<P: FnMut(&[u8])>(
     node: &mut Node<BenchAdc<'_>, Pin<'_>, Pin<'_>, Pin<'_>, NoDelay, MemStorage>,
@@ -507,7 +554,7 @@ fn main() -> ! {
     cp.SYST.enable_interrupt();
     cp.SYST.enable_counter();
 
-    let tests: [Test; 7] = [
+    let tests: [Test; 8] = [
         ("ntc_and_vref", t_ntc_and_vref),
         ("persist", t_persist),
         ("flash_store", t_flash_store),
@@ -518,6 +565,7 @@ fn main() -> ! {
             t_node_ice_onset_drives_the_alarm,
         ),
         ("flicker_bound", t_flicker_bound),
+        ("estimator_rime_and_bad_input", t_estimator_rime_and_bad_input),
     ];
     hprintln!("running {} tests on the emulated Cortex-M4F", tests.len());
     let mut failed = 0;
@@ -586,7 +634,40 @@ fn main() -> ! {
     // many µs of CPU per frame, beside the 17 settle waits.
     hprintln!("  (about {} us of CPU per frame at 16 MHz)", per_frame / 16);
 
-    if failed == 0 && per_frame > 0 {
+    // The ice estimator's share: its step alone, F and 2F frames.
+    let mut est = Estimator::default();
+    let mut lcg = 7u32;
+    bench_estimator(&mut est, 10, &mut lcg); // warm-up (initialised)
+    let e_f = bench_estimator(&mut est, F, &mut lcg);
+    let e_2f = bench_estimator(&mut est, 2 * F, &mut lcg);
+    let est_frame = ((e_2f.saturating_sub(e_f) as f32 / F as f32) * insn_per_tick + 0.5) as u32;
+    hprintln!("estimator instructions per step: {}", est_frame);
+    // Worst case: every state alive (a weak signal that several media at
+    // several thicknesses explain, after a long gap that spread the
+    // posterior over the grid), then 10 Hz frames of the same signal.
+    let mut est = Estimator::default();
+    let _ = est.step(0.0, Some([0.4, 0.5]), Some(0.0));
+    for _ in 0..20 {
+        let _ = est.step(3_600.0, None, Some(0.0));
+    }
+    let mut worst = 0u32;
+    let mut alive = 0usize;
+    for _ in 0..5 {
+        let t0 = ticks();
+        let _ = est.step(0.1, Some([0.4, 0.5]), Some(0.0));
+        let t = ((ticks() - t0) as f32 * insn_per_tick) as u32;
+        worst = worst.max(t);
+        let (dry, cells) = est.cells();
+        alive = usize::from(dry > 0.0) + cells.iter().flatten().filter(|c| **c > 0.0).count();
+    }
+    hprintln!(
+        "estimator worst case: {} instructions per step ({} of {} states alive; ±1 tick = ±40)",
+        worst,
+        alive,
+        1 + 3 * fois_firmware::estimator::ROWS
+    );
+
+    if failed == 0 && per_frame > 0 && est_frame > 0 {
         debug::exit(debug::EXIT_SUCCESS);
     } else {
         debug::exit(debug::EXIT_FAILURE);

@@ -8,6 +8,7 @@ pub mod bench_decode;
 pub mod compare;
 pub mod config;
 pub mod demo;
+pub mod estimate;
 pub mod gateway;
 pub mod monitor;
 pub mod plot;
@@ -67,6 +68,11 @@ pub enum Cmd {
     /// Draw I1 and I2 of a log over host time, alarm periods shaded, link
     /// breaks marked (PNG).
     Plot(plot::PlotArgs),
+    /// Replay a monitor log or a `sim curve` CSV, row by row as consecutive
+    /// frames, through the node's own ice estimator and write it with the
+    /// estimate appended (thickness ± sigma in mm, medium, its probability).
+    #[command(after_help = exit::TABLE)]
+    Estimate(estimate::EstimateArgs),
     /// Decoder throughput: encode a stream of measurement frames and decode
     /// it, print frames/s and MB/s.
     BenchDecode(bench_decode::BenchDecodeArgs),
@@ -112,6 +118,7 @@ impl Cli {
             }
             Cmd::Compare(a) => compare::run(a),
             Cmd::Plot(a) => plot::run(a),
+            Cmd::Estimate(a) => estimate::run(a),
             Cmd::BenchDecode(a) => bench_decode::run(a),
             Cmd::Sim(a) => sim::run(a),
             Cmd::Gateway(a) => {

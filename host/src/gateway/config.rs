@@ -119,7 +119,8 @@ pub struct PublishFile {
     /// state, alarm, acknowledgement, faults or medium goes out at once.
     pub state_interval_ms: Option<u64>,
     /// A node that sends nothing for this long is declared offline and
-    /// reconnected, ms [default: 5000].
+    /// reconnected, ms [default: 8000, the protocol's reply timeout: a
+    /// healthy node can be silent ~6–7 s while it erases flash and calibrates].
     pub silence_timeout_ms: Option<u64>,
 }
 
@@ -486,7 +487,9 @@ impl FileConfig {
             .or(p.offline_measurement_interval_ms)
             .unwrap_or(10_000);
         let state_interval_ms = p.state_interval_ms.unwrap_or(5000);
-        let silence_ms = p.silence_timeout_ms.unwrap_or(5000);
+        let silence_ms = p
+            .silence_timeout_ms
+            .unwrap_or(fois_protocol::REPLY_TIMEOUT_MS);
         if !(500..=600_000).contains(&silence_ms) {
             anyhow::bail!("silence_timeout_ms must be within 500..=600000");
         }

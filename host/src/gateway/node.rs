@@ -32,6 +32,12 @@ pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REP
 /// calibration behind the longest frame and an erasing save).
 pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS);
 
+/// A node silent this long is declared offline and reconnected: the
+/// protocol's `REPLY_TIMEOUT_MS` (8 s). A healthy node can be silent for up
+/// to ~6–7 s (its longest frame, a sector erase, then a dark calibration;
+/// firmware/README.md "Answer time"), so anything shorter would flap.
+pub const SILENCE_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS);
+
 /// A command from MQTT for the node.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NodeCommand {
@@ -136,7 +142,7 @@ pub struct ReaderTimings {
 impl Default for ReaderTimings {
     fn default() -> Self {
         ReaderTimings {
-            silence_timeout: Duration::from_secs(5),
+            silence_timeout: SILENCE_TIMEOUT,
             retry: RETRY_INTERVAL,
             handshake: HANDSHAKE_TIMEOUT,
         }

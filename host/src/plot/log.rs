@@ -1,5 +1,7 @@
 //! The figure of `foisctl plot`: a log's currents over time, alarm periods
-//! shaded, link breaks marked.
+//! shaded, link breaks marked; below them the ice estimate (thickness with
+//! its ±2σ band) when the log has one (a v2 node's log, or `foisctl
+//! estimate`'s output).
 
 use std::path::Path;
 
@@ -18,6 +20,8 @@ pub struct TimePoint {
     pub i_ua: [f64; 2],
     /// Alarm output on.
     pub alarm: bool,
+    /// The ice estimate: thickness and its σ, mm (empty for a v1 node).
+    pub est_mm: Option<(f64, f64)>,
 }
 
 /// What a log holds for the time plot: points, and the breaks (link lost,
@@ -61,6 +65,7 @@ pub fn time_series(path: &Path, axis: TimeAxis) -> anyhow::Result<TimeSeries> {
         need(&rd, "alarm")?,
     );
     let valid = rd.col("valid");
+    let est = rd.col("est_thickness_mm").zip(rd.col("est_sigma_mm"));
     let num = |s: &str| s.trim().parse::<f64>().ok().filter(|x| x.is_finite());
     let mut t0: Option<f64> = None;
     let mut out = TimeSeries::default();
@@ -81,6 +86,7 @@ pub fn time_series(path: &Path, axis: TimeAxis) -> anyhow::Result<TimeSeries> {
                         t_s,
                         i_ua: [a, b],
                         alarm: r[alarm].trim() == "1",
+                        est_mm: est.and_then(|(d, s)| num(&r[d]).zip(num(&r[s]))),
                     });
                 }
             }
@@ -89,6 +95,85 @@ pub fn time_series(path: &Path, axis: TimeAxis) -> anyhow::Result<TimeSeries> {
         }
     }
     Ok(out)
+}
+
+/// The estimate panel: posterior mean thickness and its ±2σ band (clipped
+/// at 0 mm), over the same time axis as the currents.
+fn draw_estimate<DB: DrawingBackend>(
+    area: &DrawingArea<DB, plotters::coord::Shift>,
+    points: &[TimePoint],
+    div: f64,
+    x_max: f64,
+    unit: &str,
+    axis: TimeAxis,
+) -> anyhow::Result<()> {
+    let est: Vec<(f64, f64, f64)> = points
+        .iter()
+        .filter_map(|p| p.est_mm.map(|(d, s)| (p.t_s / div, d, s)))
+        .collect();
+    // At most ~3000 points per line (a day at 10 Hz draws fast).
+    let stride = est.len().div_ceil(3000).max(1);
+    let est: Vec<(f64, f64, f64)> = est.into_iter().step_by(stride).collect();
+    let y_hi = est
+        .iter()
+        .map(|&(_, d, s)| d + 2.0 * s)
+        .fold(1.0f64, f64::max)
+        * 1.05;
+    let mut chart = ChartBuilder::on(area)
+        .margin(12)
+        .x_label_area_size(45)
+        .y_label_area_size(65)
+        .build_cartesian_2d(0.0..x_max.max(1e-6), 0.0..y_hi)
+        .map_err(draw_err)?;
+    chart
+        .configure_mesh()
+        .x_desc(match axis {
+            TimeAxis::Host => format!("host time since the first row ({unit})"),
+            TimeAxis::Node => format!("node uptime ({unit})"),
+        })
+        .y_desc("ice estimate (mm)")
+        .label_style(("sans-serif", 15))
+        .draw()
+        .map_err(draw_err)?;
+    let band_color = RGBColor(255, 150, 0);
+    let mut band: Vec<(f64, f64)> = est
+        .iter()
+        .map(|&(t, d, s)| (t, (d + 2.0 * s).min(y_hi)))
+        .collect();
+    band.extend(
+        est.iter()
+            .rev()
+            .map(|&(t, d, s)| (t, (d - 2.0 * s).max(0.0))),
+    );
+    chart
+        .draw_series(std::iter::once(Polygon::new(
+            band,
+            band_color.mix(0.3).filled(),
+        )))
+        .map_err(draw_err)?
+        .label("±2σ")
+        .legend(move |(x, y)| {
+            Rectangle::new([(x, y - 6), (x + 20, y + 6)], band_color.mix(0.3).filled())
+        });
+    chart
+        .draw_series(LineSeries::new(
+            est.iter().map(|&(t, d, _)| (t, d)),
+            band_color.stroke_width(2),
+        ))
+        .map_err(draw_err)?
+        .label("estimated thickness")
+        .legend(move |(x, y)| {
+            PathElement::new(vec![(x, y), (x + 20, y)], band_color.stroke_width(3))
+        });
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 15))
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(draw_err)?;
+    Ok(())
 }
 
 /// Alarm periods (start, end) in s: runs of measurements with the alarm on.
@@ -168,9 +253,16 @@ pub fn plot_log(log: &Path, out: &Path, axis: TimeAxis) -> anyhow::Result<usize>
     let pad = 0.05 * (y_max - y_min);
     let (y_lo, y_hi) = (y_min - pad, y_max + pad);
     super::register_fonts();
-    let root = BitMapBackend::new(out, WIDE).into_drawing_area();
+    let with_est = ts.points.iter().any(|p| p.est_mm.is_some());
+    let size = if with_est {
+        (WIDE.0, WIDE.1 + 350)
+    } else {
+        WIDE
+    };
+    let root = BitMapBackend::new(out, size).into_drawing_area();
     root.fill(&WHITE).map_err(draw_err)?;
-    let mut chart = ChartBuilder::on(&root)
+    let (top, bottom) = root.split_vertically(WIDE.1);
+    let mut chart = ChartBuilder::on(&top)
         .caption(
             format!(
                 "FOIS log {}",
@@ -257,6 +349,9 @@ pub fn plot_log(log: &Path, out: &Path, axis: TimeAxis) -> anyhow::Result<usize>
         .position(SeriesLabelPosition::UpperLeft)
         .draw()
         .map_err(draw_err)?;
+    if with_est {
+        draw_estimate(&bottom, &ts.points, div, x_max, unit, axis)?;
+    }
     root.present().map_err(draw_err)?;
     Ok(ts.points.len())
 }
@@ -288,6 +383,7 @@ mod tests {
             t_s: t,
             i_ua: [0.0; 2],
             alarm: a,
+            est_mm: None,
         };
         let pts = [
             p(0.0, false),
@@ -298,5 +394,66 @@ mod tests {
             p(5.0, true),
         ];
         assert_eq!(alarm_periods(&pts), vec![(1.0, 3.0), (4.0, 5.0)]);
+    }
+
+    /// PNG height from the IHDR chunk.
+    fn png_height(path: &Path) -> u32 {
+        let b = std::fs::read(path).unwrap();
+        assert_eq!(&b[..8], b"\x89PNG\r\n\x1a\n");
+        u32::from_be_bytes([b[20], b[21], b[22], b[23]])
+    }
+
+    #[test]
+    fn the_estimate_is_read_and_drawn_below_the_currents() {
+        use crate::csvlog::{CsvLog, Row};
+        use fois_protocol::{DetectorState, DeviceMsg, IceEstimate, Measurement, MeasurementV2};
+        let dir = tempfile::tempdir().unwrap();
+        let m = |t: u64| Measurement {
+            uptime_ms: t,
+            i1_na: 20_000,
+            i2_na: 7_000,
+            ambient1_na: 0,
+            ambient2_na: 0,
+            temperature_centi_c: -500,
+            vdda_mv: 3300,
+            flags: 0,
+            state: DetectorState::Ice,
+        };
+        let write = |name: &str, v2: bool| {
+            let path = dir.path().join(name);
+            let mut log = CsvLog::open(&path).unwrap();
+            for (i, t) in [100u64, 200, 300].into_iter().enumerate() {
+                let msg = if v2 {
+                    DeviceMsg::MeasurementV2(MeasurementV2 {
+                        measurement: m(t),
+                        estimate: (i > 0).then_some(IceEstimate {
+                            thickness_um: 2000 + 100 * i as u16,
+                            sigma_um: 300,
+                            medium: fois_protocol::Medium::Rime,
+                            probability_permille: 950,
+                        }),
+                    })
+                } else {
+                    DeviceMsg::Measurement(m(t))
+                };
+                log.write(&Row::device(i as u32, &msg)).unwrap();
+            }
+            log.close().unwrap();
+            path
+        };
+        let v2 = write("v2.csv", true);
+        let ts = time_series(&v2, TimeAxis::Node).unwrap();
+        let est: Vec<Option<(f64, f64)>> = ts.points.iter().map(|p| p.est_mm).collect();
+        assert_eq!(est, [None, Some((2.1, 0.3)), Some((2.2, 0.3))]);
+        let png = dir.path().join("v2.png");
+        plot_log(&v2, &png, TimeAxis::Node).unwrap();
+        assert_eq!(png_height(&png), WIDE.1 + 350);
+
+        let v1 = write("v1.csv", false);
+        let ts = time_series(&v1, TimeAxis::Node).unwrap();
+        assert!(ts.points.iter().all(|p| p.est_mm.is_none()));
+        let png = dir.path().join("v1.png");
+        plot_log(&v1, &png, TimeAxis::Node).unwrap();
+        assert_eq!(png_height(&png), WIDE.1);
     }
 }

@@ -13,6 +13,7 @@ pub mod gallery;
 pub mod montecarlo;
 pub mod output;
 pub mod runs;
+pub mod table;
 
 use clap::{Args, Subcommand};
 
@@ -56,6 +57,14 @@ pub enum SimCmd {
     /// One ray evaluation = one source ray at one thickness (surface reflection plus the
     /// bubbles newly frozen in).
     Bench(bench::BenchArgs),
+    /// The node estimator's response table: Monte Carlo of rime, glazed and
+    /// water (Sensor B, thesis chapter-5 geometry, 0–15 mm), smoothed, packed
+    /// (μ, σ in nA, correlation), written as the Rust source the firmware
+    /// embeds (default firmware/src/estimator/table.rs, relative to the
+    /// repository root). The same file `FOIS_BLESS=1 cargo test -p
+    /// fois-firmware --test estimator_table` writes; that test fails while
+    /// the checked-in table differs from the simulator's.
+    Table(table::TableArgs),
     /// Draw every gallery PNG of sim/README.md (thesis Figs. 3.19–3.23, 5.13–5.18).
     Gallery(gallery::GalleryArgs),
 }
@@ -69,5 +78,6 @@ pub fn run(args: SimArgs) -> anyhow::Result<()> {
         SimCmd::Crlb(a) => crlb::run(a),
         SimCmd::Bench(a) => bench::run(a),
         SimCmd::Gallery(a) => gallery::run(a),
+        SimCmd::Table(a) => table::run(a),
     }
 }

@@ -1,0 +1,178 @@
+//! Accuracy of the ice estimator on ray-traced accretions the response table
+//! was not built from (run 0 of seeds 101–106; the table uses seed 900 001),
+//! with frame noise and a persistent offset per run. The goals of the ice
+//! characterisation that the estimator meets are asserted here; the figures
+//! of every class, met or not, are printed
+//! (`cargo test -p fois-firmware --test estimator_accuracy -- --nocapture`)
+//! and the larger sweep is `examples/estimator_eval.rs`.
+//!
+//! Frames come at 1 Hz here (10 Hz in the example): the errors that matter
+//! persist for a whole accretion, so the frame rate barely changes the
+//! figures, and the test stays fast.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+#[path = "estimator_eval/mod.rs"]
+mod estimator_eval;
+
+use estimator_eval::*;
+use fois_firmware::estimator::EstimatorParams;
+use fois_sim::IceKind;
+
+const SEEDS: std::ops::RangeInclusive<u64> = 101..=106;
+
+/// √CRLB of rime from 128 accretions of seed 4242 (computed once).
+fn crlb() -> &'static [(f64, f64)] {
+    static CRLB: std::sync::OnceLock<Vec<(f64, f64)>> = std::sync::OnceLock::new();
+    CRLB.get_or_init(|| rime_crlb(128, 4242))
+}
+
+fn class(kind: IceKind, rate: f64, temp_c: f64, max_mm: f64) -> Stats {
+    let mut st = Stats::new();
+    for seed in SEEDS {
+        let mut run = Run::new(
+            seed,
+            vec![
+                Segment::dry(120.0, temp_c),
+                Segment::grow(kind, 0.0, max_mm, rate, temp_c),
+            ],
+        );
+        run.frame_s = 1.0;
+        st.add(&simulate(&run, EstimatorParams::default()), 0.05);
+    }
+    st
+}
+
+fn print(name: &str, st: &Stats, crlb: &[(f64, f64)]) {
+    println!("{name}:");
+    for d in TARGETS_MM {
+        if let Some((bias, rms, sig, n)) = st.at(d) {
+            println!(
+                "  {d:4.1} mm  bias {bias:+.3}  rms {rms:.3}  mean σ {sig:.3}  √CRLB {:.3}  ({n} runs)",
+                crlb_at(crlb, d)
+            );
+        }
+    }
+    println!(
+        "  |error| ≤ 2σ beyond 0.5 mm: {:.1} % of {} frames; medium right from 1 mm: {:.1} % of {}",
+        100.0 * st.calibration(),
+        st.calib.0,
+        100.0 * st.medium_accuracy(),
+        st.medium.0
+    );
+}
+
+#[test]
+fn rime_thickness_meets_the_goal_at_5_mm_and_its_sigma_is_honest() {
+    let crlb = crlb();
+    let st = class(IceKind::Rime, 2.0, -8.0, 11.0);
+    print("rime, 2 mm/h, -8 °C", &st, crlb);
+    // Goal: RMS ≤ 1.5 √CRLB and |bias| ≤ 0.3 mm for 2–10 mm. Met at 5 mm;
+    // missed at 2 mm, and at 10 mm over the 10-seed sweep of the example
+    // (these six seeds happen to pass there), see firmware/README.md.
+    let (bias, rms, _, n) = st.at(5.0).expect("frames at 5 mm");
+    assert_eq!(n, 6);
+    let bound = 1.5 * crlb_at(crlb, 5.0);
+    assert!(rms <= bound, "5 mm: rms {rms:.3} > 1.5 √CRLB {bound:.3}");
+    assert!(bias.abs() <= 0.3, "5 mm: bias {bias:+.3}");
+    // Goal: |error| ≤ 2σ in ≥ 90 % of the frames beyond 0.5 mm.
+    assert!(st.calibration() >= 0.90, "calibration {}", st.calibration());
+    // Goal 95 % (missed); this guards the figure the README states.
+    assert!(
+        st.medium_accuracy() >= 0.90,
+        "medium {}",
+        st.medium_accuracy()
+    );
+}
+
+#[test]
+fn glazed_sigma_is_honest() {
+    let crlb = crlb();
+    let st = class(IceKind::Glazed, 2.0, -5.0, 11.0);
+    print("glazed, 2 mm/h, -5 °C (thickness: report only)", &st, crlb);
+    assert!(st.calibration() >= 0.90, "calibration {}", st.calibration());
+    // Goal 95 % (missed); this guards the figure the README states.
+    assert!(
+        st.medium_accuracy() >= 0.85,
+        "medium {}",
+        st.medium_accuracy()
+    );
+}
+
+#[test]
+fn water_at_plus_5_c_is_never_ice_and_water_that_freezes_becomes_glaze() {
+    let crlb = crlb();
+    let st = class(IceKind::Water, 2.0, 5.0, 3.0);
+    print("water, 2 mm/h, +5 °C", &st, crlb);
+    assert!(st.water_frames > 30_000);
+    assert_eq!(st.water_called_ice, 0, "water at +5 °C called ice");
+    assert!(
+        st.medium_accuracy() >= 0.95,
+        "medium {}",
+        st.medium_accuracy()
+    );
+    assert!(st.calibration() >= 0.90, "calibration {}", st.calibration());
+
+    // The scenario of the hardware-in-loop suite: 0.3 mm of water at +5 °C,
+    // the air cools to 0 °C, the film freezes and glaze grows on it while
+    // the air falls to −5 °C.
+    let mut st = Stats::new();
+    // Frames of the frozen film below −1 °C: (all, called ice, called glaze).
+    let mut frozen = (0u64, 0u64, 0u64);
+    for seed in SEEDS {
+        let mut run = Run::new(
+            seed,
+            vec![
+                Segment::dry(600.0, 5.0),
+                Segment::grow(IceKind::Water, 0.0, 0.3, 1.8, 5.0),
+                Segment {
+                    cover: Some(IceKind::Water),
+                    duration_s: 1200.0,
+                    rate_mm_per_h: 0.0,
+                    temp_c: (5.0, 0.0),
+                },
+                Segment {
+                    cover: Some(IceKind::Glazed),
+                    duration_s: 3600.0,
+                    rate_mm_per_h: 1.0,
+                    temp_c: (0.0, -5.0),
+                },
+            ],
+        );
+        run.frame_s = 1.0;
+        let frames = simulate(&run, EstimatorParams::default());
+        for f in &frames {
+            let Some(e) = f.est else { continue };
+            if f.medium == fois_protocol::Medium::Glazed && f.temp_c <= -1.0 {
+                frozen.0 += 1;
+                match e.medium().0 {
+                    fois_protocol::Medium::Glazed => {
+                        frozen.1 += 1;
+                        frozen.2 += 1;
+                    }
+                    fois_protocol::Medium::Rime => frozen.1 += 1,
+                    _ => {}
+                }
+            }
+        }
+        st.add(&frames, 0.05);
+    }
+    let ice = frozen.1 as f64 / frozen.0.max(1) as f64;
+    let glaze = frozen.2 as f64 / frozen.0.max(1) as f64;
+    println!(
+        "water that freezes: water frames called ice {} of {}; the frozen film (0.3–1.3 mm) below −1 °C called ice {:.1} %, glaze {:.1} % of {} frames",
+        st.water_called_ice,
+        st.water_frames,
+        100.0 * ice,
+        100.0 * glaze,
+        frozen.0
+    );
+    assert_eq!(
+        st.water_called_ice, 0,
+        "the film called ice while still water"
+    );
+    // Ice, not water, once the air is below −1 °C (where the water factor
+    // is ½ and falls): 97.5 % with these seeds. Glaze or rime: a film under
+    // 1.3 mm is too thin to tell (the glaze share is only reported).
+    assert!(ice >= 0.95, "frozen film called ice in {ice:.3}");
+}
