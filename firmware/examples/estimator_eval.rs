@@ -159,26 +159,3 @@ fn params_from_env() -> EstimatorParams {
     }
     p
 }
-
-/// The water-that-freezes timeline of the accuracy test (for `trace-freeze SEED`).
-pub fn freeze_run(seed: u64) -> Run {
-    Run::new(
-        seed,
-        vec![
-            Segment::dry(600.0, 5.0),
-            Segment::grow(IceKind::Water, 0.0, 0.3, 1.8, 5.0),
-            Segment {
-                cover: Some(IceKind::Water),
-                duration_s: 1200.0,
-                rate_mm_per_h: 0.0,
-                temp_c: (5.0, 0.0),
-            },
-            Segment {
-                cover: Some(IceKind::Glazed),
-                duration_s: 3600.0,
-                rate_mm_per_h: 1.0,
-                temp_c: (0.0, -5.0),
-            },
-        ],
-    )
-}

@@ -120,25 +120,7 @@ fn water_at_plus_5_c_is_never_ice_and_water_that_freezes_becomes_glaze() {
     // Frames of the frozen film below −1 °C: (all, called ice, called glaze).
     let mut frozen = (0u64, 0u64, 0u64);
     for seed in SEEDS {
-        let mut run = Run::new(
-            seed,
-            vec![
-                Segment::dry(600.0, 5.0),
-                Segment::grow(IceKind::Water, 0.0, 0.3, 1.8, 5.0),
-                Segment {
-                    cover: Some(IceKind::Water),
-                    duration_s: 1200.0,
-                    rate_mm_per_h: 0.0,
-                    temp_c: (5.0, 0.0),
-                },
-                Segment {
-                    cover: Some(IceKind::Glazed),
-                    duration_s: 3600.0,
-                    rate_mm_per_h: 1.0,
-                    temp_c: (0.0, -5.0),
-                },
-            ],
-        );
+        let mut run = freeze_run(seed);
         run.frame_s = 1.0;
         let frames = simulate(&run, EstimatorParams::default());
         for f in &frames {

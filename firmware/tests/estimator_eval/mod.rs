@@ -297,3 +297,28 @@ pub fn crlb_at(crlb: &[(f64, f64)], d: f64) -> f64 {
         .min_by(|a, b| (a.0 - d).abs().total_cmp(&(b.0 - d).abs()))
         .map_or(f64::NAN, |p| p.1)
 }
+
+/// Water that freezes: 0.3 mm of water at +5 °C, the air to 0 °C, then glaze
+/// at 1 mm/h while the air falls to −5 °C (the accuracy test and
+/// `estimator_eval trace-freeze SEED`).
+pub fn freeze_run(seed: u64) -> Run {
+    Run::new(
+        seed,
+        vec![
+            Segment::dry(600.0, 5.0),
+            Segment::grow(IceKind::Water, 0.0, 0.3, 1.8, 5.0),
+            Segment {
+                cover: Some(IceKind::Water),
+                duration_s: 1200.0,
+                rate_mm_per_h: 0.0,
+                temp_c: (5.0, 0.0),
+            },
+            Segment {
+                cover: Some(IceKind::Glazed),
+                duration_s: 3600.0,
+                rate_mm_per_h: 1.0,
+                temp_c: (0.0, -5.0),
+            },
+        ],
+    )
+}
