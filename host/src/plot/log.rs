@@ -44,6 +44,16 @@ pub enum TimeAxis {
     Node,
 }
 
+impl TimeAxis {
+    /// The x-axis caption, with the time unit.
+    fn describe(self, unit: &str) -> String {
+        match self {
+            TimeAxis::Host => format!("host time since the first row ({unit})"),
+            TimeAxis::Node => format!("node uptime ({unit})"),
+        }
+    }
+}
+
 /// Extract the time series from a foisctl log, row by row.
 pub fn time_series(path: &Path, axis: TimeAxis) -> anyhow::Result<TimeSeries> {
     let mut rd = LogReader::open(path)?;
@@ -127,10 +137,7 @@ fn draw_estimate<DB: DrawingBackend>(
         .map_err(draw_err)?;
     chart
         .configure_mesh()
-        .x_desc(match axis {
-            TimeAxis::Host => format!("host time since the first row ({unit})"),
-            TimeAxis::Node => format!("node uptime ({unit})"),
-        })
+        .x_desc(axis.describe(unit))
         .y_desc("ice estimate (mm)")
         .label_style(("sans-serif", 15))
         .draw()
@@ -278,10 +285,7 @@ pub fn plot_log(log: &Path, out: &Path, axis: TimeAxis) -> anyhow::Result<usize>
         .map_err(draw_err)?;
     chart
         .configure_mesh()
-        .x_desc(match axis {
-            TimeAxis::Host => format!("host time since the first row ({unit})"),
-            TimeAxis::Node => format!("node uptime ({unit})"),
-        })
+        .x_desc(axis.describe(unit))
         .y_desc("net photocurrent (µA)")
         .label_style(("sans-serif", 15))
         .draw()
