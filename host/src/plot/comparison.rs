@@ -115,14 +115,7 @@ pub fn plot_comparison(c: &Comparison, ice: &str, out: &Path) -> anyhow::Result<
             .map_err(draw_err)?
             .label("logged")
             .legend(|(x, y)| Circle::new((x + 10, y), 3, BLUE.filled()));
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .position(SeriesLabelPosition::UpperLeft)
-            .draw()
-            .map_err(draw_err)?;
+        super::draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 14)?;
     }
     root.present().map_err(draw_err)?;
     Ok(())

@@ -172,14 +172,7 @@ fn draw_estimate<DB: DrawingBackend>(
         .legend(move |(x, y)| {
             PathElement::new(vec![(x, y), (x + 20, y)], band_color.stroke_width(3))
         });
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 15))
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(draw_err)?;
+    super::draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 15)?;
     Ok(())
 }
 
@@ -345,14 +338,7 @@ pub fn plot_log(log: &Path, out: &Path, axis: TimeAxis) -> anyhow::Result<usize>
             }
         }
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 15))
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(draw_err)?;
+    super::draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 15)?;
     if with_est {
         draw_estimate(&bottom, &ts.points, div, x_max, unit, axis)?;
     }

@@ -29,6 +29,28 @@ pub fn register_fonts() {
 /// Size of the log and comparison figures, pixels.
 pub const WIDE: (u32, u32) = (1200, 700);
 
+/// The legend of every figure: white, framed, `font_px` sans-serif, at
+/// `position`.
+pub(crate) fn draw_legend<'a, DB, CT>(
+    chart: &mut plotters::chart::ChartContext<'a, DB, CT>,
+    position: plotters::chart::SeriesLabelPosition,
+    font_px: u32,
+) -> anyhow::Result<()>
+where
+    DB: plotters::prelude::DrawingBackend + 'a,
+    CT: plotters::coord::CoordTranslate,
+{
+    use plotters::style::{BLACK, Color, WHITE};
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", font_px))
+        .position(position)
+        .draw()
+        .map_err(draw_err)
+}
+
 /// A plotters error as an `anyhow` error.
 pub(crate) fn draw_err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow::anyhow!("drawing failed: {e:?}")

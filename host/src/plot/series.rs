@@ -175,13 +175,7 @@ fn draw(
         )?;
     }
     if any_label {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()?;
+        super::draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 15)?;
     }
     root.present()?;
     Ok(())
