@@ -12,6 +12,7 @@
 pub mod analytic;
 pub mod consts;
 pub mod geometry;
+mod bubbles;
 mod kernels;
 pub mod laws;
 pub mod model;

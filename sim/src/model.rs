@@ -4,6 +4,7 @@ use glam::{DVec2, DVec3};
 use rand_core::Rng;
 use rand_pcg::Pcg32;
 
+use crate::bubbles::{BubbleLanes, BubbleRay, CounterStream, GapSampler, land_scattered};
 use crate::consts::*;
 use crate::geometry::{Geometry, Region};
 use crate::kernels::{DiffuseLanes, DiffuseRay, reflect_diffuse};
@@ -344,8 +345,9 @@ pub(crate) fn accretion_key(seed: u64, run: u64) -> u64 {
 /// Most bubble layers one ray walks through (20 000 × 0.1 mm = 2 m of ice along z).
 const MAX_LAYERS_PER_RAY: u32 = 20_000;
 
-/// Above this P_B the bubbles are drawn layer by layer, below it by geometric gaps.
-const BERNOULLI_ABOVE: f64 = 0.02;
+/// Above this P_B the bubbles are walked by `bubbles::GapSampler` from counter-based
+/// streams; at or below it by `geometric_gap` (one `ln` per bubble) from a PCG stream.
+const DENSE_ABOVE: f64 = 0.02;
 
 /// Stream ids: 0 = accretion (slopes); 2 + 2r = bubbles of ray r; 3 + 2r = diffuse of ray r.
 const STREAM_ACCRETION: u64 = 0;
@@ -385,20 +387,6 @@ fn ceil_index(q: f64) -> usize {
     let t = q as i64; // toward zero: the ceiling for q ≤ 0, the floor for q > 0
     let t = if (t as f64) < q { t + 1 } else { t };
     t.max(0) as usize
-}
-
-/// Draw until a draw is below `threshold`, at most `max` draws: the number of draws at or
-/// above it before that one (which is consumed too), or `max` if none is below.
-#[inline(always)]
-fn draws_until_below(rng: &mut Pcg32, threshold: u32, max: u32) -> u32 {
-    let mut n = 0u32;
-    while n < max {
-        if rng.next_u32() < threshold {
-            return n;
-        }
-        n += 1;
-    }
-    max
 }
 
 /// Geometric number of failures before the first success, P(success) = p.
@@ -539,9 +527,9 @@ impl SensorModel {
             0.0
         };
         let diffuse = p.diffuse_max_rad > 0.0;
-        let bernoulli = p.p_bubble > BERNOULLI_ABOVE;
-        // P(next_u32 < p_thr) = P_B.
-        let p_thr = (p.p_bubble * 4_294_967_296.0).min(u32::MAX as f64) as u32;
+        // Dense bubbles (rime) walk gap by gap from counter-based streams (bubbles.rs).
+        let dense = (p.p_bubble > DENSE_ABOVE).then(|| GapSampler::new(p.p_bubble));
+        let mut lanes = BubbleLanes::default();
         let sensor_a = cfg.sensor == SensorKind::A;
         let bundles = geo.bundles();
         // Bounding box of the face, for culling scattered rays.
@@ -573,7 +561,6 @@ impl SensorModel {
                 continue;
             }
             let slope_xy = DVec2::new(v.x, v.y) / v.z;
-            let mut bub = Pcg32::new(key, 2 + 2 * r as u64);
             let mut dif = Pcg32::new(key, 3 + 2 * r as u64);
             // Pass 1, bubbles: layer j (z from jΔ to (j+1)Δ, bubble at its middle) is frozen
             // in once the local surface above the bubble is at least (j+1)Δ high, i.e. from
@@ -599,59 +586,75 @@ impl SensorModel {
             fwd_after.clear();
             fwd_after.push(ray.flux_in_w);
             let mut fwd = ray.flux_in_w;
-            // The random walk: which layers hold a bubble, and the scattered light of each.
-            // Dense bubbles (rime): one draw per layer, P_B each. Sparse bubbles (glazed):
-            // geometric gaps between bubbles, P_B per layer too. The walk is as fast as its
-            // chain of draws; the arithmetic of each bubble runs alongside, which is why it
-            // stays here rather than in a separate (vectorised) pass.
-            let mut j: u32 = match (p.p_bubble > 0.0, bernoulli) {
-                (false, _) => j_end,
-                (true, true) => 0,
-                (true, false) => geometric_gap(&mut bub, ln_q),
+            // The scattered part of a bubble: 5 % deflected toward the face (Fig. 3.11),
+            // attenuated along the ray up to the bubble and down to the face (Beer–Lambert,
+            // eq. 3.21), entering the bundle with the coupling of eqs. 3.24–3.25.
+            let mut scatter = |i: usize, k: usize, fwd: f64, s: DVec3, z_b: f64, reach: f64| {
+                let path = z_b / v.z + reach;
+                scat_delta[i][k] +=
+                    fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
             };
-            loop {
-                if bernoulli {
-                    j += draws_until_below(&mut bub, p_thr, j_end - j);
-                }
-                if j >= j_end {
-                    break;
-                }
-                let z_b = (j as f64 + 0.5) * BUBBLE_LAYER_MM;
-                // First output index at or above d_j (j < j_end: below nt).
-                let i = ceil_index(q_of(j)).max(first_wet);
-                let b = ray.p0 + slope_xy * z_b;
-                // Scattered part: 5 % deflected toward the face (Fig. 3.11).
-                let cos_b = 1.0 - uniform32(&mut bub); // isotropic over the lower hemisphere
-                let sin2_b = (1.0 - cos_b * cos_b).max(0.0);
-                // Horizontal travel z_b·tan θ_B; beyond the farthest point of the face the
-                // ray misses whatever its azimuth, so the azimuth is not drawn.
-                let far_x = (b.x - x_lo).abs().max((b.x - x_hi).abs());
-                let far_y = b.y.abs() + y_hi;
-                let travel2 = z_b * z_b * sin2_b / (cos_b * cos_b);
-                // Where the scattered ray lands, if it can reach the face at all.
-                let (k, reach, c_phi, s_phi, sin_b) = if travel2 <= far_x * far_x + far_y * far_y {
-                    let (ua, ub, uq) = unit_circle_unnormalised(&mut bub);
-                    let norm = uq.sqrt().recip();
-                    let (c_phi, s_phi) = (ua * norm, ub * norm);
-                    let sin_b = sin2_b.sqrt();
-                    let reach = z_b / cos_b;
-                    let land = b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
-                    (bundles.slot(land.x, land.y), reach, c_phi, s_phi, sin_b)
-                } else {
-                    (2, 0.0, 0.0, 0.0, 0.0)
+            if let Some(gaps) = &dense {
+                // Dense bubbles (rime): the walk draws one geometric gap per bubble from a
+                // counter-based stream, then lands all scattered rays at once (bubbles.rs).
+                lanes.walk(CounterStream::new(key, 2 + 2 * r as u64), gaps, j_end);
+                let bray = BubbleRay {
+                    p0: ray.p0,
+                    slope_xy,
+                    a,
+                    off1,
+                    inv_step,
+                    first_wet: first_wet as u32,
                 };
-                if k < 2 {
-                    let s = DVec3::new(sin_b * c_phi, sin_b * s_phi, -cos_b);
-                    let path = z_b / v.z + reach;
-                    scat_delta[i][k] +=
-                        fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
+                land_scattered(&bray, &bundles, &mut lanes);
+                for n in 0..lanes.len() {
+                    let i = lanes.index[n] as usize;
+                    let k = lanes.slot[n] as usize;
+                    if k < 2 {
+                        scatter(i, k, fwd, DVec3::from(lanes.dir[n]), lanes.z_mm[n], lanes.reach_mm[n]);
+                    }
+                    fwd *= FORWARD_FRACTION;
+                    fwd_after.push(fwd);
+                    bubbles_at[i] += 1;
                 }
-                fwd *= FORWARD_FRACTION;
-                fwd_after.push(fwd);
-                bubbles_at[i] += 1;
-                if bernoulli {
-                    j += 1;
+            } else {
+                // Sparse bubbles (glazed): geometric gaps between bubbles by inversion
+                // (one `ln` per bubble), P_B per layer; each bubble's scattered ray is
+                // culled before its azimuth is drawn when it cannot reach the face.
+                let mut bub = Pcg32::new(key, 2 + 2 * r as u64);
+                let mut j: u32 = if p.p_bubble > 0.0 {
+                    geometric_gap(&mut bub, ln_q)
                 } else {
+                    j_end
+                };
+                while j < j_end {
+                    let z_b = (j as f64 + 0.5) * BUBBLE_LAYER_MM;
+                    // First output index at or above d_j (j < j_end: below nt).
+                    let i = ceil_index(q_of(j)).max(first_wet);
+                    let b = ray.p0 + slope_xy * z_b;
+                    let cos_b = 1.0 - uniform32(&mut bub); // isotropic over the lower hemisphere
+                    let sin2_b = (1.0 - cos_b * cos_b).max(0.0);
+                    // Horizontal travel z_b·tan θ_B; beyond the farthest point of the face
+                    // the ray misses whatever its azimuth, so the azimuth is not drawn.
+                    let far_x = (b.x - x_lo).abs().max((b.x - x_hi).abs());
+                    let far_y = b.y.abs() + y_hi;
+                    let travel2 = z_b * z_b * sin2_b / (cos_b * cos_b);
+                    if travel2 <= far_x * far_x + far_y * far_y {
+                        let (ua, ub, uq) = unit_circle_unnormalised(&mut bub);
+                        let norm = uq.sqrt().recip();
+                        let (c_phi, s_phi) = (ua * norm, ub * norm);
+                        let sin_b = sin2_b.sqrt();
+                        let reach = z_b / cos_b;
+                        let land = b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
+                        let k = bundles.slot(land.x, land.y);
+                        if k < 2 {
+                            let s = DVec3::new(sin_b * c_phi, sin_b * s_phi, -cos_b);
+                            scatter(i, k, fwd, s, z_b, reach);
+                        }
+                    }
+                    fwd *= FORWARD_FRACTION;
+                    fwd_after.push(fwd);
+                    bubbles_at[i] += 1;
                     let gap = geometric_gap(&mut bub, ln_q);
                     j = j.saturating_add(1).saturating_add(gap);
                 }

@@ -1,0 +1,433 @@
+//! The dense bubble walk of rime ice (thesis §3.2.2–§3.2.3, Fig. 3.11): where along a ray
+//! the bubbles lie, which way each scatters, and where its scattered ray lands on the face.
+//!
+//! Every layer of Δ_Ice holds a bubble with probability P_B, independently, so the numbers
+//! of empty layers between bubbles are geometric. Instead of one draw per layer, the walk
+//! draws one gap per bubble ([`GapSampler`], exact up to the 2⁻³² resolution of a draw), and
+//! each bubble's draws come from a counter-based stream ([`CounterStream`]: bubble n of ray
+//! r always gets words 2n and 2n + 1 of the stream of r), so no draw depends on a branch
+//! taken before it. The landing of all scattered rays of one ray is then computed at once
+//! by [`land_scattered`], a loop the compiler vectorises (AVX2 when the CPU has it, with
+//! bit-identical results: the same IEEE-754 operations in the same order per lane).
+//!
+//! Layout of the draws of bubble n (words w₀ = word 2n, w₁ = word 2n + 1):
+//! - the gap of empty layers before it: the upper 32 bits of w₀;
+//! - cos θ_B = 1 − u, u uniform in [0, 1): the lower 32 bits of w₀ (the scattered ray is
+//!   isotropic over the lower hemisphere, as in the thesis's bubble model);
+//! - the azimuth φ: the upper 32 bits of w₁ (2 bits of quadrant, 30 of angle).
+
+use glam::DVec2;
+
+use crate::consts::BUBBLE_LAYER_MM;
+use crate::geometry::Bundles;
+use crate::model::mix64;
+
+/// Increment of the SplitMix64 sequence (2⁶⁴/φ, odd).
+const GOLDEN_GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
+
+/// 2⁻³²: a 32-bit draw to [0, 1).
+const INV_2_POW_32: f64 = 1.0 / 4_294_967_296.0;
+
+/// A counter-based random stream: word n is the SplitMix64 output (Steele, Lea & Flood,
+/// "Fast splittable pseudorandom number generators", OOPSLA 2014) n + 1 steps after the
+/// stream's start, i.e. a pure function of (start, n). Any word can be computed without
+/// the ones before it, in any order, in vector lanes.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct CounterStream {
+    start: u64,
+}
+
+impl CounterStream {
+    /// The stream `id` of the accretion with PCG key `key` (ids as in the tracer's table).
+    pub(crate) fn new(key: u64, id: u64) -> Self {
+        CounterStream {
+            start: mix64(key ^ mix64(id)),
+        }
+    }
+
+    /// Word n of the stream.
+    #[inline(always)]
+    pub(crate) fn word(self, n: u64) -> u64 {
+        mix64(self.start.wrapping_add(n.wrapping_mul(GOLDEN_GAMMA)))
+    }
+}
+
+/// Bits of a draw that index the bucket table of [`GapSampler`].
+const GAP_BUCKET_BITS: u32 = 10;
+
+/// Geometric gaps from one 32-bit draw: the number of layers without a bubble before the
+/// next bubble, P(gap ≥ k) = (1 − P_B)^k, by inversion against a table of thresholds.
+#[derive(Clone, Debug)]
+pub(crate) struct GapSampler {
+    /// threshold[k − 1] = round((1 − P_B)^k · 2³²): gap ≥ k iff the draw is below it.
+    /// Non-increasing; ends before the first 0 (no draw is below 0).
+    threshold: Vec<u32>,
+    /// Per bucket of the draw's upper `GAP_BUCKET_BITS` bits: the gap of the bucket's
+    /// largest draw, the smallest gap in the bucket.
+    bucket_gap: Vec<u32>,
+}
+
+impl GapSampler {
+    /// The sampler for P_B = `p_bubble` (0 < P_B ≤ 1).
+    pub(crate) fn new(p_bubble: f64) -> Self {
+        let q = 1.0 - p_bubble;
+        let mut threshold = Vec::new();
+        let mut qk = q;
+        loop {
+            let t = (qk * 4_294_967_296.0).round().min(u32::MAX as f64);
+            if !(t >= 1.0) {
+                break;
+            }
+            threshold.push(t as u32);
+            qk *= q;
+        }
+        let count = |u: u32| threshold.iter().take_while(|&&t| u < t).count() as u32;
+        let buckets = 1u32 << GAP_BUCKET_BITS;
+        let width = 1u64 << (32 - GAP_BUCKET_BITS);
+        let bucket_gap = (0..buckets)
+            .map(|b| count(((u64::from(b) + 1) * width - 1) as u32))
+            .collect();
+        GapSampler {
+            threshold,
+            bucket_gap,
+        }
+    }
+
+    /// The gap for the draw `u`: #{k ≥ 1 : u < threshold of k}.
+    #[inline(always)]
+    pub(crate) fn gap(&self, u: u32) -> u32 {
+        let mut g = self.bucket_gap[(u >> (32 - GAP_BUCKET_BITS)) as usize];
+        // Only buckets that straddle a threshold need more than the table.
+        while let Some(&t) = self.threshold.get(g as usize) {
+            if u >= t {
+                break;
+            }
+            g += 1;
+        }
+        g
+    }
+}
+
+/// The point on the unit circle at azimuth φ for a 32-bit draw: quadrant from the upper 2
+/// bits, the angle within it from the other 30 (bucket centres), by polynomials.
+#[inline(always)]
+pub(crate) fn unit_circle_of(u: u32) -> (f64, f64) {
+    use std::f64::consts::{FRAC_1_SQRT_2, FRAC_PI_2, FRAC_PI_4};
+    let quadrant = u >> 30;
+    let t = (f64::from(u & 0x3FFF_FFFF) + 0.5) * (FRAC_PI_2 / 1_073_741_824.0) - FRAC_PI_4;
+    let (s, c) = sin_cos_octant(t);
+    // Angle π/4 + t, in [0, π/2).
+    let (x, y) = ((c - s) * FRAC_1_SQRT_2, (c + s) * FRAC_1_SQRT_2);
+    // Turned by quadrant·π/2.
+    let (x, y) = if quadrant & 1 == 1 { (-y, x) } else { (x, y) };
+    if quadrant & 2 == 2 { (-x, -y) } else { (x, y) }
+}
+
+/// sin and cos for |x| ≤ π/4 by Taylor series to x¹⁵ / x¹⁶ (Horner, multiplications only):
+/// error below 2e-16.
+#[inline(always)]
+fn sin_cos_octant(x: f64) -> (f64, f64) {
+    debug_assert!(x.abs() <= std::f64::consts::FRAC_PI_4 + 1e-12);
+    // 1/k! for the odd and even k.
+    const S: [f64; 7] = [
+        -1.0 / 6.0,
+        1.0 / 120.0,
+        -1.0 / 5_040.0,
+        1.0 / 362_880.0,
+        -1.0 / 39_916_800.0,
+        1.0 / 6_227_020_800.0,
+        -1.0 / 1_307_674_368_000.0,
+    ];
+    const C: [f64; 8] = [
+        -1.0 / 2.0,
+        1.0 / 24.0,
+        -1.0 / 720.0,
+        1.0 / 40_320.0,
+        -1.0 / 3_628_800.0,
+        1.0 / 479_001_600.0,
+        -1.0 / 87_178_291_200.0,
+        1.0 / 20_922_789_888_000.0,
+    ];
+    let x2 = x * x;
+    let mut s = S[6];
+    for &k in S[..6].iter().rev() {
+        s = s * x2 + k;
+    }
+    let mut c = C[7];
+    for &k in C[..7].iter().rev() {
+        c = c * x2 + k;
+    }
+    (x + x * x2 * s, 1.0 + x2 * c)
+}
+
+/// The bubbles of one ray, one entry per bubble in walk order: inputs and outputs of
+/// [`land_scattered`].
+#[derive(Clone, Debug, Default)]
+pub(crate) struct BubbleLanes {
+    /// Layer index j of the bubble.
+    pub layer: Vec<u32>,
+    /// The draw of cos θ_B.
+    pub cos_draw: Vec<u32>,
+    /// The draw of the azimuth.
+    pub phi_draw: Vec<u32>,
+    /// Output: height of the bubble above the face, (j + ½)·Δ_Ice, mm.
+    pub z_mm: Vec<f64>,
+    /// Output: the output index (thickness) from which the bubble is frozen in.
+    pub index: Vec<u32>,
+    /// Output: 0 or 1 for the bundle the scattered ray lands on, 2 for none.
+    pub slot: Vec<u32>,
+    /// Output: the scattered ray's direction (x, y, z), z = −cos θ_B < 0.
+    pub dir: Vec<[f64; 3]>,
+    /// Output: its path from the bubble down to the face, z / cos θ_B, mm.
+    pub reach_mm: Vec<f64>,
+}
+
+impl BubbleLanes {
+    /// Forget the bubbles of the previous ray.
+    pub(crate) fn clear(&mut self) {
+        self.layer.clear();
+        self.cos_draw.clear();
+        self.phi_draw.clear();
+    }
+
+    /// Number of bubbles.
+    pub(crate) fn len(&self) -> usize {
+        self.layer.len()
+    }
+
+    /// Walk the layers j < `j_end` of one ray: the bubbles and their draws.
+    pub(crate) fn walk(&mut self, stream: CounterStream, gaps: &GapSampler, j_end: u32) {
+        self.clear();
+        let mut j: u32 = 0;
+        let mut n: u64 = 0;
+        loop {
+            let w0 = stream.word(2 * n);
+            j = j.saturating_add(gaps.gap((w0 >> 32) as u32));
+            if j >= j_end {
+                break;
+            }
+            let w1 = stream.word(2 * n + 1);
+            self.layer.push(j);
+            self.cos_draw.push(w0 as u32);
+            self.phi_draw.push((w1 >> 32) as u32);
+            j += 1;
+            n += 1;
+        }
+    }
+}
+
+/// One source ray as the bubble kernel sees it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct BubbleRay {
+    /// Position of the ray on the face, mm.
+    pub p0: DVec2,
+    /// Sideways travel per height along the ray, (v_x, v_y)/v_z.
+    pub slope_xy: DVec2,
+    /// Height of the surface plane above the ray's fibre at d = 0, mm.
+    pub a: f64,
+    /// The plane's rise per height along the ray, tan δ_x·slope_x + tan δ_y·slope_y.
+    pub off1: f64,
+    /// 1 / output step, mm⁻¹.
+    pub inv_step: f64,
+    /// First output index with ice (d > 0).
+    pub first_wet: u32,
+}
+
+impl BubbleRay {
+    /// The mean thickness from which layer j is covered, in output steps (minus 1e-9):
+    /// d_j = (j + 1)·Δ − a − off1·z_b, with z_b = (j + ½)·Δ.
+    #[inline(always)]
+    pub(crate) fn cover_steps(&self, j: f64) -> f64 {
+        let z_top = (j + 1.0) * BUBBLE_LAYER_MM;
+        let z_b = (j + 0.5) * BUBBLE_LAYER_MM;
+        (z_top - self.a - self.off1 * z_b) * self.inv_step - 1e-9
+    }
+}
+
+/// Per bubble: the output index at which it is frozen in (the first index ≥ its cover
+/// thickness, not before the first wet one), and where its scattered ray lands. The
+/// bubble lies on the source ray at p0 + `slope_xy`·z, its scattered ray leaves downward
+/// at θ_B from the vertical and azimuth φ and travels z·tan θ_B sideways (thesis §3.2.2).
+pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
+    let n = lanes.len();
+    lanes.z_mm.resize(n, 0.0);
+    lanes.index.resize(n, 0);
+    lanes.slot.resize(n, 2);
+    lanes.dir.resize(n, [0.0; 3]);
+    lanes.reach_mm.resize(n, 0.0);
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU supports AVX2 (checked just above).
+        unsafe { land_scattered_avx2(ray, bundles, lanes) };
+        return;
+    }
+    land_scattered_lanes(ray, bundles, lanes);
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn land_scattered_avx2(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
+    land_scattered_lanes(ray, bundles, lanes);
+}
+
+#[inline(always)]
+fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
+    let n = lanes.len();
+    let layer = &lanes.layer[..n];
+    let cos_draw = &lanes.cos_draw[..n];
+    let phi_draw = &lanes.phi_draw[..n];
+    let z_mm = &mut lanes.z_mm[..n];
+    let index = &mut lanes.index[..n];
+    let slot = &mut lanes.slot[..n];
+    let dir = &mut lanes.dir[..n];
+    let reach_mm = &mut lanes.reach_mm[..n];
+    let first_wet = f64::from(ray.first_wet);
+    for k in 0..n {
+        let j = f64::from(layer[k]);
+        let z = (j + 0.5) * BUBBLE_LAYER_MM;
+        z_mm[k] = z;
+        // ceil is exact; the walk keeps j below the layer whose index would pass the last.
+        index[k] = ray.cover_steps(j).ceil().max(first_wet) as u32;
+        let bx = ray.p0.x + ray.slope_xy.x * z;
+        let by = ray.p0.y + ray.slope_xy.y * z;
+        // cos θ_B in (0, 1]: isotropic over the lower hemisphere.
+        let cos_b = 1.0 - f64::from(cos_draw[k]) * INV_2_POW_32;
+        let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
+        let (c_phi, s_phi) = unit_circle_of(phi_draw[k]);
+        let reach = z / cos_b;
+        let travel = sin_b * reach;
+        slot[k] = bundles.slot(bx + c_phi * travel, by + s_phi * travel) as u32;
+        dir[k] = [sin_b * c_phi, sin_b * s_phi, -cos_b];
+        reach_mm[k] = reach;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Geometry;
+
+    #[test]
+    fn gap_table_matches_counting_every_threshold() {
+        for p in [0.021, 0.21, 0.5, 0.99, 1.0] {
+            let g = GapSampler::new(p);
+            let brute = |u: u32| g.threshold.iter().filter(|&&t| u < t).count() as u32;
+            // Every threshold, each side of it, and a spread of other draws.
+            let mut us: Vec<u32> = vec![0, 1, u32::MAX, u32::MAX - 1];
+            for &t in &g.threshold {
+                us.extend([t.wrapping_sub(1), t, t.wrapping_add(1)]);
+            }
+            us.extend((0..100_000u32).map(|k| k.wrapping_mul(0x9E37_79B9)));
+            for u in us {
+                assert_eq!(g.gap(u), brute(u), "p {p}, u {u}");
+            }
+        }
+    }
+
+    #[test]
+    fn gaps_are_geometric() {
+        // P_B = 0.21 (rime): mean gap (1 − p)/p = 3.762, P(gap = 0) = 0.21, P(gap ≥ 10) = 0.79¹⁰.
+        let p: f64 = 0.21;
+        let g = GapSampler::new(p);
+        let s = CounterStream::new(7, 2);
+        let n = 200_000u64;
+        let gaps: Vec<u32> = (0..n).map(|k| g.gap((s.word(k) >> 32) as u32)).collect();
+        let mean = gaps.iter().map(|&x| f64::from(x)).sum::<f64>() / n as f64;
+        let sd_of_mean = ((1.0 - p).sqrt() / p) / (n as f64).sqrt(); // 0.0095
+        assert!((mean - 3.7619).abs() < 4.0 * sd_of_mean, "{mean}");
+        let zero = gaps.iter().filter(|&&x| x == 0).count() as f64 / n as f64;
+        assert!((zero - 0.21).abs() < 4.0 * (0.21f64 * 0.79 / n as f64).sqrt(), "{zero}");
+        let ten = gaps.iter().filter(|&&x| x >= 10).count() as f64 / n as f64;
+        let want = 0.79f64.powi(10); // 0.0947
+        assert!((ten - want).abs() < 4.0 * (want * (1.0 - want) / n as f64).sqrt(), "{ten}");
+        // P_B = 1: every layer holds a bubble.
+        let all = GapSampler::new(1.0);
+        assert!((0..1000).all(|k| all.gap((s.word(k) >> 32) as u32) == 0));
+    }
+
+    #[test]
+    fn counter_stream_is_a_pure_function_of_its_counter() {
+        let s = CounterStream::new(123, 4);
+        let forward: Vec<u64> = (0..50).map(|n| s.word(n)).collect();
+        let backward: Vec<u64> = (0..50).rev().map(|n| s.word(n)).collect();
+        assert!(forward.iter().eq(backward.iter().rev()));
+        // Different streams and keys differ.
+        assert_ne!(CounterStream::new(123, 5).word(0), s.word(0));
+        assert_ne!(CounterStream::new(124, 4).word(0), s.word(0));
+        // Bits are balanced: mean of the upper 32 bits as a uniform.
+        let n = 100_000u64;
+        let mean = (0..n)
+            .map(|k| (s.word(k) >> 32) as f64 * INV_2_POW_32)
+            .sum::<f64>()
+            / n as f64;
+        assert!((mean - 0.5).abs() < 4.0 * (1.0 / 12.0 / n as f64).sqrt(), "{mean}");
+    }
+
+    #[test]
+    fn unit_circle_is_unit_and_uniform_in_angle() {
+        let s = CounterStream::new(9, 9);
+        let mut sector = [0usize; 16];
+        let n = 160_000u64;
+        for k in 0..n {
+            let u = (s.word(k) >> 32) as u32;
+            let (x, y) = unit_circle_of(u);
+            assert!((x * x + y * y - 1.0).abs() < 1e-15);
+            // The same angle as libm gives for φ = 2π (u + ½)/2³².
+            let phi = std::f64::consts::TAU * (f64::from(u) + 0.5) * INV_2_POW_32;
+            assert!((x - phi.cos()).abs() < 1e-14 && (y - phi.sin()).abs() < 1e-14, "{u}");
+            let a = y.atan2(x).rem_euclid(std::f64::consts::TAU);
+            sector[((a / std::f64::consts::TAU * 16.0) as usize).min(15)] += 1;
+        }
+        for c in sector {
+            assert!((c as f64 - 10_000.0).abs() < 400.0, "{sector:?}");
+        }
+        // Quadrant edges.
+        let (x, y) = unit_circle_of(0);
+        assert!((x - 1.0).abs() < 1e-9 && y.abs() < 1e-8);
+        let (x, y) = unit_circle_of(1 << 30);
+        assert!(x.abs() < 1e-8 && (y - 1.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn landing_kernel_is_bit_identical_to_the_scalar_formula() {
+        let geo = Geometry::ThesisCh5;
+        let bundles = geo.bundles();
+        let gaps = GapSampler::new(0.21);
+        let mut lanes = BubbleLanes::default();
+        let (p0, slope) = (DVec2::new(-1.3, 0.7), DVec2::new(0.45, -0.12));
+        let ray = BubbleRay {
+            p0,
+            slope_xy: slope,
+            a: -0.3,
+            off1: 0.05,
+            inv_step: 10.0,
+            first_wet: 1,
+        };
+        lanes.walk(CounterStream::new(5, 8), &gaps, 150);
+        assert!(lanes.len() > 15, "{}", lanes.len());
+        land_scattered(&ray, &bundles, &mut lanes);
+        let mut landed = 0;
+        for k in 0..lanes.len() {
+            let z = (f64::from(lanes.layer[k]) + 0.5) * 0.1;
+            assert_eq!(lanes.z_mm[k].to_bits(), z.to_bits());
+            let q = ((f64::from(lanes.layer[k]) + 1.0) * 0.1 + 0.3 - 0.05 * z) * 10.0 - 1e-9;
+            assert_eq!(lanes.index[k], (q.ceil() as u32).max(1), "bubble {k}");
+            let cos_b = 1.0 - f64::from(lanes.cos_draw[k]) * INV_2_POW_32;
+            let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
+            let (c, s) = unit_circle_of(lanes.phi_draw[k]);
+            let reach = z / cos_b;
+            let land = p0 + slope * z + DVec2::new(c, s) * (sin_b * reach);
+            let want = match geo.region(land.x, land.y) {
+                crate::geometry::Region::Bundle1 => 0,
+                crate::geometry::Region::Bundle2 => 1,
+                _ => 2,
+            };
+            assert_eq!(lanes.slot[k], want, "bubble {k}");
+            assert_eq!(lanes.reach_mm[k].to_bits(), reach.to_bits());
+            assert_eq!(lanes.dir[k][2].to_bits(), (-cos_b).to_bits());
+            assert_eq!(lanes.dir[k][0].to_bits(), (sin_b * c).to_bits());
+            landed += usize::from(want < 2);
+        }
+        assert!(landed > 0);
+    }
+}
