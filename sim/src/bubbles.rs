@@ -108,19 +108,24 @@ impl GapSampler {
     }
 }
 
-/// The point on the unit circle at azimuth φ for a 32-bit draw: quadrant from the upper 2
-/// bits, the angle within it from the other 30 (bucket centres), by polynomials.
+/// The point on the unit circle at azimuth φ = 2π (u + ½)/2³² for a 32-bit draw u (given
+/// as an f64, exactly): the quadrant from its upper 2 bits, the angle within it from the
+/// other 30, by polynomials; float operations only, so that it vectorises.
 #[inline(always)]
-pub(crate) fn unit_circle_of(u: u32) -> (f64, f64) {
+pub(crate) fn unit_circle_of(u: f64) -> (f64, f64) {
     use std::f64::consts::{FRAC_1_SQRT_2, FRAC_PI_2, FRAC_PI_4};
-    let quadrant = u >> 30;
-    let t = (f64::from(u & 0x3FFF_FFFF) + 0.5) * (FRAC_PI_2 / 1_073_741_824.0) - FRAC_PI_4;
+    const QUARTER: f64 = 1_073_741_824.0; // 2³⁰
+    let quadrant = (u * (1.0 / QUARTER)).floor();
+    let within = u - quadrant * QUARTER; // exact
+    let t = (within + 0.5) * (FRAC_PI_2 / QUARTER) - FRAC_PI_4;
     let (s, c) = sin_cos_octant(t);
     // Angle π/4 + t, in [0, π/2).
     let (x, y) = ((c - s) * FRAC_1_SQRT_2, (c + s) * FRAC_1_SQRT_2);
-    // Turned by quadrant·π/2.
-    let (x, y) = if quadrant & 1 == 1 { (-y, x) } else { (x, y) };
-    if quadrant & 2 == 2 { (-x, -y) } else { (x, y) }
+    // Turned by quadrant·π/2: by π/2 in quadrants 1 and 3, then by π in 2 and 3.
+    let odd = quadrant == 1.0 || quadrant == 3.0;
+    let (x, y) = (if odd { -y } else { x }, if odd { x } else { y });
+    let half = quadrant >= 2.0;
+    (if half { -x } else { x }, if half { -y } else { y })
 }
 
 /// sin and cos for |x| ≤ π/4 by Taylor series to x¹⁵ / x¹⁶ (Horner, multiplications only):
@@ -161,35 +166,33 @@ fn sin_cos_octant(x: f64) -> (f64, f64) {
 }
 
 /// The bubbles of one ray, one entry per bubble in walk order: inputs and outputs of
-/// [`land_scattered`].
+/// [`land_scattered`]. Structure of arrays, all f64 (integers exactly), so that the kernel
+/// is a loop of float operations that the compiler vectorises.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BubbleLanes {
     /// Layer index j of the bubble.
-    pub layer: Vec<u32>,
-    /// The draw of cos θ_B.
-    pub cos_draw: Vec<u32>,
-    /// The draw of the azimuth.
-    pub phi_draw: Vec<u32>,
+    pub layer: Vec<f64>,
+    /// The 32-bit draw of cos θ_B.
+    pub cos_draw: Vec<f64>,
+    /// The 32-bit draw of the azimuth.
+    pub phi_draw: Vec<f64>,
     /// Output: height of the bubble above the face, (j + ½)·Δ_Ice, mm.
     pub z_mm: Vec<f64>,
     /// Output: the output index (thickness) from which the bubble is frozen in.
-    pub index: Vec<u32>,
+    pub index: Vec<f64>,
     /// Output: 0 or 1 for the bundle the scattered ray lands on, 2 for none.
-    pub slot: Vec<u32>,
-    /// Output: the scattered ray's direction (x, y, z), z = −cos θ_B < 0.
-    pub dir: Vec<[f64; 3]>,
+    pub slot: Vec<f64>,
+    /// Output: the scattered ray's direction, x.
+    pub dir_x: Vec<f64>,
+    /// Output: the scattered ray's direction, y.
+    pub dir_y: Vec<f64>,
+    /// Output: cos θ_B (the direction's z is −cos θ_B).
+    pub cos_b: Vec<f64>,
     /// Output: its path from the bubble down to the face, z / cos θ_B, mm.
     pub reach_mm: Vec<f64>,
 }
 
 impl BubbleLanes {
-    /// Forget the bubbles of the previous ray.
-    pub(crate) fn clear(&mut self) {
-        self.layer.clear();
-        self.cos_draw.clear();
-        self.phi_draw.clear();
-    }
-
     /// Number of bubbles.
     pub(crate) fn len(&self) -> usize {
         self.layer.len()
@@ -197,7 +200,13 @@ impl BubbleLanes {
 
     /// Walk the layers j < `j_end` of one ray: the bubbles and their draws.
     pub(crate) fn walk(&mut self, stream: CounterStream, gaps: &GapSampler, j_end: u32) {
-        self.clear();
+        // Pushed through locals: their lengths stay in registers.
+        let mut layer = std::mem::take(&mut self.layer);
+        let mut cos_draw = std::mem::take(&mut self.cos_draw);
+        let mut phi_draw = std::mem::take(&mut self.phi_draw);
+        layer.clear();
+        cos_draw.clear();
+        phi_draw.clear();
         let mut j: u32 = 0;
         let mut n: u64 = 0;
         loop {
@@ -207,12 +216,15 @@ impl BubbleLanes {
                 break;
             }
             let w1 = stream.word(2 * n + 1);
-            self.layer.push(j);
-            self.cos_draw.push(w0 as u32);
-            self.phi_draw.push((w1 >> 32) as u32);
+            layer.push(f64::from(j));
+            cos_draw.push(f64::from(w0 as u32));
+            phi_draw.push(f64::from((w1 >> 32) as u32));
             j += 1;
             n += 1;
         }
+        self.layer = layer;
+        self.cos_draw = cos_draw;
+        self.phi_draw = phi_draw;
     }
 }
 
@@ -250,11 +262,17 @@ impl BubbleRay {
 /// at θ_B from the vertical and azimuth φ and travels z·tan θ_B sideways (thesis §3.2.2).
 pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
     let n = lanes.len();
-    lanes.z_mm.resize(n, 0.0);
-    lanes.index.resize(n, 0);
-    lanes.slot.resize(n, 2);
-    lanes.dir.resize(n, [0.0; 3]);
-    lanes.reach_mm.resize(n, 0.0);
+    for out in [
+        &mut lanes.z_mm,
+        &mut lanes.index,
+        &mut lanes.slot,
+        &mut lanes.dir_x,
+        &mut lanes.dir_y,
+        &mut lanes.cos_b,
+        &mut lanes.reach_mm,
+    ] {
+        out.resize(n, 0.0);
+    }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked just above).
@@ -279,25 +297,29 @@ fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLa
     let z_mm = &mut lanes.z_mm[..n];
     let index = &mut lanes.index[..n];
     let slot = &mut lanes.slot[..n];
-    let dir = &mut lanes.dir[..n];
+    let dir_x = &mut lanes.dir_x[..n];
+    let dir_y = &mut lanes.dir_y[..n];
+    let cos_out = &mut lanes.cos_b[..n];
     let reach_mm = &mut lanes.reach_mm[..n];
     let first_wet = f64::from(ray.first_wet);
     for k in 0..n {
-        let j = f64::from(layer[k]);
+        let j = layer[k];
         let z = (j + 0.5) * BUBBLE_LAYER_MM;
         z_mm[k] = z;
         // ceil is exact; the walk keeps j below the layer whose index would pass the last.
-        index[k] = ray.cover_steps(j).ceil().max(first_wet) as u32;
+        index[k] = ray.cover_steps(j).ceil().max(first_wet);
         let bx = ray.p0.x + ray.slope_xy.x * z;
         let by = ray.p0.y + ray.slope_xy.y * z;
         // cos θ_B in (0, 1]: isotropic over the lower hemisphere.
-        let cos_b = 1.0 - f64::from(cos_draw[k]) * INV_2_POW_32;
+        let cos_b = 1.0 - cos_draw[k] * INV_2_POW_32;
         let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
         let (c_phi, s_phi) = unit_circle_of(phi_draw[k]);
         let reach = z / cos_b;
         let travel = sin_b * reach;
-        slot[k] = bundles.slot(bx + c_phi * travel, by + s_phi * travel) as u32;
-        dir[k] = [sin_b * c_phi, sin_b * s_phi, -cos_b];
+        slot[k] = bundles.slot_f64(bx + c_phi * travel, by + s_phi * travel);
+        dir_x[k] = sin_b * c_phi;
+        dir_y[k] = sin_b * s_phi;
+        cos_out[k] = cos_b;
         reach_mm[k] = reach;
     }
 }
@@ -370,7 +392,7 @@ mod tests {
         let n = 160_000u64;
         for k in 0..n {
             let u = (s.word(k) >> 32) as u32;
-            let (x, y) = unit_circle_of(u);
+            let (x, y) = unit_circle_of(f64::from(u));
             assert!((x * x + y * y - 1.0).abs() < 1e-15);
             // The same angle as libm gives for φ = 2π (u + ½)/2³².
             let phi = std::f64::consts::TAU * (f64::from(u) + 0.5) * INV_2_POW_32;
@@ -382,9 +404,11 @@ mod tests {
             assert!((c as f64 - 10_000.0).abs() < 400.0, "{sector:?}");
         }
         // Quadrant edges.
-        let (x, y) = unit_circle_of(0);
+        let (x, y) = unit_circle_of(0.0);
         assert!((x - 1.0).abs() < 1e-9 && y.abs() < 1e-8);
-        let (x, y) = unit_circle_of(1 << 30);
+        let (x, y) = unit_circle_of(f64::from(u32::MAX));
+        assert!((x - 1.0).abs() < 1e-9 && y.abs() < 1e-8);
+        let (x, y) = unit_circle_of(f64::from(1u32 << 30));
         assert!(x.abs() < 1e-8 && (y - 1.0).abs() < 1e-9);
     }
 
@@ -408,11 +432,11 @@ mod tests {
         land_scattered(&ray, &bundles, &mut lanes);
         let mut landed = 0;
         for k in 0..lanes.len() {
-            let z = (f64::from(lanes.layer[k]) + 0.5) * 0.1;
+            let z = (lanes.layer[k] + 0.5) * 0.1;
             assert_eq!(lanes.z_mm[k].to_bits(), z.to_bits());
-            let q = ((f64::from(lanes.layer[k]) + 1.0) * 0.1 + 0.3 - 0.05 * z) * 10.0 - 1e-9;
-            assert_eq!(lanes.index[k], (q.ceil() as u32).max(1), "bubble {k}");
-            let cos_b = 1.0 - f64::from(lanes.cos_draw[k]) * INV_2_POW_32;
+            let q = ((lanes.layer[k] + 1.0) * 0.1 + 0.3 - 0.05 * z) * 10.0 - 1e-9;
+            assert_eq!(lanes.index[k], q.ceil().max(1.0), "bubble {k}");
+            let cos_b = 1.0 - lanes.cos_draw[k] * INV_2_POW_32;
             let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
             let (c, s) = unit_circle_of(lanes.phi_draw[k]);
             let reach = z / cos_b;
@@ -422,10 +446,11 @@ mod tests {
                 crate::geometry::Region::Bundle2 => 1,
                 _ => 2,
             };
-            assert_eq!(lanes.slot[k], want, "bubble {k}");
+            assert_eq!(lanes.slot[k], want as f64, "bubble {k}");
             assert_eq!(lanes.reach_mm[k].to_bits(), reach.to_bits());
-            assert_eq!(lanes.dir[k][2].to_bits(), (-cos_b).to_bits());
-            assert_eq!(lanes.dir[k][0].to_bits(), (sin_b * c).to_bits());
+            assert_eq!(lanes.cos_b[k].to_bits(), cos_b.to_bits());
+            assert_eq!(lanes.dir_x[k].to_bits(), (sin_b * c).to_bits());
+            assert_eq!(lanes.dir_y[k].to_bits(), (sin_b * s).to_bits());
             landed += usize::from(want < 2);
         }
         assert!(landed > 0);

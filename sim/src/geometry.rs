@@ -128,17 +128,23 @@ pub(crate) struct Bundles {
 
 impl Bundles {
     /// 0 on signal bundle 1, 1 on signal bundle 2, 2 elsewhere (source, outside).
+    #[inline(always)]
+    pub(crate) fn slot(&self, x_mm: f64, y_mm: f64) -> usize {
+        self.slot_f64(x_mm, y_mm) as usize
+    }
+
+    /// [`Bundles::slot`] as 0.0, 1.0 or 2.0: selects between floats only, so that loops
+    /// over many landing points vectorise.
     // The negated comparisons keep `region`'s answer for NaN coordinates too.
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     #[inline(always)]
-    pub(crate) fn slot(&self, x_mm: f64, y_mm: f64) -> usize {
-        // Exactly the tests of `Geometry::region`, NaN included, combined with `&`.
-        let in_y = !(y_mm.abs() > self.r);
-        let right = !(x_mm < 0.0);
-        let b1 = in_y & right & (x_mm <= self.b);
+    pub(crate) fn slot_f64(&self, x_mm: f64, y_mm: f64) -> f64 {
+        // Exactly the tests of `Geometry::region`, NaN included.
+        let face = !(y_mm.abs() > self.r) & !(x_mm < 0.0);
         let dx = x_mm - self.b;
-        let b2 = in_y & right & !(x_mm <= self.b) & (dx * dx + y_mm * y_mm <= self.r2);
-        2 - 2 * usize::from(b1) - usize::from(b2)
+        let disc = if dx * dx + y_mm * y_mm <= self.r2 { 1.0 } else { 2.0 };
+        let on = if x_mm <= self.b { 0.0 } else { disc };
+        if face { on } else { 2.0 }
     }
 }
 

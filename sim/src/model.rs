@@ -530,6 +530,9 @@ impl SensorModel {
         // Dense bubbles (rime) walk gap by gap from counter-based streams (bubbles.rs).
         let dense = (p.p_bubble > DENSE_ABOVE).then(|| GapSampler::new(p.p_bubble));
         let mut lanes = BubbleLanes::default();
+        // F^n, n = 0, 1, …: grown to the most bubbles one ray met.
+        let mut forward_pow: Vec<f64> = vec![1.0];
+        let mut landed: Vec<usize> = Vec::new();
         let sensor_a = cfg.sensor == SensorKind::A;
         let bundles = geo.bundles();
         // Bounding box of the face, for culling scattered rays.
@@ -607,15 +610,28 @@ impl SensorModel {
                     first_wet: first_wet as u32,
                 };
                 land_scattered(&bray, &bundles, &mut lanes);
-                for n in 0..lanes.len() {
-                    let i = lanes.index[n] as usize;
-                    let k = lanes.slot[n] as usize;
-                    if k < 2 {
-                        scatter(i, k, fwd, DVec3::from(lanes.dir[n]), lanes.z_mm[n], lanes.reach_mm[n]);
-                    }
-                    fwd *= FORWARD_FRACTION;
-                    fwd_after.push(fwd);
-                    bubbles_at[i] += 1;
+                let count = lanes.len();
+                // Forward flux after n bubbles: Φ·F^n (F = FORWARD_FRACTION).
+                while forward_pow.len() <= count {
+                    let last = forward_pow.last().copied().unwrap_or(1.0);
+                    forward_pow.push(last * FORWARD_FRACTION);
+                }
+                fwd_after.extend(forward_pow[1..=count].iter().map(|&f| ray.flux_in_w * f));
+                for &i in &lanes.index {
+                    bubbles_at[i as usize] += 1;
+                }
+                // The few bubbles whose scattered ray lands on a bundle (≈ 1 in 8).
+                landed.clear();
+                landed.resize(count, 0);
+                let mut m = 0;
+                for (n, &k) in lanes.slot.iter().enumerate() {
+                    landed[m] = n;
+                    m += usize::from(k < 2.0);
+                }
+                for &n in &landed[..m] {
+                    let s = DVec3::new(lanes.dir_x[n], lanes.dir_y[n], -lanes.cos_b[n]);
+                    let (i, k) = (lanes.index[n] as usize, lanes.slot[n] as usize);
+                    scatter(i, k, fwd_after[n], s, lanes.z_mm[n], lanes.reach_mm[n]);
                 }
             } else {
                 // Sparse bubbles (glazed): geometric gaps between bubbles by inversion
