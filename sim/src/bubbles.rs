@@ -53,22 +53,23 @@ impl CounterStream {
 }
 
 /// Bits of a draw that index the bucket table of [`GapSampler`].
-const GAP_BUCKET_BITS: u32 = 10;
+const GAP_BUCKET_BITS: u32 = 12;
 
 /// Geometric gaps from one 32-bit draw: the number of layers without a bubble before the
 /// next bubble, P(gap ≥ k) = (1 − P_B)^k, by inversion against a table of thresholds.
 #[derive(Clone, Debug)]
 pub(crate) struct GapSampler {
     /// threshold[k − 1] = round((1 − P_B)^k · 2³²): gap ≥ k iff the draw is below it.
-    /// Non-increasing; ends before the first 0 (no draw is below 0).
+    /// Non-increasing, ends with a 0 (no draw is below it), so that every gap g has a
+    /// threshold[g].
     threshold: Vec<u32>,
     /// Per bucket of the draw's upper `GAP_BUCKET_BITS` bits: the gap of the bucket's
     /// largest draw, the smallest gap in the bucket.
-    bucket_gap: Vec<u32>,
+    bucket_gap: Vec<u16>,
 }
 
 impl GapSampler {
-    /// The sampler for P_B = `p_bubble` (0 < P_B ≤ 1).
+    /// The sampler for P_B = `p_bubble` (`DENSE_ABOVE` < P_B ≤ 1: fewer than 2¹⁶ thresholds).
     pub(crate) fn new(p_bubble: f64) -> Self {
         let q = 1.0 - p_bubble;
         let mut threshold = Vec::new();
@@ -81,7 +82,9 @@ impl GapSampler {
             threshold.push(t as u32);
             qk *= q;
         }
-        let count = |u: u32| threshold.iter().take_while(|&&t| u < t).count() as u32;
+        threshold.push(0);
+        assert!(threshold.len() <= usize::from(u16::MAX), "P_B too small for the gap table");
+        let count = |u: u32| threshold.iter().take_while(|&&t| u < t).count() as u16;
         let buckets = 1u32 << GAP_BUCKET_BITS;
         let width = 1u64 << (32 - GAP_BUCKET_BITS);
         let bucket_gap = (0..buckets)
@@ -96,12 +99,12 @@ impl GapSampler {
     /// The gap for the draw `u`: #{k ≥ 1 : u < threshold of k}.
     #[inline(always)]
     pub(crate) fn gap(&self, u: u32) -> u32 {
-        let mut g = self.bucket_gap[(u >> (32 - GAP_BUCKET_BITS)) as usize];
-        // Only buckets that straddle a threshold need more than the table.
-        while let Some(&t) = self.threshold.get(g as usize) {
-            if u >= t {
-                break;
-            }
+        let table = |g: u32| self.threshold.get(g as usize).copied().unwrap_or(0);
+        let g = u32::from(self.bucket_gap[(u >> (32 - GAP_BUCKET_BITS)) as usize]);
+        // A bucket straddles at most one threshold except near u = 0: one step without a
+        // branch, then a loop that almost never runs.
+        let mut g = g + u32::from(u < table(g));
+        while u < table(g) {
             g += 1;
         }
         g
@@ -334,6 +337,7 @@ mod tests {
         for p in [0.021, 0.21, 0.5, 0.99, 1.0] {
             let g = GapSampler::new(p);
             let brute = |u: u32| g.threshold.iter().filter(|&&t| u < t).count() as u32;
+            assert_eq!(g.threshold.last(), Some(&0));
             // Every threshold, each side of it, and a spread of other draws.
             let mut us: Vec<u32> = vec![0, 1, u32::MAX, u32::MAX - 1];
             for &t in &g.threshold {
