@@ -168,37 +168,37 @@ fn sin_cos_octant(x: f64) -> (f64, f64) {
     (x + x * x2 * s, 1.0 + x2 * c)
 }
 
-/// The bubbles of one ray, one entry per bubble in walk order: inputs and outputs of
+/// The bubbles of one ray, one entry per bubble in walk order, padded to a multiple of
+/// `LANES` with copies of the last bubble (never read): inputs and outputs of
 /// [`land_scattered`]. Structure of arrays, all f64 (integers exactly), so that the kernel
 /// is a loop of float operations that the compiler vectorises.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BubbleLanes {
+    count: usize,
     /// Layer index j of the bubble.
-    pub layer: Vec<f64>,
+    layer: Vec<f64>,
     /// The 32-bit draw of cos θ_B.
-    pub cos_draw: Vec<f64>,
+    cos_draw: Vec<f64>,
     /// The 32-bit draw of the azimuth.
-    pub phi_draw: Vec<f64>,
-    /// Output: height of the bubble above the face, (j + ½)·Δ_Ice, mm.
-    pub z_mm: Vec<f64>,
+    phi_draw: Vec<f64>,
     /// Output: the output index (thickness) from which the bubble is frozen in.
     pub index: Vec<f64>,
     /// Output: 0 or 1 for the bundle the scattered ray lands on, 2 for none.
     pub slot: Vec<f64>,
-    /// Output: the scattered ray's direction, x.
-    pub dir_x: Vec<f64>,
-    /// Output: the scattered ray's direction, y.
-    pub dir_y: Vec<f64>,
-    /// Output: cos θ_B (the direction's z is −cos θ_B).
-    pub cos_b: Vec<f64>,
-    /// Output: its path from the bubble down to the face, z / cos θ_B, mm.
-    pub reach_mm: Vec<f64>,
 }
+
+/// Bubbles per vector of f64 (AVX2); the lanes are padded to a multiple of it.
+const LANES: usize = 4;
 
 impl BubbleLanes {
     /// Number of bubbles.
     pub(crate) fn len(&self) -> usize {
-        self.layer.len()
+        self.count
+    }
+
+    /// The scattered ray of bubble `n`, as [`land_scattered`] found it.
+    pub(crate) fn scattered(&self, ray: &BubbleRay, n: usize) -> Scattered {
+        scattered(ray, self.layer[n], self.cos_draw[n], self.phi_draw[n])
     }
 
     /// Walk the layers j < `j_end` of one ray: the bubbles and their draws.
@@ -224,6 +224,12 @@ impl BubbleLanes {
             phi_draw.push(f64::from((w1 >> 32) as u32));
             j += 1;
             n += 1;
+        }
+        self.count = layer.len();
+        let padded = self.count.next_multiple_of(LANES);
+        for v in [&mut layer, &mut cos_draw, &mut phi_draw] {
+            let last = v.last().copied().unwrap_or(0.0);
+            v.resize(padded, last);
         }
         self.layer = layer;
         self.cos_draw = cos_draw;
@@ -259,23 +265,46 @@ impl BubbleRay {
     }
 }
 
-/// Per bubble: the output index at which it is frozen in (the first index ≥ its cover
-/// thickness, not before the first wet one), and where its scattered ray lands. The
-/// bubble lies on the source ray at p0 + `slope_xy`·z, its scattered ray leaves downward
-/// at θ_B from the vertical and azimuth φ and travels z·tan θ_B sideways (thesis §3.2.2).
-pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
-    let n = lanes.len();
-    for out in [
-        &mut lanes.z_mm,
-        &mut lanes.index,
-        &mut lanes.slot,
-        &mut lanes.dir_x,
-        &mut lanes.dir_y,
-        &mut lanes.cos_b,
-        &mut lanes.reach_mm,
-    ] {
-        out.resize(n, 0.0);
+/// The scattered ray of one bubble (thesis §3.2.2, Fig. 3.11).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Scattered {
+    /// Height of the bubble above the face, (j + ½)·Δ_Ice, mm.
+    pub z_mm: f64,
+    /// Direction of the scattered ray (unit, z = −cos θ_B < 0).
+    pub dir: [f64; 3],
+    /// Its path from the bubble down to the face, z / cos θ_B, mm.
+    pub reach_mm: f64,
+    /// Where it meets the face, mm.
+    pub land: [f64; 2],
+}
+
+/// The bubble of layer j lies on the source ray at p0 + `slope_xy`·z; its scattered ray
+/// leaves downward at θ_B from the vertical (cos θ_B uniform in (0, 1]: isotropic over the
+/// lower hemisphere) and azimuth φ, and travels z·tan θ_B sideways to the face.
+#[inline(always)]
+fn scattered(ray: &BubbleRay, j: f64, cos_draw: f64, phi_draw: f64) -> Scattered {
+    let z = (j + 0.5) * BUBBLE_LAYER_MM;
+    let bx = ray.p0.x + ray.slope_xy.x * z;
+    let by = ray.p0.y + ray.slope_xy.y * z;
+    let cos_b = 1.0 - cos_draw * INV_2_POW_32;
+    let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
+    let (c_phi, s_phi) = unit_circle_of(phi_draw);
+    let reach = z / cos_b;
+    let travel = sin_b * reach;
+    Scattered {
+        z_mm: z,
+        dir: [sin_b * c_phi, sin_b * s_phi, -cos_b],
+        reach_mm: reach,
+        land: [bx + c_phi * travel, by + s_phi * travel],
     }
+}
+
+/// Per bubble: the output index at which it is frozen in (the first index ≥ its cover
+/// thickness, not before the first wet one) and the bundle its scattered ray lands on.
+pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
+    let n = lanes.layer.len();
+    lanes.index.resize(n, 0.0);
+    lanes.slot.resize(n, 0.0);
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU supports AVX2 (checked just above).
@@ -293,37 +322,18 @@ fn land_scattered_avx2(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLan
 
 #[inline(always)]
 fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
-    let n = lanes.len();
+    let n = lanes.layer.len();
     let layer = &lanes.layer[..n];
     let cos_draw = &lanes.cos_draw[..n];
     let phi_draw = &lanes.phi_draw[..n];
-    let z_mm = &mut lanes.z_mm[..n];
     let index = &mut lanes.index[..n];
     let slot = &mut lanes.slot[..n];
-    let dir_x = &mut lanes.dir_x[..n];
-    let dir_y = &mut lanes.dir_y[..n];
-    let cos_out = &mut lanes.cos_b[..n];
-    let reach_mm = &mut lanes.reach_mm[..n];
     let first_wet = f64::from(ray.first_wet);
     for k in 0..n {
-        let j = layer[k];
-        let z = (j + 0.5) * BUBBLE_LAYER_MM;
-        z_mm[k] = z;
         // ceil is exact; the walk keeps j below the layer whose index would pass the last.
-        index[k] = ray.cover_steps(j).ceil().max(first_wet);
-        let bx = ray.p0.x + ray.slope_xy.x * z;
-        let by = ray.p0.y + ray.slope_xy.y * z;
-        // cos θ_B in (0, 1]: isotropic over the lower hemisphere.
-        let cos_b = 1.0 - cos_draw[k] * INV_2_POW_32;
-        let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
-        let (c_phi, s_phi) = unit_circle_of(phi_draw[k]);
-        let reach = z / cos_b;
-        let travel = sin_b * reach;
-        slot[k] = bundles.slot_f64(bx + c_phi * travel, by + s_phi * travel);
-        dir_x[k] = sin_b * c_phi;
-        dir_y[k] = sin_b * s_phi;
-        cos_out[k] = cos_b;
-        reach_mm[k] = reach;
+        index[k] = ray.cover_steps(layer[k]).ceil().max(first_wet);
+        let s = scattered(ray, layer[k], cos_draw[k], phi_draw[k]);
+        slot[k] = bundles.slot_f64(s.land[0], s.land[1]);
     }
 }
 
@@ -431,18 +441,26 @@ mod tests {
             inv_step: 10.0,
             first_wet: 1,
         };
-        lanes.walk(CounterStream::new(5, 8), &gaps, 150);
+        let stream = CounterStream::new(5, 8);
+        lanes.walk(stream, &gaps, 150);
         assert!(lanes.len() > 15, "{}", lanes.len());
+        assert_eq!(lanes.layer.len() % LANES, 0);
         land_scattered(&ray, &bundles, &mut lanes);
-        let mut landed = 0;
-        for k in 0..lanes.len() {
-            let z = (lanes.layer[k] + 0.5) * 0.1;
-            assert_eq!(lanes.z_mm[k].to_bits(), z.to_bits());
-            let q = ((lanes.layer[k] + 1.0) * 0.1 + 0.3 - 0.05 * z) * 10.0 - 1e-9;
-            assert_eq!(lanes.index[k], q.ceil().max(1.0), "bubble {k}");
-            let cos_b = 1.0 - lanes.cos_draw[k] * INV_2_POW_32;
+        // The walk again, by hand: gaps, then the draws of each bubble.
+        let (mut j, mut landed) = (0u32, 0);
+        for n in 0..lanes.len() {
+            let w0 = stream.word(2 * n as u64);
+            j += gaps.gap((w0 >> 32) as u32);
+            let u_cos = f64::from(w0 as u32);
+            let u_phi = f64::from((stream.word(2 * n as u64 + 1) >> 32) as u32);
+            let got = (lanes.layer[n], lanes.cos_draw[n], lanes.phi_draw[n]);
+            assert_eq!(got, (f64::from(j), u_cos, u_phi), "bubble {n}");
+            let z = (f64::from(j) + 0.5) * 0.1;
+            let q = ((f64::from(j) + 1.0) * 0.1 + 0.3 - 0.05 * z) * 10.0 - 1e-9;
+            assert_eq!(lanes.index[n], q.ceil().max(1.0), "bubble {n}");
+            let cos_b = 1.0 - u_cos * INV_2_POW_32;
             let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
-            let (c, s) = unit_circle_of(lanes.phi_draw[k]);
+            let (c, s) = unit_circle_of(u_phi);
             let reach = z / cos_b;
             let land = p0 + slope * z + DVec2::new(c, s) * (sin_b * reach);
             let want = match geo.region(land.x, land.y) {
@@ -450,13 +468,17 @@ mod tests {
                 crate::geometry::Region::Bundle2 => 1,
                 _ => 2,
             };
-            assert_eq!(lanes.slot[k], want as f64, "bubble {k}");
-            assert_eq!(lanes.reach_mm[k].to_bits(), reach.to_bits());
-            assert_eq!(lanes.cos_b[k].to_bits(), cos_b.to_bits());
-            assert_eq!(lanes.dir_x[k].to_bits(), (sin_b * c).to_bits());
-            assert_eq!(lanes.dir_y[k].to_bits(), (sin_b * s).to_bits());
+            assert_eq!(lanes.slot[n], want as f64, "bubble {n}");
+            let sc = lanes.scattered(&ray, n);
+            assert_eq!(sc.reach_mm.to_bits(), reach.to_bits());
+            assert_eq!(sc.dir, [sin_b * c, sin_b * s, -cos_b]);
+            assert_eq!(sc.land, [land.x, land.y]);
             landed += usize::from(want < 2);
+            j += 1;
         }
+        // The next gap passes the end.
+        let w0 = stream.word(2 * lanes.len() as u64);
+        assert!(j + gaps.gap((w0 >> 32) as u32) >= 150);
         assert!(landed > 0);
     }
 }

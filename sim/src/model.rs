@@ -617,21 +617,21 @@ impl SensorModel {
                     forward_pow.push(last * FORWARD_FRACTION);
                 }
                 fwd_after.extend(forward_pow[1..=count].iter().map(|&f| ray.flux_in_w * f));
-                for &i in &lanes.index {
+                for &i in &lanes.index[..count] {
                     bubbles_at[i as usize] += 1;
                 }
                 // The few bubbles whose scattered ray lands on a bundle (≈ 1 in 8).
                 landed.clear();
                 landed.resize(count, 0);
                 let mut m = 0;
-                for (n, &k) in lanes.slot.iter().enumerate() {
+                for (n, &k) in lanes.slot[..count].iter().enumerate() {
                     landed[m] = n;
                     m += usize::from(k < 2.0);
                 }
                 for &n in &landed[..m] {
-                    let s = DVec3::new(lanes.dir_x[n], lanes.dir_y[n], -lanes.cos_b[n]);
+                    let sc = lanes.scattered(&bray, n);
                     let (i, k) = (lanes.index[n] as usize, lanes.slot[n] as usize);
-                    scatter(i, k, fwd_after[n], s, lanes.z_mm[n], lanes.reach_mm[n]);
+                    scatter(i, k, fwd_after[n], DVec3::from(sc.dir), sc.z_mm, sc.reach_mm);
                 }
             } else {
                 // Sparse bubbles (glazed): geometric gaps between bubbles by inversion
