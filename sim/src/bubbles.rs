@@ -20,6 +20,7 @@ use glam::DVec2;
 
 use crate::consts::BUBBLE_LAYER_MM;
 use crate::geometry::Bundles;
+use crate::kernels::vector_kernel;
 use crate::model::mix64;
 
 /// Increment of the SplitMix64 sequence (2⁶⁴/φ, odd).
@@ -305,22 +306,10 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
     let n = lanes.layer.len();
     lanes.index.resize(n, 0.0);
     lanes.slot.resize(n, 0.0);
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        unsafe { land_scattered_avx2(ray, bundles, lanes) };
-        return;
-    }
     land_scattered_lanes(ray, bundles, lanes);
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn land_scattered_avx2(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
-    land_scattered_lanes(ray, bundles, lanes);
-}
-
-#[inline(always)]
+vector_kernel! {
 fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
     let n = lanes.layer.len();
     let layer = &lanes.layer[..n];
@@ -335,6 +324,7 @@ fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLa
         let s = scattered(ray, layer[k], cos_draw[k], phi_draw[k]);
         slot[k] = bundles.slot_f64(s.land[0], s.land[1]);
     }
+}
 }
 
 #[cfg(test)]

@@ -5,10 +5,35 @@
 //! as the scalar formula (Rust never fuses a multiply and an add on its own), so the results
 //! are bit-identical to it; the golden-value tests of the crate check this.
 
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 
 use crate::geometry::Bundles;
 use crate::laws::fr_dielectric;
+
+/// A kernel compiled twice: for the CPU's AVX2 when it has it (checked at run time) and for
+/// the baseline x86-64 (or any other target). Both run the same body, so the results are
+/// bit-identical.
+macro_rules! vector_kernel {
+    ($(#[$meta:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $body:block) => {
+        $(#[$meta])*
+        $vis fn $name($($arg: $ty),*) {
+            #[inline(always)]
+            fn kernel_body($($arg: $ty),*) $body
+            #[cfg(target_arch = "x86_64")]
+            #[target_feature(enable = "avx2")]
+            fn kernel_avx2($($arg: $ty),*) {
+                kernel_body($($arg),*)
+            }
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                return unsafe { kernel_avx2($($arg),*) };
+            }
+            kernel_body($($arg),*)
+        }
+    };
+}
+pub(crate) use vector_kernel;
 
 /// What the diffuse reflection of one ray needs besides its thicknesses and draws.
 #[derive(Clone, Copy, Debug)]
@@ -68,28 +93,10 @@ pub(crate) fn reflect_diffuse(
     out.couple.resize(n, 0.0);
     out.path_mm.resize(n, 0.0);
     out.dir.resize(n, [0.0; 3]);
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU supports AVX2 (checked just above).
-        unsafe { reflect_diffuse_avx2(ray, bundles, thick_mm, draws, out) };
-        return;
-    }
     reflect_diffuse_lanes(ray, bundles, thick_mm, draws, out);
 }
 
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn reflect_diffuse_avx2(
-    ray: &DiffuseRay,
-    bundles: &Bundles,
-    thick_mm: &[f64],
-    draws: &[u32],
-    out: &mut DiffuseLanes,
-) {
-    reflect_diffuse_lanes(ray, bundles, thick_mm, draws, out);
-}
-
-#[inline(always)]
+vector_kernel! {
 fn reflect_diffuse_lanes(
     ray: &DiffuseRay,
     bundles: &Bundles,
@@ -137,6 +144,30 @@ fn reflect_diffuse_lanes(
         path[k] = t_up + t_down;
         dir[k] = [rd_x, rd_y, rd_z];
     }
+}
+}
+
+vector_kernel! {
+/// The bundle slot of a specular reflection's landing point p0 + w·h0, h0 = d + a, at each
+/// thickness d = `thick_mm[n]`: 0 or 1, and 2 for none or where the surface is not above
+/// the fibre (h0 ≤ 0). The same comparisons as `Geometry::region`.
+pub(crate) fn specular_slots(
+    p0: DVec2,
+    w: DVec2,
+    a: f64,
+    bundles: &Bundles,
+    thick_mm: &[f64],
+    slot: &mut [f64],
+) {
+    let n = thick_mm.len().min(slot.len());
+    let (thick_mm, slot) = (&thick_mm[..n], &mut slot[..n]);
+    for k in 0..n {
+        let h0 = thick_mm[k] + a;
+        let land = p0 + w * h0;
+        let on = bundles.slot_f64(land.x, land.y);
+        slot[k] = if h0 <= 0.0 { 2.0 } else { on };
+    }
+}
 }
 
 /// sin and cos of a small angle (|x| ≤ 0.53 rad, i.e. δ_R/2 ≤ 30°) by Taylor series to x¹¹:

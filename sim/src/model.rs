@@ -6,8 +6,8 @@ use rand_pcg::Pcg32;
 
 use crate::bubbles::{BubbleLanes, BubbleRay, CounterStream, GapSampler, land_scattered};
 use crate::consts::*;
-use crate::geometry::{Geometry, Region};
-use crate::kernels::{DiffuseLanes, DiffuseRay, reflect_diffuse};
+use crate::geometry::Geometry;
+use crate::kernels::{DiffuseLanes, DiffuseRay, reflect_diffuse, specular_slots};
 use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
 
 /// The medium that accretes on the face (thesis §3.4, §5.2.3, §5.3).
@@ -533,6 +533,7 @@ impl SensorModel {
         // F^n, n = 0, 1, …: grown to the most bubbles one ray met.
         let mut forward_pow: Vec<f64> = vec![1.0];
         let mut landed: Vec<usize> = Vec::new();
+        let mut spec_slot: Vec<f64> = Vec::with_capacity(nt);
         let sensor_a = cfg.sensor == SensorKind::A;
         let bundles = geo.bundles();
         // Bounding box of the face, for culling scattered rays.
@@ -779,23 +780,16 @@ impl SensorModel {
                         .iter()
                         .map(|&c| c as usize)
                         .sum();
-                    for i in i_lo..i_hi {
+                    spec_slot.resize(i_hi - i_lo, 2.0);
+                    specular_slots(ray.p0, w, a, &bundles, &self.thick[i_lo..i_hi], &mut spec_slot);
+                    for (i, &k) in (i_lo..i_hi).zip(&spec_slot) {
                         let att_i = att;
                         att *= att_step;
                         n_bub += bubbles_at[i] as usize;
-                        let fwd = fwd_after[n_bub];
-                        let h0 = self.thick[i] + a;
-                        if h0 <= 0.0 {
-                            continue;
-                        }
-                        let land = ray.p0 + w * h0;
                         // Along the line the bundle changes rarely: a branch predicts well.
-                        let k = match geo.region(land.x, land.y) {
-                            Region::Bundle1 => 0,
-                            Region::Bundle2 => 1,
-                            _ => continue,
-                        };
-                        refl[i][k] += fwd * rfl * cpl * att_i;
+                        if k < 2.0 {
+                            refl[i][k as usize] += fwd_after[n_bub] * rfl * cpl * att_i;
+                        }
                     }
                 }
             }
