@@ -183,9 +183,9 @@ pub(crate) struct BubbleLanes {
     /// The 32-bit draw of the azimuth.
     phi_draw: Vec<f64>,
     /// Output: the output index (thickness) from which the bubble is frozen in.
-    pub index: Vec<f64>,
+    pub index: Vec<i32>,
     /// Output: 0 or 1 for the bundle the scattered ray lands on, 2 for none.
-    pub slot: Vec<f64>,
+    pub slot: Vec<i32>,
 }
 
 /// Bubbles per vector of f64 (AVX2); the lanes are padded to a multiple of it.
@@ -204,37 +204,42 @@ impl BubbleLanes {
 
     /// Walk the layers j < `j_end` of one ray: the bubbles and their draws.
     pub(crate) fn walk(&mut self, stream: CounterStream, gaps: &GapSampler, j_end: u32) {
-        // Pushed through locals: their lengths stay in registers.
-        let mut layer = std::mem::take(&mut self.layer);
-        let mut cos_draw = std::mem::take(&mut self.cos_draw);
-        let mut phi_draw = std::mem::take(&mut self.phi_draw);
-        layer.clear();
-        cos_draw.clear();
-        phi_draw.clear();
+        // At most one bubble per layer, plus the padding. The buffers only grow, and are
+        // written by index: cheaper than a push.
+        let room = j_end as usize + LANES;
+        for v in [&mut self.layer, &mut self.cos_draw, &mut self.phi_draw] {
+            if v.len() < room {
+                v.resize(room, 0.0);
+            }
+        }
+        let (layer, cos_draw, phi_draw) = (
+            &mut self.layer[..room],
+            &mut self.cos_draw[..room],
+            &mut self.phi_draw[..room],
+        );
         let mut j: u32 = 0;
-        let mut n: u64 = 0;
+        let mut n: usize = 0;
         loop {
-            let w0 = stream.word(2 * n);
+            let w0 = stream.word(2 * n as u64);
             j = j.saturating_add(gaps.gap((w0 >> 32) as u32));
             if j >= j_end {
                 break;
             }
-            let w1 = stream.word(2 * n + 1);
-            layer.push(f64::from(j));
-            cos_draw.push(f64::from(w0 as u32));
-            phi_draw.push(f64::from((w1 >> 32) as u32));
+            let w1 = stream.word(2 * n as u64 + 1);
+            layer[n] = f64::from(j);
+            cos_draw[n] = f64::from(w0 as u32);
+            phi_draw[n] = f64::from((w1 >> 32) as u32);
             j += 1;
             n += 1;
         }
-        self.count = layer.len();
-        let padded = self.count.next_multiple_of(LANES);
-        for v in [&mut layer, &mut cos_draw, &mut phi_draw] {
-            let last = v.last().copied().unwrap_or(0.0);
-            v.resize(padded, last);
+        self.count = n;
+        // Pad to whole vectors with copies of the last bubble (or of zeros).
+        let last = n.saturating_sub(1);
+        for k in n..n.next_multiple_of(LANES) {
+            layer[k] = layer[last];
+            cos_draw[k] = cos_draw[last];
+            phi_draw[k] = phi_draw[last];
         }
-        self.layer = layer;
-        self.cos_draw = cos_draw;
-        self.phi_draw = phi_draw;
     }
 }
 
@@ -303,15 +308,15 @@ fn scattered(ray: &BubbleRay, j: f64, cos_draw: f64, phi_draw: f64) -> Scattered
 /// Per bubble: the output index at which it is frozen in (the first index ≥ its cover
 /// thickness, not before the first wet one) and the bundle its scattered ray lands on.
 pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
-    let n = lanes.layer.len();
-    lanes.index.resize(n, 0.0);
-    lanes.slot.resize(n, 0.0);
+    let n = lanes.count.next_multiple_of(LANES);
+    lanes.index.resize(n, 0);
+    lanes.slot.resize(n, 0);
     land_scattered_lanes(ray, bundles, lanes);
 }
 
 vector_kernel! {
 fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
-    let n = lanes.layer.len();
+    let n = lanes.count.next_multiple_of(LANES);
     let layer = &lanes.layer[..n];
     let cos_draw = &lanes.cos_draw[..n];
     let phi_draw = &lanes.phi_draw[..n];
@@ -320,9 +325,9 @@ fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLa
     let first_wet = f64::from(ray.first_wet);
     for k in 0..n {
         // ceil is exact; the walk keeps j below the layer whose index would pass the last.
-        index[k] = ray.cover_steps(layer[k]).ceil().max(first_wet);
+        index[k] = ray.cover_steps(layer[k]).ceil().max(first_wet) as i32;
         let s = scattered(ray, layer[k], cos_draw[k], phi_draw[k]);
-        slot[k] = bundles.slot_f64(s.land[0], s.land[1]);
+        slot[k] = bundles.slot_f64(s.land[0], s.land[1]) as i32;
     }
 }
 }
@@ -434,7 +439,6 @@ mod tests {
         let stream = CounterStream::new(5, 8);
         lanes.walk(stream, &gaps, 150);
         assert!(lanes.len() > 15, "{}", lanes.len());
-        assert_eq!(lanes.layer.len() % LANES, 0);
         land_scattered(&ray, &bundles, &mut lanes);
         // The walk again, by hand: gaps, then the draws of each bubble.
         let (mut j, mut landed) = (0u32, 0);
@@ -447,7 +451,7 @@ mod tests {
             assert_eq!(got, (f64::from(j), u_cos, u_phi), "bubble {n}");
             let z = (f64::from(j) + 0.5) * 0.1;
             let q = ((f64::from(j) + 1.0) * 0.1 + 0.3 - 0.05 * z) * 10.0 - 1e-9;
-            assert_eq!(lanes.index[n], q.ceil().max(1.0), "bubble {n}");
+            assert_eq!(f64::from(lanes.index[n]), q.ceil().max(1.0), "bubble {n}");
             let cos_b = 1.0 - u_cos * INV_2_POW_32;
             let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
             let (c, s) = unit_circle_of(u_phi);
@@ -458,7 +462,7 @@ mod tests {
                 crate::geometry::Region::Bundle2 => 1,
                 _ => 2,
             };
-            assert_eq!(lanes.slot[n], want as f64, "bubble {n}");
+            assert_eq!(lanes.slot[n], want, "bubble {n}");
             let sc = lanes.scattered(&ray, n);
             assert_eq!(sc.reach_mm.to_bits(), reach.to_bits());
             assert_eq!(sc.dir, [sin_b * c, sin_b * s, -cos_b]);

@@ -157,7 +157,7 @@ pub(crate) fn specular_slots(
     a: f64,
     bundles: &Bundles,
     thick_mm: &[f64],
-    slot: &mut [f64],
+    slot: &mut [i32],
 ) {
     let n = thick_mm.len().min(slot.len());
     let (thick_mm, slot) = (&thick_mm[..n], &mut slot[..n]);
@@ -165,7 +165,7 @@ pub(crate) fn specular_slots(
         let h0 = thick_mm[k] + a;
         let land = p0 + w * h0;
         let on = bundles.slot_f64(land.x, land.y);
-        slot[k] = if h0 <= 0.0 { 2.0 } else { on };
+        slot[k] = if h0 <= 0.0 { 2 } else { on as i32 };
     }
 }
 }

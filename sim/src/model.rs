@@ -533,7 +533,7 @@ impl SensorModel {
         // F^n, n = 0, 1, …: grown to the most bubbles one ray met.
         let mut forward_pow: Vec<f64> = vec![1.0];
         let mut landed: Vec<usize> = Vec::new();
-        let mut spec_slot: Vec<f64> = Vec::with_capacity(nt);
+        let mut spec_slot: Vec<i32> = Vec::with_capacity(nt);
         let sensor_a = cfg.sensor == SensorKind::A;
         let bundles = geo.bundles();
         // Bounding box of the face, for culling scattered rays.
@@ -627,7 +627,7 @@ impl SensorModel {
                 let mut m = 0;
                 for (n, &k) in lanes.slot[..count].iter().enumerate() {
                     landed[m] = n;
-                    m += usize::from(k < 2.0);
+                    m += usize::from(k < 2);
                 }
                 for &n in &landed[..m] {
                     let sc = lanes.scattered(&bray, n);
@@ -780,14 +780,14 @@ impl SensorModel {
                         .iter()
                         .map(|&c| c as usize)
                         .sum();
-                    spec_slot.resize(i_hi - i_lo, 2.0);
+                    spec_slot.resize(i_hi - i_lo, 2);
                     specular_slots(ray.p0, w, a, &bundles, &self.thick[i_lo..i_hi], &mut spec_slot);
                     for (i, &k) in (i_lo..i_hi).zip(&spec_slot) {
                         let att_i = att;
                         att *= att_step;
                         n_bub += bubbles_at[i] as usize;
                         // Along the line the bundle changes rarely: a branch predicts well.
-                        if k < 2.0 {
+                        if k < 2 {
                             refl[i][k as usize] += fwd_after[n_bub] * rfl * cpl * att_i;
                         }
                     }
