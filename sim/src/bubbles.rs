@@ -11,8 +11,8 @@
 //! bit-identical results: the same IEEE-754 operations in the same order per lane).
 //!
 //! Layout of the draws of bubble n (words w₀ = word 2n, w₁ = word 2n + 1):
-//! - the gap of empty layers before it: the upper 32 bits of w₀;
-//! - cos θ_B = 1 − u, u uniform in [0, 1): the lower 32 bits of w₀ (the scattered ray is
+//! - the gap of empty layers before it: the upper 32 bits of w₀ (the lower 32 are unused);
+//! - cos θ_B = 1 − u, u uniform in [0, 1): the lower 32 bits of w₁ (the scattered ray is
 //!   isotropic over the lower hemisphere, as in the thesis's bubble model);
 //! - the azimuth φ: the upper 32 bits of w₁ (2 bits of quadrant, 30 of angle).
 
@@ -33,7 +33,7 @@ const INV_2_POW_32: f64 = 1.0 / 4_294_967_296.0;
 /// "Fast splittable pseudorandom number generators", OOPSLA 2014) n + 1 steps after the
 /// stream's start, i.e. a pure function of (start, n). Any word can be computed without
 /// the ones before it, in any order, in vector lanes.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct CounterStream {
     start: u64,
 }
@@ -126,7 +126,7 @@ pub(crate) fn unit_circle_of(u: f64) -> (f64, f64) {
     // Angle π/4 + t, in [0, π/2).
     let (x, y) = ((c - s) * FRAC_1_SQRT_2, (c + s) * FRAC_1_SQRT_2);
     // Turned by quadrant·π/2: by π/2 in quadrants 1 and 3, then by π in 2 and 3.
-    let odd = quadrant == 1.0 || quadrant == 3.0;
+    let odd = (quadrant == 1.0) | (quadrant == 3.0);
     let (x, y) = (if odd { -y } else { x }, if odd { x } else { y });
     let half = quadrant >= 2.0;
     (if half { -x } else { x }, if half { -y } else { y })
@@ -176,12 +176,10 @@ fn sin_cos_octant(x: f64) -> (f64, f64) {
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BubbleLanes {
     count: usize,
+    /// The stream of the ray's bubbles.
+    stream: CounterStream,
     /// Layer index j of the bubble.
     layer: Vec<f64>,
-    /// The 32-bit draw of cos θ_B.
-    cos_draw: Vec<f64>,
-    /// The 32-bit draw of the azimuth.
-    phi_draw: Vec<f64>,
     /// Output: the output index (thickness) from which the bubble is frozen in.
     pub index: Vec<i32>,
     /// Output: 0 or 1 for the bundle the scattered ray lands on, 2 for none.
@@ -199,48 +197,50 @@ impl BubbleLanes {
 
     /// The scattered ray of bubble `n`, as [`land_scattered`] found it.
     pub(crate) fn scattered(&self, ray: &BubbleRay, n: usize) -> Scattered {
-        scattered(ray, self.layer[n], self.cos_draw[n], self.phi_draw[n])
+        let (cos_draw, phi_draw) = angle_draws(self.stream, n as u64);
+        scattered(ray, self.layer[n], cos_draw, phi_draw)
     }
 
-    /// Walk the layers j < `j_end` of one ray: the bubbles and their draws.
+    /// Walk the layers j < `j_end` of one ray: where its bubbles are.
     pub(crate) fn walk(&mut self, stream: CounterStream, gaps: &GapSampler, j_end: u32) {
-        // At most one bubble per layer, plus the padding. The buffers only grow, and are
+        self.stream = stream;
+        // At most one bubble per layer, plus the padding. The buffer only grows, and is
         // written by index: cheaper than a push.
         let room = j_end as usize + LANES;
-        for v in [&mut self.layer, &mut self.cos_draw, &mut self.phi_draw] {
-            if v.len() < room {
-                v.resize(room, 0.0);
-            }
+        if self.layer.len() < room {
+            self.layer.resize(room, 0.0);
         }
-        let (layer, cos_draw, phi_draw) = (
-            &mut self.layer[..room],
-            &mut self.cos_draw[..room],
-            &mut self.phi_draw[..room],
-        );
+        let layer = &mut self.layer[..room];
         let mut j: u32 = 0;
         let mut n: usize = 0;
         loop {
-            let w0 = stream.word(2 * n as u64);
-            j = j.saturating_add(gaps.gap((w0 >> 32) as u32));
+            j = j.saturating_add(gaps.gap(gap_draw(stream, n as u64)));
             if j >= j_end {
                 break;
             }
-            let w1 = stream.word(2 * n as u64 + 1);
             layer[n] = f64::from(j);
-            cos_draw[n] = f64::from(w0 as u32);
-            phi_draw[n] = f64::from((w1 >> 32) as u32);
             j += 1;
             n += 1;
         }
         self.count = n;
         // Pad to whole vectors with copies of the last bubble (or of zeros).
-        let last = n.saturating_sub(1);
-        for k in n..n.next_multiple_of(LANES) {
-            layer[k] = layer[last];
-            cos_draw[k] = cos_draw[last];
-            phi_draw[k] = phi_draw[last];
-        }
+        let last = layer[n.saturating_sub(1)];
+        layer[n..n.next_multiple_of(LANES)].fill(last);
     }
+}
+
+/// The draw of the gap before bubble n: the upper 32 bits of word 2n.
+#[inline(always)]
+fn gap_draw(stream: CounterStream, n: u64) -> u32 {
+    (stream.word(2 * n) >> 32) as u32
+}
+
+/// The draws of the scattering angles of bubble n, as f64 (exactly): cos θ_B from the lower
+/// and φ from the upper 32 bits of word 2n + 1.
+#[inline(always)]
+fn angle_draws(stream: CounterStream, n: u64) -> (f64, f64) {
+    let w = stream.word(2 * n + 1);
+    (f64::from(w as u32), f64::from((w >> 32) as u32))
 }
 
 /// One source ray as the bubble kernel sees it.
@@ -317,16 +317,16 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
 vector_kernel! {
 fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
     let n = lanes.count.next_multiple_of(LANES);
+    let stream = lanes.stream;
     let layer = &lanes.layer[..n];
-    let cos_draw = &lanes.cos_draw[..n];
-    let phi_draw = &lanes.phi_draw[..n];
     let index = &mut lanes.index[..n];
     let slot = &mut lanes.slot[..n];
     let first_wet = f64::from(ray.first_wet);
     for k in 0..n {
         // ceil is exact; the walk keeps j below the layer whose index would pass the last.
         index[k] = ray.cover_steps(layer[k]).ceil().max(first_wet) as i32;
-        let s = scattered(ray, layer[k], cos_draw[k], phi_draw[k]);
+        let (cos_draw, phi_draw) = angle_draws(stream, k as u64);
+        let s = scattered(ray, layer[k], cos_draw, phi_draw);
         slot[k] = bundles.slot_f64(s.land[0], s.land[1]) as i32;
     }
 }
@@ -443,12 +443,10 @@ mod tests {
         // The walk again, by hand: gaps, then the draws of each bubble.
         let (mut j, mut landed) = (0u32, 0);
         for n in 0..lanes.len() {
-            let w0 = stream.word(2 * n as u64);
-            j += gaps.gap((w0 >> 32) as u32);
-            let u_cos = f64::from(w0 as u32);
-            let u_phi = f64::from((stream.word(2 * n as u64 + 1) >> 32) as u32);
-            let got = (lanes.layer[n], lanes.cos_draw[n], lanes.phi_draw[n]);
-            assert_eq!(got, (f64::from(j), u_cos, u_phi), "bubble {n}");
+            j += gaps.gap((stream.word(2 * n as u64) >> 32) as u32);
+            let w1 = stream.word(2 * n as u64 + 1);
+            let (u_cos, u_phi) = (f64::from(w1 as u32), f64::from((w1 >> 32) as u32));
+            assert_eq!(lanes.layer[n], f64::from(j), "bubble {n}");
             let z = (f64::from(j) + 0.5) * 0.1;
             let q = ((f64::from(j) + 1.0) * 0.1 + 0.3 - 0.05 * z) * 10.0 - 1e-9;
             assert_eq!(f64::from(lanes.index[n]), q.ceil().max(1.0), "bubble {n}");
