@@ -184,6 +184,13 @@ pub(crate) struct BubbleLanes {
     pub index: Vec<i32>,
     /// Output: 0 or 1 for the bundle the scattered ray lands on, 2 for none.
     pub slot: Vec<i32>,
+    /// Output: the scattered rays, `Scattered` as a structure of arrays (z, dir x, dir y,
+    /// cos θ_B, reach).
+    out_z_mm: Vec<f64>,
+    out_dir_x: Vec<f64>,
+    out_dir_y: Vec<f64>,
+    out_cos_b: Vec<f64>,
+    out_reach_mm: Vec<f64>,
 }
 
 /// Bubbles per vector of f64 (AVX2); the lanes are padded to a multiple of it.
@@ -196,9 +203,12 @@ impl BubbleLanes {
     }
 
     /// The scattered ray of bubble `n`, as [`land_scattered`] found it.
-    pub(crate) fn scattered(&self, ray: &BubbleRay, n: usize) -> Scattered {
-        let (cos_draw, phi_draw) = angle_draws(self.stream, n as u64);
-        scattered(ray, self.layer[n], cos_draw, phi_draw)
+    pub(crate) fn scattered(&self, n: usize) -> Scattered {
+        Scattered {
+            z_mm: self.out_z_mm[n],
+            dir: [self.out_dir_x[n], self.out_dir_y[n], -self.out_cos_b[n]],
+            reach_mm: self.out_reach_mm[n],
+        }
     }
 
     /// Walk the layers j < `j_end` of one ray: where its bubbles are.
@@ -280,15 +290,14 @@ pub(crate) struct Scattered {
     pub dir: [f64; 3],
     /// Its path from the bubble down to the face, z / cos θ_B, mm.
     pub reach_mm: f64,
-    /// Where it meets the face, mm.
-    pub land: [f64; 2],
 }
 
 /// The bubble of layer j lies on the source ray at p0 + `slope_xy`·z; its scattered ray
 /// leaves downward at θ_B from the vertical (cos θ_B uniform in (0, 1]: isotropic over the
-/// lower hemisphere) and azimuth φ, and travels z·tan θ_B sideways to the face.
+/// lower hemisphere) and azimuth φ, and travels z·tan θ_B sideways to the face: the ray and
+/// where it lands, mm.
 #[inline(always)]
-fn scattered(ray: &BubbleRay, j: f64, cos_draw: f64, phi_draw: f64) -> Scattered {
+fn scattered(ray: &BubbleRay, j: f64, cos_draw: f64, phi_draw: f64) -> (Scattered, [f64; 2]) {
     let z = (j + 0.5) * BUBBLE_LAYER_MM;
     let bx = ray.p0.x + ray.slope_xy.x * z;
     let by = ray.p0.y + ray.slope_xy.y * z;
@@ -297,12 +306,12 @@ fn scattered(ray: &BubbleRay, j: f64, cos_draw: f64, phi_draw: f64) -> Scattered
     let (c_phi, s_phi) = unit_circle_of(phi_draw);
     let reach = z / cos_b;
     let travel = sin_b * reach;
-    Scattered {
+    let sc = Scattered {
         z_mm: z,
         dir: [sin_b * c_phi, sin_b * s_phi, -cos_b],
         reach_mm: reach,
-        land: [bx + c_phi * travel, by + s_phi * travel],
-    }
+    };
+    (sc, [bx + c_phi * travel, by + s_phi * travel])
 }
 
 /// Per bubble: the output index at which it is frozen in (the first index ≥ its cover
@@ -311,6 +320,15 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
     let n = lanes.count.next_multiple_of(LANES);
     lanes.index.resize(n, 0);
     lanes.slot.resize(n, 0);
+    for out in [
+        &mut lanes.out_z_mm,
+        &mut lanes.out_dir_x,
+        &mut lanes.out_dir_y,
+        &mut lanes.out_cos_b,
+        &mut lanes.out_reach_mm,
+    ] {
+        out.resize(n, 0.0);
+    }
     land_scattered_lanes(ray, bundles, lanes);
 }
 
@@ -321,13 +339,23 @@ fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLa
     let layer = &lanes.layer[..n];
     let index = &mut lanes.index[..n];
     let slot = &mut lanes.slot[..n];
+    let out_z_mm = &mut lanes.out_z_mm[..n];
+    let out_dir_x = &mut lanes.out_dir_x[..n];
+    let out_dir_y = &mut lanes.out_dir_y[..n];
+    let out_cos_b = &mut lanes.out_cos_b[..n];
+    let out_reach_mm = &mut lanes.out_reach_mm[..n];
     let first_wet = f64::from(ray.first_wet);
     for k in 0..n {
         // ceil is exact; the walk keeps j below the layer whose index would pass the last.
         index[k] = ray.cover_steps(layer[k]).ceil().max(first_wet) as i32;
         let (cos_draw, phi_draw) = angle_draws(stream, k as u64);
-        let s = scattered(ray, layer[k], cos_draw, phi_draw);
-        slot[k] = bundles.slot_f64(s.land[0], s.land[1]) as i32;
+        let (s, land) = scattered(ray, layer[k], cos_draw, phi_draw);
+        slot[k] = bundles.slot_f64(land[0], land[1]) as i32;
+        out_z_mm[k] = s.z_mm;
+        out_dir_x[k] = s.dir[0];
+        out_dir_y[k] = s.dir[1];
+        out_cos_b[k] = -s.dir[2];
+        out_reach_mm[k] = s.reach_mm;
     }
 }
 }
@@ -461,10 +489,10 @@ mod tests {
                 _ => 2,
             };
             assert_eq!(lanes.slot[n], want, "bubble {n}");
-            let sc = lanes.scattered(&ray, n);
+            let sc = lanes.scattered(n);
+            assert_eq!(sc.z_mm.to_bits(), z.to_bits());
             assert_eq!(sc.reach_mm.to_bits(), reach.to_bits());
             assert_eq!(sc.dir, [sin_b * c, sin_b * s, -cos_b]);
-            assert_eq!(sc.land, [land.x, land.y]);
             landed += usize::from(want < 2);
             j += 1;
         }

@@ -630,7 +630,7 @@ impl SensorModel {
                     m += usize::from(k < 2);
                 }
                 for &n in &landed[..m] {
-                    let sc = lanes.scattered(&bray, n);
+                    let sc = lanes.scattered(n);
                     let (i, k) = (lanes.index[n] as usize, lanes.slot[n] as usize);
                     scatter(i, k, fwd_after[n], DVec3::from(sc.dir), sc.z_mm, sc.reach_mm);
                 }
