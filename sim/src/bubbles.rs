@@ -64,13 +64,18 @@ pub(crate) struct GapSampler {
     /// Non-increasing, ends with a 0 (no draw is below it), so that every gap g has a
     /// threshold[g].
     threshold: Vec<u32>,
-    /// Per bucket of the draw's upper `GAP_BUCKET_BITS` bits: the gap of the bucket's
-    /// largest draw, the smallest gap in the bucket.
-    bucket_gap: Vec<u16>,
+    /// Per bucket of the draw's upper `GAP_BUCKET_BITS` bits, one load answers: the
+    /// smallest gap g in the bucket (bits 32–63) and the threshold below which the gap is
+    /// g + 1 (bits 0–31; 0 if the whole bucket has gap g). `MANY` in bits 32–63 marks the
+    /// few buckets near a draw of 0 that straddle more than one threshold.
+    bucket: Vec<u64>,
 }
 
+/// Marks a bucket whose gaps are counted threshold by threshold.
+const MANY: u64 = u64::MAX << 32;
+
 impl GapSampler {
-    /// The sampler for P_B = `p_bubble` (`DENSE_ABOVE` < P_B ≤ 1: fewer than 2¹⁶ thresholds).
+    /// The sampler for P_B = `p_bubble` (`DENSE_ABOVE` < P_B ≤ 1).
     pub(crate) fn new(p_bubble: f64) -> Self {
         let q = 1.0 - p_bubble;
         let mut threshold = Vec::new();
@@ -84,31 +89,29 @@ impl GapSampler {
             qk *= q;
         }
         threshold.push(0);
-        assert!(threshold.len() <= usize::from(u16::MAX), "P_B too small for the gap table");
-        let count = |u: u32| threshold.iter().take_while(|&&t| u < t).count() as u16;
-        let buckets = 1u32 << GAP_BUCKET_BITS;
+        let count = |u: u32| threshold.iter().take_while(|&&t| u < t).count() as u64;
         let width = 1u64 << (32 - GAP_BUCKET_BITS);
-        let bucket_gap = (0..buckets)
-            .map(|b| count(((u64::from(b) + 1) * width - 1) as u32))
+        let bucket = (0..1u64 << GAP_BUCKET_BITS)
+            .map(|b| {
+                let (least, most) = (count(((b + 1) * width - 1) as u32), count((b * width) as u32));
+                match most - least {
+                    0 => least << 32,
+                    1 => (least << 32) | u64::from(threshold[least as usize]),
+                    _ => MANY,
+                }
+            })
             .collect();
-        GapSampler {
-            threshold,
-            bucket_gap,
-        }
+        GapSampler { threshold, bucket }
     }
 
     /// The gap for the draw `u`: #{k ≥ 1 : u < threshold of k}.
     #[inline(always)]
     pub(crate) fn gap(&self, u: u32) -> u32 {
-        let table = |g: u32| self.threshold.get(g as usize).copied().unwrap_or(0);
-        let g = u32::from(self.bucket_gap[(u >> (32 - GAP_BUCKET_BITS)) as usize]);
-        // A bucket straddles at most one threshold except near u = 0: one step without a
-        // branch, then a loop that almost never runs.
-        let mut g = g + u32::from(u < table(g));
-        while u < table(g) {
-            g += 1;
+        let entry = self.bucket[(u >> (32 - GAP_BUCKET_BITS)) as usize];
+        if entry == MANY {
+            return self.threshold.iter().take_while(|&&t| u < t).count() as u32;
         }
-        g
+        (entry >> 32) as u32 + u32::from(u < entry as u32)
     }
 }
 
