@@ -20,7 +20,7 @@ use glam::DVec2;
 
 use crate::consts::BUBBLE_LAYER_MM;
 use crate::geometry::Bundles;
-use crate::kernels::vector_kernel;
+use crate::kernels::{small_int, vector_kernel};
 use crate::model::mix64;
 
 /// Increment of the SplitMix64 sequence (2⁶⁴/φ, odd).
@@ -350,10 +350,10 @@ fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLa
     let first_wet = f64::from(ray.first_wet);
     for k in 0..n {
         // ceil is exact; the walk keeps j below the layer whose index would pass the last.
-        index[k] = ray.cover_steps(layer[k]).ceil().max(first_wet) as i32;
+        index[k] = small_int(ray.cover_steps(layer[k]).ceil().max(first_wet));
         let (cos_draw, phi_draw) = angle_draws(stream, k as u64);
         let (s, land) = scattered(ray, layer[k], cos_draw, phi_draw);
-        slot[k] = bundles.slot_f64(land[0], land[1]) as i32;
+        slot[k] = small_int(bundles.slot_f64(land[0], land[1]));
         out_z_mm[k] = s.z_mm;
         out_dir_x[k] = s.dir[0];
         out_dir_y[k] = s.dir[1];

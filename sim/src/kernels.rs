@@ -35,6 +35,17 @@ macro_rules! vector_kernel {
 }
 pub(crate) use vector_kernel;
 
+/// A small non-negative integer held in an f64 (an index or a slot), as i32 in a way that
+/// vectorises: `as i32` saturates and handles NaN lane by lane, which the compiler does
+/// with scalar instructions.
+#[inline(always)]
+pub(crate) fn small_int(x: f64) -> i32 {
+    // NaN goes to 0 (`max` ignores it), and the value is clamped into 0..=2³⁰.
+    let x = x.max(0.0).min(1_073_741_824.0);
+    // SAFETY: x is finite and within the range of i32.
+    unsafe { x.to_int_unchecked::<i32>() }
+}
+
 /// What the diffuse reflection of one ray needs besides its thicknesses and draws.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct DiffuseRay {
@@ -165,7 +176,7 @@ pub(crate) fn specular_slots(
         let h0 = thick_mm[k] + a;
         let land = p0 + w * h0;
         let on = bundles.slot_f64(land.x, land.y);
-        slot[k] = if h0 <= 0.0 { 2 } else { on as i32 };
+        slot[k] = small_int(if h0 <= 0.0 { 2.0 } else { on });
     }
 }
 }
