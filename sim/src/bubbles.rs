@@ -196,8 +196,9 @@ pub(crate) struct BubbleLanes {
     out_reach_mm: Vec<f64>,
 }
 
-/// Bubbles per vector of f64 (AVX2); the lanes are padded to a multiple of it.
-const LANES: usize = 4;
+/// The lanes are padded to a multiple of this: two AVX2 vectors of f64, the step of the
+/// vectorised loop, so that no bubble is left to a scalar remainder.
+const LANES: usize = 8;
 
 impl BubbleLanes {
     /// Number of bubbles.
@@ -332,21 +333,42 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
     ] {
         out.resize(n, 0.0);
     }
-    land_scattered_lanes(ray, bundles, lanes);
+    let n = lanes.count.next_multiple_of(LANES);
+    land_scattered_lanes(
+        ray,
+        bundles,
+        lanes.stream,
+        &lanes.layer[..n],
+        &mut lanes.index[..n],
+        &mut lanes.slot[..n],
+        &mut lanes.out_z_mm[..n],
+        &mut lanes.out_dir_x[..n],
+        &mut lanes.out_dir_y[..n],
+        &mut lanes.out_cos_b[..n],
+        &mut lanes.out_reach_mm[..n],
+    );
 }
 
 vector_kernel! {
-fn land_scattered_lanes(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
-    let n = lanes.count.next_multiple_of(LANES);
-    let stream = lanes.stream;
-    let layer = &lanes.layer[..n];
-    let index = &mut lanes.index[..n];
-    let slot = &mut lanes.slot[..n];
-    let out_z_mm = &mut lanes.out_z_mm[..n];
-    let out_dir_x = &mut lanes.out_dir_x[..n];
-    let out_dir_y = &mut lanes.out_dir_y[..n];
-    let out_cos_b = &mut lanes.out_cos_b[..n];
-    let out_reach_mm = &mut lanes.out_reach_mm[..n];
+// Every array its own argument: the compiler then knows that they do not overlap.
+#[allow(clippy::too_many_arguments)]
+fn land_scattered_lanes(
+    ray: &BubbleRay,
+    bundles: &Bundles,
+    stream: CounterStream,
+    layer: &[f64],
+    index: &mut [i32],
+    slot: &mut [i32],
+    out_z_mm: &mut [f64],
+    out_dir_x: &mut [f64],
+    out_dir_y: &mut [f64],
+    out_cos_b: &mut [f64],
+    out_reach_mm: &mut [f64],
+) {
+    let n = layer.len();
+    let (index, slot) = (&mut index[..n], &mut slot[..n]);
+    let (out_z_mm, out_dir_x, out_dir_y) = (&mut out_z_mm[..n], &mut out_dir_x[..n], &mut out_dir_y[..n]);
+    let (out_cos_b, out_reach_mm) = (&mut out_cos_b[..n], &mut out_reach_mm[..n]);
     let first_wet = f64::from(ray.first_wet);
     for k in 0..n {
         // ceil is exact; the walk keeps j below the layer whose index would pass the last.

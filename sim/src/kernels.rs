@@ -17,8 +17,10 @@ macro_rules! vector_kernel {
     ($(#[$meta:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $body:block) => {
         $(#[$meta])*
         $vis fn $name($($arg: $ty),*) {
+            $(#[$meta])*
             #[inline(always)]
             fn kernel_body($($arg: $ty),*) $body
+            $(#[$meta])*
             #[cfg(target_arch = "x86_64")]
             #[target_feature(enable = "avx2")]
             fn kernel_avx2($($arg: $ty),*) {
