@@ -10,9 +10,10 @@ use glam::{DVec2, DVec3};
 use crate::geometry::Bundles;
 use crate::laws::fr_dielectric;
 
-/// A kernel compiled twice: for the CPU's AVX2 when it has it (checked at run time) and for
-/// the baseline x86-64 (or any other target). Both run the same body, so the results are
-/// bit-identical.
+/// A kernel compiled twice: for the CPU's AVX2 and FMA when it has them (checked at run
+/// time) and for the baseline x86-64 (or any other target). Both run the same body, so the
+/// results are bit-identical (an explicit `mul_add` is exactly rounded either way; the
+/// compiler never fuses a multiply and an add on its own).
 macro_rules! vector_kernel {
     ($(#[$meta:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $body:block) => {
         $(#[$meta])*
@@ -22,13 +23,15 @@ macro_rules! vector_kernel {
             fn kernel_body($($arg: $ty),*) $body
             $(#[$meta])*
             #[cfg(target_arch = "x86_64")]
-            #[target_feature(enable = "avx2")]
+            #[target_feature(enable = "avx2,fma")]
             fn kernel_avx2($($arg: $ty),*) {
                 kernel_body($($arg),*)
             }
             #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx2") {
-                // SAFETY: the CPU supports AVX2 (checked just above).
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                // SAFETY: the CPU supports AVX2 and FMA (checked just above).
                 return unsafe { kernel_avx2($($arg),*) };
             }
             kernel_body($($arg),*)
@@ -46,6 +49,14 @@ pub(crate) fn small_int(x: f64) -> i32 {
     let x = x.max(0.0).min(1_073_741_824.0);
     // SAFETY: x is finite and within the range of i32.
     unsafe { x.to_int_unchecked::<i32>() }
+}
+
+/// A 32-bit unsigned integer as an f64 (exactly), by the exponent trick: 2⁵² + x has x in
+/// its low mantissa bits. `f64::from(u32)` is done lane by lane with scalar instructions.
+#[inline(always)]
+pub(crate) fn u32_to_f64(x: u64) -> f64 {
+    const TWO_52: f64 = 4_503_599_627_370_496.0;
+    f64::from_bits(TWO_52.to_bits() | (x & 0xFFFF_FFFF)) - TWO_52
 }
 
 /// What the diffuse reflection of one ray needs besides its thicknesses and draws.
