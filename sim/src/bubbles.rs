@@ -319,9 +319,13 @@ fn scattered(ray: &BubbleRay, j: f64, cos_draw: f64, phi_draw: f64) -> (Scattere
 /// Per bubble: the output index at which it is frozen in (the first index ≥ its cover
 /// thickness, not before the first wet one) and the bundle its scattered ray lands on.
 pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
+    // The output buffers only grow (their tails are stale and never read).
     let n = lanes.count.next_multiple_of(LANES);
-    lanes.index.resize(n, 0);
-    lanes.slot.resize(n, 0);
+    for out in [&mut lanes.index, &mut lanes.slot] {
+        if out.len() < n {
+            out.resize(n, 0);
+        }
+    }
     for out in [
         &mut lanes.out_z_mm,
         &mut lanes.out_dir_x,
@@ -329,9 +333,10 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
         &mut lanes.out_cos_b,
         &mut lanes.out_reach_mm,
     ] {
-        out.resize(n, 0.0);
+        if out.len() < n {
+            out.resize(n, 0.0);
+        }
     }
-    let n = lanes.count.next_multiple_of(LANES);
     land_scattered_lanes(
         ray,
         bundles,

@@ -300,6 +300,8 @@ pub struct SensorModel {
     /// Unit vector along the signal fibres' axis (pointing into the medium).
     fibre_axis: DVec3,
     cos_accept: f64,
+    /// Dense bubbles (rime) walk gap by gap from counter-based streams (bubbles.rs).
+    dense: Option<GapSampler>,
 }
 
 /// Uniform f64 in [0, 1).
@@ -458,6 +460,7 @@ impl SensorModel {
             thick: cfg.thicknesses_mm(),
             fibre_axis: DVec3::new(si, 0.0, ci),
             cos_accept: th_max_f.cos(),
+            dense: (cfg.params.p_bubble > DENSE_ABOVE).then(|| GapSampler::new(cfg.params.p_bubble)),
         }
     }
 
@@ -527,8 +530,6 @@ impl SensorModel {
             0.0
         };
         let diffuse = p.diffuse_max_rad > 0.0;
-        // Dense bubbles (rime) walk gap by gap from counter-based streams (bubbles.rs).
-        let dense = (p.p_bubble > DENSE_ABOVE).then(|| GapSampler::new(p.p_bubble));
         let mut lanes = BubbleLanes::default();
         // F^n, n = 0, 1, …: grown to the most bubbles one ray met.
         let mut forward_pow: Vec<f64> = vec![1.0];
@@ -598,7 +599,7 @@ impl SensorModel {
                 scat_delta[i][k] +=
                     fwd * (1.0 - FORWARD_FRACTION) * self.couple(s) * (-alpha * path).exp();
             };
-            if let Some(gaps) = &dense {
+            if let Some(gaps) = &self.dense {
                 // Dense bubbles (rime): the walk draws one geometric gap per bubble from a
                 // counter-based stream, then lands all scattered rays at once (bubbles.rs).
                 lanes.walk(CounterStream::new(key, 2 + 2 * r as u64), gaps, j_end);
@@ -782,13 +783,18 @@ impl SensorModel {
                         .sum();
                     spec_slot.resize(i_hi - i_lo, 2);
                     specular_slots(ray.p0, w, a, &bundles, &self.thick[i_lo..i_hi], &mut spec_slot);
-                    for (i, &k) in (i_lo..i_hi).zip(&spec_slot) {
+                    let visited = refl[i_lo..i_hi]
+                        .iter_mut()
+                        .zip(&bubbles_at[i_lo..i_hi])
+                        .zip(&spec_slot);
+                    for ((flux, &frozen), &k) in visited {
                         let att_i = att;
                         att *= att_step;
-                        n_bub += bubbles_at[i] as usize;
+                        n_bub += frozen as usize;
                         // Along the line the bundle changes rarely: a branch predicts well.
+                        let k = k as u32 as usize;
                         if k < 2 {
-                            refl[i][k as usize] += fwd_after[n_bub] * rfl * cpl * att_i;
+                            flux[k] += fwd_after[n_bub] * rfl * cpl * att_i;
                         }
                     }
                 }
