@@ -10,11 +10,12 @@
 //! by [`land_scattered`], a loop the compiler vectorises (AVX2 when the CPU has it, with
 //! bit-identical results: the same IEEE-754 operations in the same order per lane).
 //!
-//! Layout of the draws of bubble n (words w₀ = word 2n, w₁ = word 2n + 1):
-//! - the gap of empty layers before it: the upper 32 bits of w₀ (the lower 32 are unused);
-//! - cos θ_B = 1 − u, u uniform in [0, 1): the lower 32 bits of w₁ (the scattered ray is
-//!   isotropic over the lower hemisphere, as in the thesis's bubble model);
-//! - the azimuth φ: the upper 32 bits of w₁ (2 bits of quadrant, 30 of angle).
+//! Layout of the draws of bubble n (the even words hold gaps, the odd words angles):
+//! - the gap of empty layers before it: word 2⌊n/2⌋, its upper 32 bits for even n, its
+//!   lower 32 bits for odd n;
+//! - cos θ_B = 1 − u, u uniform in [0, 1): the lower 32 bits of word 2n + 1 (the
+//!   scattered ray is isotropic over the lower hemisphere, as in the thesis's bubble model);
+//! - the azimuth φ: the upper 32 bits of word 2n + 1 (2 bits of quadrant, 30 of angle).
 
 use glam::DVec2;
 
@@ -225,14 +226,17 @@ impl BubbleLanes {
         let layer = &mut self.layer[..room];
         let mut j: u32 = 0;
         let mut n: usize = 0;
-        loop {
-            j = j.saturating_add(gaps.gap(gap_draw(stream, n as u64)));
-            if j >= j_end {
-                break;
+        'walk: for m in 0.. {
+            let w = stream.word(2 * m);
+            for u in gap_draws(w) {
+                j = j.saturating_add(gaps.gap(u));
+                if j >= j_end {
+                    break 'walk;
+                }
+                layer[n] = f64::from(j);
+                j += 1;
+                n += 1;
             }
-            layer[n] = f64::from(j);
-            j += 1;
-            n += 1;
         }
         self.count = n;
         // Pad to whole vectors with copies of the last bubble (or of zeros).
@@ -241,10 +245,11 @@ impl BubbleLanes {
     }
 }
 
-/// The draw of the gap before bubble n: the upper 32 bits of word 2n.
+/// The draws of the gaps before bubbles 2m and 2m + 1 from word 2m: its upper, then its
+/// lower 32 bits.
 #[inline(always)]
-fn gap_draw(stream: CounterStream, n: u64) -> u32 {
-    (stream.word(2 * n) >> 32) as u32
+fn gap_draws(w: u64) -> [u32; 2] {
+    [(w >> 32) as u32, w as u32]
 }
 
 /// The draws of the scattering angles of bubble n, as f64 (exactly): cos θ_B from the lower
@@ -499,7 +504,8 @@ mod tests {
         // The walk again, by hand: gaps, then the draws of each bubble.
         let (mut j, mut landed) = (0u32, 0);
         for n in 0..lanes.len() {
-            j += gaps.gap((stream.word(2 * n as u64) >> 32) as u32);
+            let w0 = stream.word(2 * (n as u64 / 2));
+            j += gaps.gap(if n % 2 == 0 { (w0 >> 32) as u32 } else { w0 as u32 });
             let w1 = stream.word(2 * n as u64 + 1);
             let (u_cos, u_phi) = (f64::from(w1 as u32), f64::from((w1 >> 32) as u32));
             assert_eq!(lanes.layer[n], f64::from(j), "bubble {n}");
@@ -525,8 +531,9 @@ mod tests {
             j += 1;
         }
         // The next gap passes the end.
-        let w0 = stream.word(2 * lanes.len() as u64);
-        assert!(j + gaps.gap((w0 >> 32) as u32) >= 150);
+        let n = lanes.len() as u64;
+        let w0 = stream.word(2 * (n / 2));
+        assert!(j + gaps.gap(if n % 2 == 0 { (w0 >> 32) as u32 } else { w0 as u32 }) >= 150);
         assert!(landed > 0);
     }
 }

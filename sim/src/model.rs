@@ -618,15 +618,17 @@ impl SensorModel {
                     let last = forward_pow.last().copied().unwrap_or(1.0);
                     forward_pow.push(last * FORWARD_FRACTION);
                 }
-                fwd_after.extend(forward_pow[1..=count].iter().map(|&f| ray.flux_in_w * f));
-                for &i in &lanes.index[..count] {
-                    bubbles_at[i as usize] += 1;
+                // One pass over the bubbles: the forward flux after each, the count frozen in
+                // at each thickness, and the few whose scattered ray lands on a bundle (≈ 1
+                // in 8), gathered without a branch.
+                if landed.len() < count {
+                    landed.resize(count, 0);
                 }
-                // The few bubbles whose scattered ray lands on a bundle (≈ 1 in 8).
-                landed.clear();
-                landed.resize(count, 0);
                 let mut m = 0;
-                for (n, &k) in lanes.slot[..count].iter().enumerate() {
+                let bubbles = lanes.index[..count].iter().zip(&lanes.slot[..count]);
+                for (n, ((&i, &k), &f)) in bubbles.zip(&forward_pow[1..=count]).enumerate() {
+                    fwd_after.push(ray.flux_in_w * f);
+                    bubbles_at[i as usize] += 1;
                     landed[m] = n;
                     m += usize::from(k < 2);
                 }
