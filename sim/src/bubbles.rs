@@ -299,18 +299,24 @@ pub(crate) struct Scattered {
     pub reach_mm: f64,
 }
 
-/// The bubble of layer j lies on the source ray at p0 + `slope_xy`·z; its scattered ray
-/// leaves downward at θ_B from the vertical (cos θ_B uniform in (0, 1]: isotropic over the
-/// lower hemisphere) and azimuth φ, and travels z·tan θ_B sideways to the face: the ray and
-/// where it lands, mm.
+/// The scattering angles of bubble n: cos θ_B uniform in (0, 1] (isotropic over the
+/// lower hemisphere) and the azimuth φ as (cos φ, sin φ).
 #[inline(always)]
-fn scattered(ray: &BubbleRay, j: f64, cos_draw: f64, phi_draw: f64) -> (Scattered, [f64; 2]) {
+fn scattering_angles(stream: CounterStream, n: u64) -> (f64, f64, f64) {
+    let (cos_draw, phi_draw) = angle_draws(stream, n);
+    let (c_phi, s_phi) = unit_circle_of(phi_draw);
+    (1.0 - cos_draw * INV_2_POW_32, c_phi, s_phi)
+}
+
+/// The bubble of layer j lies on the source ray at p0 + `slope_xy`·z; its scattered ray
+/// leaves downward at θ_B from the vertical and azimuth φ, and travels z·tan θ_B sideways
+/// to the face: the ray and where it lands, mm.
+#[inline(always)]
+fn scattered(ray: &BubbleRay, j: f64, cos_b: f64, c_phi: f64, s_phi: f64) -> (Scattered, [f64; 2]) {
     let z = (j + 0.5) * BUBBLE_LAYER_MM;
     let bx = ray.p0.x + ray.slope_xy.x * z;
     let by = ray.p0.y + ray.slope_xy.y * z;
-    let cos_b = 1.0 - cos_draw * INV_2_POW_32;
     let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
-    let (c_phi, s_phi) = unit_circle_of(phi_draw);
     let reach = z / cos_b;
     let travel = sin_b * reach;
     let sc = Scattered {
@@ -377,17 +383,23 @@ fn land_scattered_lanes(
     let (index, slot) = (&mut index[..n], &mut slot[..n]);
     let (out_z_mm, out_dir_x, out_dir_y) = (&mut out_z_mm[..n], &mut out_dir_x[..n], &mut out_dir_y[..n]);
     let (out_cos_b, out_reach_mm) = (&mut out_cos_b[..n], &mut out_reach_mm[..n]);
+    // Two passes, each a short chain of dependent operations, so that the processor
+    // overlaps many bubbles: first the angles (into the output arrays), then the rays.
+    for k in 0..n {
+        let (cos_b, c_phi, s_phi) = scattering_angles(stream, k as u64);
+        out_cos_b[k] = cos_b;
+        out_dir_x[k] = c_phi;
+        out_dir_y[k] = s_phi;
+    }
     let first_wet = f64::from(ray.first_wet);
     for k in 0..n {
         // ceil is exact; the walk keeps j below the layer whose index would pass the last.
         index[k] = small_int(ray.cover_steps(layer[k]).ceil().max(first_wet));
-        let (cos_draw, phi_draw) = angle_draws(stream, k as u64);
-        let (s, land) = scattered(ray, layer[k], cos_draw, phi_draw);
+        let (s, land) = scattered(ray, layer[k], out_cos_b[k], out_dir_x[k], out_dir_y[k]);
         slot[k] = small_int(bundles.slot_f64(land[0], land[1]));
         out_z_mm[k] = s.z_mm;
         out_dir_x[k] = s.dir[0];
         out_dir_y[k] = s.dir[1];
-        out_cos_b[k] = -s.dir[2];
         out_reach_mm[k] = s.reach_mm;
     }
 }
