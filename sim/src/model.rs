@@ -777,28 +777,23 @@ impl SensorModel {
                     }
                     // Up and back: path (d + a)·k_path, absorbed by the same ratio every step.
                     let k_path = (1.0 + back) / den;
-                    let mut att = (-alpha * k_path * (self.thick[i_lo] + a)).exp();
+                    let att = (-alpha * k_path * (self.thick[i_lo] + a)).exp();
                     let att_step = (-alpha * k_path * cfg.step_mm).exp();
-                    let mut n_bub: usize = bubbles_at[first_wet..i_lo]
+                    let n_bub: usize = bubbles_at[first_wet..i_lo]
                         .iter()
                         .map(|&c| c as usize)
                         .sum();
                     spec_slot.resize(i_hi - i_lo, 2);
                     specular_slots(ray.p0, w, a, &bundles, &self.thick[i_lo..i_hi], &mut spec_slot);
-                    let visited = refl[i_lo..i_hi]
-                        .iter_mut()
-                        .zip(&bubbles_at[i_lo..i_hi])
-                        .zip(&spec_slot);
-                    for ((flux, &frozen), &k) in visited {
-                        let att_i = att;
-                        att *= att_step;
-                        n_bub += frozen as usize;
-                        // Along the line the bundle changes rarely: a branch predicts well.
-                        let k = k as u32 as usize;
-                        if k < 2 {
-                            flux[k] += fwd_after[n_bub] * rfl * cpl * att_i;
-                        }
-                    }
+                    add_specular(
+                        &mut refl[i_lo..i_hi],
+                        &bubbles_at[i_lo..i_hi],
+                        &spec_slot,
+                        &fwd_after,
+                        n_bub,
+                        [rfl, cpl],
+                        [att, att_step],
+                    );
                 }
             }
             if had_bubbles {
@@ -827,6 +822,33 @@ impl SensorModel {
             });
         }
         Curve { points }
+    }
+}
+
+/// The specular reflection of one ray at the visited thicknesses: at each, the forward flux
+/// left after the bubbles frozen in so far (`fwd_after[n]`, n counted from `n_bub` on) times
+/// the Fresnel reflectance and coupling `[rfl, cpl]` times the absorption, which falls by
+/// `att[1]` per step from `att[0]`, added to the bundle of `slot`.
+// Its own function: inside the tracer the running values would live on the stack.
+#[inline(never)]
+fn add_specular(
+    refl: &mut [[f64; 2]],
+    bubbles_at: &[u32],
+    slot: &[i32],
+    fwd_after: &[f64],
+    mut n_bub: usize,
+    [rfl, cpl]: [f64; 2],
+    [mut att, att_step]: [f64; 2],
+) {
+    for ((flux, &frozen), &k) in refl.iter_mut().zip(bubbles_at).zip(slot) {
+        let att_i = att;
+        att *= att_step;
+        n_bub += frozen as usize;
+        // Along the line the bundle changes rarely: a branch predicts well.
+        let k = k as u32 as usize;
+        if k < 2 {
+            flux[k] += fwd_after[n_bub] * rfl * cpl * att_i;
+        }
     }
 }
 
