@@ -214,6 +214,26 @@ impl BubbleLanes {
         }
     }
 
+    /// After [`land_scattered`]: count each bubble at the output index where it is frozen
+    /// in (`bubbles_at`), and list the bubbles whose scattered ray lands on a bundle (≈ 1 in
+    /// 8; gathered without a branch into `landed`, which only grows): their number.
+    // Its own function: inside the tracer the running values would live on the stack.
+    #[inline(never)]
+    pub(crate) fn tally(&self, bubbles_at: &mut [u32], landed: &mut Vec<u32>) -> usize {
+        let count = self.count;
+        if landed.len() < count {
+            landed.resize(count, 0);
+        }
+        let mut m = 0;
+        let bubbles = self.index[..count].iter().zip(&self.slot[..count]);
+        for (n, (&i, &k)) in (0u32..).zip(bubbles) {
+            bubbles_at[i as usize] += 1;
+            landed[m] = n;
+            m += usize::from(k < 2);
+        }
+        m
+    }
+
     /// Walk the layers j < `j_end` of one ray: where its bubbles are.
     pub(crate) fn walk(&mut self, stream: CounterStream, gaps: &GapSampler, j_end: u32) {
         self.stream = stream;

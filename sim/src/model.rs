@@ -533,7 +533,7 @@ impl SensorModel {
         let mut lanes = BubbleLanes::default();
         // F^n, n = 0, 1, …: grown to the most bubbles one ray met.
         let mut forward_pow: Vec<f64> = vec![1.0];
-        let mut landed: Vec<usize> = Vec::new();
+        let mut landed: Vec<u32> = Vec::new();
         let mut spec_slot: Vec<i32> = Vec::with_capacity(nt);
         let sensor_a = cfg.sensor == SensorKind::A;
         let bundles = geo.bundles();
@@ -618,21 +618,10 @@ impl SensorModel {
                     let last = forward_pow.last().copied().unwrap_or(1.0);
                     forward_pow.push(last * FORWARD_FRACTION);
                 }
-                // One pass over the bubbles: the forward flux after each, the count frozen in
-                // at each thickness, and the few whose scattered ray lands on a bundle (≈ 1
-                // in 8), gathered without a branch.
-                if landed.len() < count {
-                    landed.resize(count, 0);
-                }
-                let mut m = 0;
-                let bubbles = lanes.index[..count].iter().zip(&lanes.slot[..count]);
-                for (n, ((&i, &k), &f)) in bubbles.zip(&forward_pow[1..=count]).enumerate() {
-                    fwd_after.push(ray.flux_in_w * f);
-                    bubbles_at[i as usize] += 1;
-                    landed[m] = n;
-                    m += usize::from(k < 2);
-                }
+                fwd_after.extend(forward_pow[1..=count].iter().map(|&f| ray.flux_in_w * f));
+                let m = lanes.tally(&mut bubbles_at, &mut landed);
                 for &n in &landed[..m] {
+                    let n = n as usize;
                     let sc = lanes.scattered(n);
                     let (i, k) = (lanes.index[n] as usize, lanes.slot[n] as usize);
                     scatter(i, k, fwd_after[n], DVec3::from(sc.dir), sc.z_mm, sc.reach_mm);
