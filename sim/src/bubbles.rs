@@ -94,7 +94,10 @@ impl GapSampler {
         let width = 1u64 << (32 - GAP_BUCKET_BITS);
         let bucket = (0..1u64 << GAP_BUCKET_BITS)
             .map(|b| {
-                let (least, most) = (count(((b + 1) * width - 1) as u32), count((b * width) as u32));
+                let (least, most) = (
+                    count(((b + 1) * width - 1) as u32),
+                    count((b * width) as u32),
+                );
                 match most - least {
                     0 => least << 32,
                     1 => (least << 32) | u64::from(threshold[least as usize]),
@@ -460,10 +463,16 @@ mod tests {
         let sd_of_mean = ((1.0 - p).sqrt() / p) / (n as f64).sqrt(); // 0.0095
         assert!((mean - 3.7619).abs() < 4.0 * sd_of_mean, "{mean}");
         let zero = gaps.iter().filter(|&&x| x == 0).count() as f64 / n as f64;
-        assert!((zero - 0.21).abs() < 4.0 * (0.21f64 * 0.79 / n as f64).sqrt(), "{zero}");
+        assert!(
+            (zero - 0.21).abs() < 4.0 * (0.21f64 * 0.79 / n as f64).sqrt(),
+            "{zero}"
+        );
         let ten = gaps.iter().filter(|&&x| x >= 10).count() as f64 / n as f64;
         let want = 0.79f64.powi(10); // 0.0947
-        assert!((ten - want).abs() < 4.0 * (want * (1.0 - want) / n as f64).sqrt(), "{ten}");
+        assert!(
+            (ten - want).abs() < 4.0 * (want * (1.0 - want) / n as f64).sqrt(),
+            "{ten}"
+        );
         // P_B = 1: every layer holds a bubble.
         let all = GapSampler::new(1.0);
         assert!((0..1000).all(|k| all.gap((s.word(k) >> 32) as u32) == 0));
@@ -484,7 +493,10 @@ mod tests {
             .map(|k| (s.word(k) >> 32) as f64 * INV_2_POW_32)
             .sum::<f64>()
             / n as f64;
-        assert!((mean - 0.5).abs() < 4.0 * (1.0 / 12.0 / n as f64).sqrt(), "{mean}");
+        assert!(
+            (mean - 0.5).abs() < 4.0 * (1.0 / 12.0 / n as f64).sqrt(),
+            "{mean}"
+        );
     }
 
     #[test]
@@ -498,7 +510,10 @@ mod tests {
             assert!((x * x + y * y - 1.0).abs() < 1e-13);
             // The same angle as libm gives for φ = 2π (u + ½)/2³².
             let phi = std::f64::consts::TAU * (f64::from(u) + 0.5) * INV_2_POW_32;
-            assert!((x - phi.cos()).abs() < 1e-13 && (y - phi.sin()).abs() < 1e-13, "{u}");
+            assert!(
+                (x - phi.cos()).abs() < 1e-13 && (y - phi.sin()).abs() < 1e-13,
+                "{u}"
+            );
             let a = y.atan2(x).rem_euclid(std::f64::consts::TAU);
             sector[((a / std::f64::consts::TAU * 16.0) as usize).min(15)] += 1;
         }
@@ -537,7 +552,11 @@ mod tests {
         let (mut j, mut landed) = (0u32, 0);
         for n in 0..lanes.len() {
             let w0 = stream.word(2 * (n as u64 / 2));
-            j += gaps.gap(if n % 2 == 0 { (w0 >> 32) as u32 } else { w0 as u32 });
+            j += gaps.gap(if n % 2 == 0 {
+                (w0 >> 32) as u32
+            } else {
+                w0 as u32
+            });
             let w1 = stream.word(2 * n as u64 + 1);
             let (u_cos, u_phi) = (f64::from(w1 as u32), f64::from((w1 >> 32) as u32));
             assert_eq!(lanes.layer[n], f64::from(j), "bubble {n}");
@@ -565,7 +584,13 @@ mod tests {
         // The next gap passes the end.
         let n = lanes.len() as u64;
         let w0 = stream.word(2 * (n / 2));
-        assert!(j + gaps.gap(if n % 2 == 0 { (w0 >> 32) as u32 } else { w0 as u32 }) >= 150);
+        assert!(
+            j + gaps.gap(if n % 2 == 0 {
+                (w0 >> 32) as u32
+            } else {
+                w0 as u32
+            }) >= 150
+        );
         assert!(landed > 0);
     }
 }

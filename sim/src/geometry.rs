@@ -142,7 +142,11 @@ impl Bundles {
         // Exactly the tests of `Geometry::region`, NaN included.
         let face = !(y_mm.abs() > self.r) & !(x_mm < 0.0);
         let dx = x_mm - self.b;
-        let disc = if dx * dx + y_mm * y_mm <= self.r2 { 1.0 } else { 2.0 };
+        let disc = if dx * dx + y_mm * y_mm <= self.r2 {
+            1.0
+        } else {
+            2.0
+        };
         let on = if x_mm <= self.b { 0.0 } else { disc };
         if face { on } else { 2.0 }
     }

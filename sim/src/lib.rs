@@ -10,9 +10,9 @@
 //! - [`table`]: the node estimator's response table (μ, Σ per medium, fixed point, Rust source).
 
 pub mod analytic;
+mod bubbles;
 pub mod consts;
 pub mod geometry;
-mod bubbles;
 mod kernels;
 pub mod laws;
 pub mod model;

@@ -351,7 +351,9 @@ const MAX_LAYERS_PER_RAY: u32 = 20_000;
 /// streams; at or below it by `geometric_gap` (one `ln` per bubble) from a PCG stream.
 const DENSE_ABOVE: f64 = 0.02;
 
-/// Stream ids: 0 = accretion (slopes); 2 + 2r = bubbles of ray r; 3 + 2r = diffuse of ray r.
+/// Stream ids: 0 = accretion (slopes, PCG); 2 + 2r = bubbles of ray r (a counter-based
+/// stream for dense bubbles, see bubbles.rs; PCG for sparse ones); 3 + 2r = diffuse of ray r
+/// (PCG).
 const STREAM_ACCRETION: u64 = 0;
 
 /// The number of bubble layers a ray meets within the output thicknesses: the first layer j
@@ -460,7 +462,8 @@ impl SensorModel {
             thick: cfg.thicknesses_mm(),
             fibre_axis: DVec3::new(si, 0.0, ci),
             cos_accept: th_max_f.cos(),
-            dense: (cfg.params.p_bubble > DENSE_ABOVE).then(|| GapSampler::new(cfg.params.p_bubble)),
+            dense: (cfg.params.p_bubble > DENSE_ABOVE)
+                .then(|| GapSampler::new(cfg.params.p_bubble)),
         }
     }
 
@@ -574,12 +577,16 @@ impl SensorModel {
             // den > 0), so the forward flux at each thickness is a running product, stored
             // as fwd_after[n] and the count of bubbles per index.
             let off1 = tx * slope_xy.x + ty * slope_xy.y;
-            // q(j): d_j in output steps; layer j belongs to the first output index ≥ q(j).
-            let q_of = |j: u32| {
-                let z_top = (j as f64 + 1.0) * BUBBLE_LAYER_MM;
-                let z_b = (j as f64 + 0.5) * BUBBLE_LAYER_MM;
-                (z_top - a - off1 * z_b) * inv_step - 1e-9
+            let bray = BubbleRay {
+                p0: ray.p0,
+                slope_xy,
+                a,
+                off1,
+                inv_step,
+                first_wet: first_wet as u32,
             };
+            // q(j): d_j in output steps; layer j belongs to the first output index ≥ q(j).
+            let q_of = |j: u32| bray.cover_steps(f64::from(j));
             // The layers that the ice covers within max_mm: j < j_end. Beyond, the bubbles
             // are not drawn. A ray almost parallel to a tilted surface would walk very many
             // layers before the surface covers them: at most MAX_LAYERS_PER_RAY (2 m).
@@ -603,14 +610,6 @@ impl SensorModel {
                 // Dense bubbles (rime): the walk draws one geometric gap per bubble from a
                 // counter-based stream, then lands all scattered rays at once (bubbles.rs).
                 lanes.walk(CounterStream::new(key, 2 + 2 * r as u64), gaps, j_end);
-                let bray = BubbleRay {
-                    p0: ray.p0,
-                    slope_xy,
-                    a,
-                    off1,
-                    inv_step,
-                    first_wet: first_wet as u32,
-                };
                 land_scattered(&bray, &bundles, &mut lanes);
                 let count = lanes.len();
                 // Forward flux after n bubbles: Φ·F^n (F = FORWARD_FRACTION).
@@ -624,7 +623,14 @@ impl SensorModel {
                     let n = n as usize;
                     let sc = lanes.scattered(n);
                     let (i, k) = (lanes.index[n] as usize, lanes.slot[n] as usize);
-                    scatter(i, k, fwd_after[n], DVec3::from(sc.dir), sc.z_mm, sc.reach_mm);
+                    scatter(
+                        i,
+                        k,
+                        fwd_after[n],
+                        DVec3::from(sc.dir),
+                        sc.z_mm,
+                        sc.reach_mm,
+                    );
                 }
             } else {
                 // Sparse bubbles (glazed): geometric gaps between bubbles by inversion
@@ -773,7 +779,14 @@ impl SensorModel {
                         .map(|&c| c as usize)
                         .sum();
                     spec_slot.resize(i_hi - i_lo, 2);
-                    specular_slots(ray.p0, w, a, &bundles, &self.thick[i_lo..i_hi], &mut spec_slot);
+                    specular_slots(
+                        ray.p0,
+                        w,
+                        a,
+                        &bundles,
+                        &self.thick[i_lo..i_hi],
+                        &mut spec_slot,
+                    );
                     add_specular(
                         &mut refl[i_lo..i_hi],
                         &bubbles_at[i_lo..i_hi],
