@@ -322,32 +322,27 @@ pub(crate) struct Scattered {
     pub reach_mm: f64,
 }
 
-/// The scattering angles of bubble n: cos θ_B uniform in (0, 1] (isotropic over the
-/// lower hemisphere) and the azimuth φ as (cos φ, sin φ).
+/// The scattered ray of the bubble of layer j: it leaves downward at θ_B from the vertical
+/// and azimuth φ, and reaches the face after z / cos θ_B.
 #[inline(always)]
-fn scattering_angles(stream: CounterStream, n: u64) -> (f64, f64, f64) {
-    let (cos_draw, phi_draw) = angle_draws(stream, n);
-    let (c_phi, s_phi) = unit_circle_of(phi_draw);
-    (1.0 - cos_draw * INV_2_POW_32, c_phi, s_phi)
-}
-
-/// The bubble of layer j lies on the source ray at p0 + `slope_xy`·z; its scattered ray
-/// leaves downward at θ_B from the vertical and azimuth φ, and travels z·tan θ_B sideways
-/// to the face: the ray and where it lands, mm.
-#[inline(always)]
-fn scattered(ray: &BubbleRay, j: f64, cos_b: f64, c_phi: f64, s_phi: f64) -> (Scattered, [f64; 2]) {
+fn scattered_ray(j: f64, cos_b: f64, c_phi: f64, s_phi: f64) -> Scattered {
     let z = (j + 0.5) * BUBBLE_LAYER_MM;
-    let bx = ray.p0.x + ray.slope_xy.x * z;
-    let by = ray.p0.y + ray.slope_xy.y * z;
     let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
-    let reach = z / cos_b;
-    let travel = sin_b * reach;
-    let sc = Scattered {
+    Scattered {
         z_mm: z,
         dir: [sin_b * c_phi, sin_b * s_phi, -cos_b],
-        reach_mm: reach,
-    };
-    (sc, [bx + c_phi * travel, by + s_phi * travel])
+        reach_mm: z / cos_b,
+    }
+}
+
+/// Where a scattered ray lands, mm: its bubble lies on the source ray at p0 + `slope_xy`·z,
+/// and it travels z·tan θ_B sideways (the horizontal part of its direction times its reach).
+#[inline(always)]
+fn landing(ray: &BubbleRay, z_mm: f64, dir_x: f64, dir_y: f64, reach_mm: f64) -> [f64; 2] {
+    [
+        dir_x.mul_add(reach_mm, ray.slope_xy.x.mul_add(z_mm, ray.p0.x)),
+        dir_y.mul_add(reach_mm, ray.slope_xy.y.mul_add(z_mm, ray.p0.y)),
+    ]
 }
 
 /// Per bubble: the output index at which it is frozen in (the first index ≥ its cover
@@ -404,26 +399,41 @@ fn land_scattered_lanes(
 ) {
     let n = layer.len();
     let (index, slot) = (&mut index[..n], &mut slot[..n]);
-    let (out_z_mm, out_dir_x, out_dir_y) = (&mut out_z_mm[..n], &mut out_dir_x[..n], &mut out_dir_y[..n]);
-    let (out_cos_b, out_reach_mm) = (&mut out_cos_b[..n], &mut out_reach_mm[..n]);
-    // Two passes, each a short chain of dependent operations, so that the processor
-    // overlaps many bubbles: first the angles (into the output arrays), then the rays.
+    let (out_z_mm, out_reach_mm) = (&mut out_z_mm[..n], &mut out_reach_mm[..n]);
+    let (out_dir_x, out_dir_y) = (&mut out_dir_x[..n], &mut out_dir_y[..n]);
+    let out_cos_b = &mut out_cos_b[..n];
+    // Passes of short chains of dependent operations, so that the processor overlaps many
+    // bubbles (one long loop body is bound by the latency of its chain: 8.8 against 6.6 ns
+    // per bubble measured). The output arrays hold the intermediate values.
+    // 1. The draws of the angles (cos θ_B's into `out_cos_b`, φ's into `out_dir_x`).
     for k in 0..n {
-        let (cos_b, c_phi, s_phi) = scattering_angles(stream, k as u64);
-        out_cos_b[k] = cos_b;
+        let (cos_draw, phi_draw) = angle_draws(stream, k as u64);
+        out_cos_b[k] = cos_draw;
+        out_dir_x[k] = phi_draw;
+    }
+    // 2. cos θ_B in (0, 1] (isotropic over the lower hemisphere), (cos φ, sin φ).
+    for k in 0..n {
+        let (c_phi, s_phi) = unit_circle_of(out_dir_x[k]);
+        out_cos_b[k] = 1.0 - out_cos_b[k] * INV_2_POW_32;
         out_dir_x[k] = c_phi;
         out_dir_y[k] = s_phi;
     }
+    // 3. The freeze-in index, 4. the scattered ray, 5. where it lands.
     let first_wet = f64::from(ray.first_wet);
     for k in 0..n {
         // ceil is exact; the walk keeps j below the layer whose index would pass the last.
         index[k] = small_int(ray.cover_steps(layer[k]).ceil().max(first_wet));
-        let (s, land) = scattered(ray, layer[k], out_cos_b[k], out_dir_x[k], out_dir_y[k]);
-        slot[k] = small_int(bundles.slot_f64(land[0], land[1]));
+    }
+    for k in 0..n {
+        let s = scattered_ray(layer[k], out_cos_b[k], out_dir_x[k], out_dir_y[k]);
         out_z_mm[k] = s.z_mm;
         out_dir_x[k] = s.dir[0];
         out_dir_y[k] = s.dir[1];
         out_reach_mm[k] = s.reach_mm;
+    }
+    for k in 0..n {
+        let land = landing(ray, out_z_mm[k], out_dir_x[k], out_dir_y[k], out_reach_mm[k]);
+        slot[k] = small_int(bundles.slot_f64(land[0], land[1]));
     }
 }
 }
@@ -567,7 +577,10 @@ mod tests {
             let sin_b = (1.0 - cos_b * cos_b).max(0.0).sqrt();
             let (c, s) = unit_circle_of(u_phi);
             let reach = z / cos_b;
-            let land = p0 + slope * z + DVec2::new(c, s) * (sin_b * reach);
+            let land = DVec2::new(
+                (sin_b * c).mul_add(reach, slope.x.mul_add(z, p0.x)),
+                (sin_b * s).mul_add(reach, slope.y.mul_add(z, p0.y)),
+            );
             let want = match geo.region(land.x, land.y) {
                 crate::geometry::Region::Bundle1 => 0,
                 crate::geometry::Region::Bundle2 => 1,
