@@ -83,7 +83,7 @@ impl GapSampler {
         let mut qk = q;
         loop {
             let t = (qk * 4_294_967_296.0).round().min(u32::MAX as f64);
-            if !(t >= 1.0) {
+            if t < 1.0 {
                 break;
             }
             threshold.push(t as u32);
@@ -562,7 +562,7 @@ mod tests {
         let (mut j, mut landed) = (0u32, 0);
         for n in 0..lanes.len() {
             let w0 = stream.word(2 * (n as u64 / 2));
-            j += gaps.gap(if n % 2 == 0 {
+            j += gaps.gap(if n.is_multiple_of(2) {
                 (w0 >> 32) as u32
             } else {
                 w0 as u32
@@ -598,7 +598,7 @@ mod tests {
         let n = lanes.len() as u64;
         let w0 = stream.word(2 * (n / 2));
         assert!(
-            j + gaps.gap(if n % 2 == 0 {
+            j + gaps.gap(if n.is_multiple_of(2) {
                 (w0 >> 32) as u32
             } else {
                 w0 as u32

@@ -43,6 +43,8 @@ pub(crate) use vector_kernel;
 /// A small non-negative integer held in an f64 (an index or a slot), as i32 in a way that
 /// vectorises: `as i32` saturates and handles NaN lane by lane, which the compiler does
 /// with scalar instructions.
+// Not `clamp`: it passes NaN through, and NaN must not reach the conversion.
+#[allow(clippy::manual_clamp)]
 #[inline(always)]
 pub(crate) fn small_int(x: f64) -> i32 {
     // NaN goes to 0 (`max` ignores it), and the value is clamped into 0..=2³⁰.
@@ -216,6 +218,18 @@ pub(crate) fn small_sin_cos(x: f64) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn small_int_and_u32_to_f64_are_exact_and_total() {
+        assert_eq!(small_int(2.0), 2);
+        assert_eq!(small_int(150.0), 150);
+        assert_eq!(small_int(f64::NAN), 0);
+        assert_eq!(small_int(-3.0), 0);
+        assert_eq!(small_int(f64::INFINITY), 1 << 30);
+        for x in [0u64, 1, 0xFFFF_FFFF, 0x8000_0000, 0x1234_5678_9ABC_DEF0] {
+            assert_eq!(u32_to_f64(x), f64::from(x as u32), "{x:#x}");
+        }
+    }
     use crate::geometry::Geometry;
     use crate::laws::{facet_normal, reflect};
 
