@@ -227,12 +227,26 @@ impl BubbleLanes {
         if landed.len() < count {
             landed.resize(count, 0);
         }
+        // The landed bubbles, gathered without a branch.
         let mut m = 0;
-        let bubbles = self.index[..count].iter().zip(&self.slot[..count]);
-        for (n, (&i, &k)) in (0u32..).zip(bubbles) {
-            bubbles_at[i as usize] += 1;
+        for (n, &k) in (0u32..).zip(&self.slot[..count]) {
             landed[m] = n;
             m += usize::from(k < 2);
+        }
+        // The indices never decrease along the walk: one addition per run of equal ones
+        // (an increment per bubble would wait for the store of the one before).
+        let mut run: u32 = 0;
+        let mut current = self.index.first().copied().unwrap_or(0);
+        for &i in &self.index[..count] {
+            if i != current {
+                bubbles_at[current as usize] += run;
+                current = i;
+                run = 0;
+            }
+            run += 1;
+        }
+        if run > 0 {
+            bubbles_at[current as usize] += run;
         }
         m
     }
