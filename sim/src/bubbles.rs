@@ -217,36 +217,24 @@ impl BubbleLanes {
         }
     }
 
-    /// After [`land_scattered`]: count each bubble at the output index where it is frozen
-    /// in (`bubbles_at`), and list the bubbles whose scattered ray lands on a bundle (≈ 1 in
-    /// 8; gathered without a branch into `landed`, which only grows): their number.
+    /// After [`land_scattered`]: at each output index where bubbles are frozen in, how many
+    /// are frozen in up to it (`frozen_by`; the indices never decrease along the walk, so
+    /// the last bubble of an index writes its number + 1, by plain stores), and the list of
+    /// the bubbles whose scattered ray lands on a bundle (≈ 1 in 8; gathered without a
+    /// branch into `landed`, which only grows): their number.
     // Its own function: inside the tracer the running values would live on the stack.
     #[inline(never)]
-    pub(crate) fn tally(&self, bubbles_at: &mut [u32], landed: &mut Vec<u32>) -> usize {
+    pub(crate) fn tally(&self, frozen_by: &mut [u32], landed: &mut Vec<u32>) -> usize {
         let count = self.count;
         if landed.len() < count {
             landed.resize(count, 0);
         }
-        // The landed bubbles, gathered without a branch.
         let mut m = 0;
-        for (n, &k) in (0u32..).zip(&self.slot[..count]) {
+        let bubbles = self.index[..count].iter().zip(&self.slot[..count]);
+        for (n, (&i, &k)) in (0u32..).zip(bubbles) {
+            frozen_by[i as usize] = n + 1;
             landed[m] = n;
             m += usize::from(k < 2);
-        }
-        // The indices never decrease along the walk: one addition per run of equal ones
-        // (an increment per bubble would wait for the store of the one before).
-        let mut run: u32 = 0;
-        let mut current = self.index.first().copied().unwrap_or(0);
-        for &i in &self.index[..count] {
-            if i != current {
-                bubbles_at[current as usize] += run;
-                current = i;
-                run = 0;
-            }
-            run += 1;
-        }
-        if run > 0 {
-            bubbles_at[current as usize] += run;
         }
         m
     }

@@ -549,11 +549,13 @@ impl SensorModel {
         let first_wet = self.thick.iter().position(|&d| d > 0.0).unwrap_or(nt);
         let inv_step = 1.0 / cfg.step_mm;
 
-        // Per ray: the forward flux after n bubbles (fwd_after[n]) and the number of
-        // bubbles frozen in at each thickness index. The forward flux at thickness i is
-        // fwd_after[bubbles at indices ≤ i].
+        // Per ray: the forward flux after n bubbles (fwd_after[n]) and, at each thickness
+        // index where bubbles are frozen in, how many are frozen in up to it (`frozen_by`,
+        // 0 at the other indices: the bubbles are frozen in in walk order, so the number
+        // frozen in at indices ≤ i is the running maximum). The forward flux at thickness i
+        // is fwd_after[that number].
         let mut fwd_after: Vec<f64> = Vec::with_capacity(256);
-        let mut bubbles_at = vec![0u32; nt];
+        let mut frozen_by = vec![0u32; nt];
         let mut diffuse_draws: Vec<u32> = Vec::with_capacity(nt);
         let mut diffuse_out = DiffuseLanes::default();
         for (r, ray) in self.rays.iter().enumerate() {
@@ -618,7 +620,7 @@ impl SensorModel {
                     forward_pow.push(last * FORWARD_FRACTION);
                 }
                 fwd_after.extend(forward_pow[1..=count].iter().map(|&f| ray.flux_in_w * f));
-                let m = lanes.tally(&mut bubbles_at, &mut landed);
+                let m = lanes.tally(&mut frozen_by, &mut landed);
                 for &n in &landed[..m] {
                     let n = n as usize;
                     let sc = lanes.scattered(n);
@@ -669,7 +671,7 @@ impl SensorModel {
                     }
                     fwd *= FORWARD_FRACTION;
                     fwd_after.push(fwd);
-                    bubbles_at[i] += 1;
+                    frozen_by[i] = (fwd_after.len() - 1) as u32;
                     let gap = geometric_gap(&mut bub, ln_q);
                     j = j.saturating_add(1).saturating_add(gap);
                 }
@@ -714,9 +716,9 @@ impl SensorModel {
                     &diffuse_draws,
                     &mut diffuse_out,
                 );
-                let mut n_bub: usize = bubbles_at[first_wet..i0].iter().map(|&c| c as usize).sum();
+                let mut n_bub = frozen_before(&frozen_by[first_wet..i0]);
                 for (n, i) in (i0..nt).enumerate() {
-                    n_bub += bubbles_at[i] as usize;
+                    n_bub = n_bub.max(frozen_by[i] as usize);
                     let k = diffuse_out.slot[n] as usize;
                     if k < 2 {
                         let fwd = fwd_after[n_bub];
@@ -774,10 +776,7 @@ impl SensorModel {
                     let k_path = (1.0 + back) / den;
                     let att = (-alpha * k_path * (self.thick[i_lo] + a)).exp();
                     let att_step = (-alpha * k_path * cfg.step_mm).exp();
-                    let n_bub: usize = bubbles_at[first_wet..i_lo]
-                        .iter()
-                        .map(|&c| c as usize)
-                        .sum();
+                    let n_bub = frozen_before(&frozen_by[first_wet..i_lo]);
                     spec_slot.resize(i_hi - i_lo, 2);
                     specular_slots(
                         ray.p0,
@@ -789,7 +788,7 @@ impl SensorModel {
                     );
                     add_specular(
                         &mut refl[i_lo..i_hi],
-                        &bubbles_at[i_lo..i_hi],
+                        &frozen_by[i_lo..i_hi],
                         &spec_slot,
                         &fwd_after,
                         n_bub,
@@ -799,7 +798,7 @@ impl SensorModel {
                 }
             }
             if had_bubbles {
-                bubbles_at[first_wet..].fill(0);
+                frozen_by[first_wet..].fill(0);
             }
         }
         // Flux to current.
@@ -827,25 +826,32 @@ impl SensorModel {
     }
 }
 
+/// How many bubbles are frozen in up to the end of a range of thickness indices, from the
+/// `frozen_by` entries of the range (0 where none is frozen in): their maximum.
+fn frozen_before(frozen_by: &[u32]) -> usize {
+    frozen_by.iter().copied().max().unwrap_or(0) as usize
+}
+
 /// The specular reflection of one ray at the visited thicknesses: at each, the forward flux
-/// left after the bubbles frozen in so far (`fwd_after[n]`, n counted from `n_bub` on) times
+/// left after the bubbles frozen in so far (`fwd_after[n]`, n the running maximum of
+/// `frozen_by` from `n_bub` on) times
 /// the Fresnel reflectance and coupling `[rfl, cpl]` times the absorption, which falls by
 /// `att[1]` per step from `att[0]`, added to the bundle of `slot`.
 // Its own function: inside the tracer the running values would live on the stack.
 #[inline(never)]
 fn add_specular(
     refl: &mut [[f64; 2]],
-    bubbles_at: &[u32],
+    frozen_by: &[u32],
     slot: &[i32],
     fwd_after: &[f64],
     mut n_bub: usize,
     [rfl, cpl]: [f64; 2],
     [mut att, att_step]: [f64; 2],
 ) {
-    for ((flux, &frozen), &k) in refl.iter_mut().zip(bubbles_at).zip(slot) {
+    for ((flux, &frozen), &k) in refl.iter_mut().zip(frozen_by).zip(slot) {
         let att_i = att;
         att *= att_step;
-        n_bub += frozen as usize;
+        n_bub = n_bub.max(frozen as usize);
         // Along the line the bundle changes rarely: a branch predicts well.
         let k = k as u32 as usize;
         if k < 2 {
