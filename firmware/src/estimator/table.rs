@@ -1,4 +1,4 @@
-//! Response table of the ice estimator, version 1 — GENERATED, do not edit.
+//! Response table of the ice estimator, version 2 — GENERATED, do not edit.
 //!
 //! Generator: `fois_sim::table` (`build_table` + `to_rust_source`). Regenerate with
 //! `FOIS_BLESS=1 cargo test -p fois-firmware --test estimator_table`.
@@ -18,7 +18,7 @@
 use super::TableEntry as E;
 
 /// Table version (content and format).
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 /// Monte Carlo seed of the table.
 pub const SEED: u64 = 900001;
 /// Thickness step between rows, µm.
