@@ -85,6 +85,19 @@ fn moments(x: &[f64]) -> [(f64, f64); 2] {
     [(mean, (var / m).sqrt()), (var, ((c4 - c2 * c2) / m).sqrt())]
 }
 
+/// (I1, I2) of every accretion at thickness `d`, µA.
+fn currents_at(mc: &MonteCarlo, d: f64) -> (Vec<f64>, Vec<f64>) {
+    let i = mc
+        .points
+        .iter()
+        .position(|p| (p.thickness_mm - d).abs() < 1e-9)
+        .unwrap_or_else(|| panic!("no point at {d} mm"));
+    mc.runs
+        .iter()
+        .map(|c| (c.points[i].i1_ua, c.points[i].i2_ua))
+        .unzip()
+}
+
 #[test]
 fn rime_mean_and_variance_agree_with_the_old_stream_layout() {
     let cfg = SimConfig::new(IceKind::Rime, SensorKind::B, Geometry::ThesisCh5);
@@ -93,13 +106,7 @@ fn rime_mean_and_variance_agree_with_the_old_stream_layout() {
     let mut report = String::new();
     let mut worst: f64 = 0.0;
     for &(d, reference) in OLD_LAYOUT {
-        let i = mc
-            .points
-            .iter()
-            .position(|p| (p.thickness_mm - d).abs() < 1e-9)
-            .unwrap_or_else(|| panic!("no point at {d} mm"));
-        let i1: Vec<f64> = mc.runs.iter().map(|c| c.points[i].i1_ua).collect();
-        let i2: Vec<f64> = mc.runs.iter().map(|c| c.points[i].i2_ua).collect();
+        let (i1, i2) = currents_at(&mc, d);
         let [m1, v1] = moments(&i1);
         let [m2, v2] = moments(&i2);
         for (name, (got, se_got), (want, se_want)) in [
@@ -119,13 +126,7 @@ fn rime_mean_and_variance_agree_with_the_old_stream_layout() {
     );
     // The test can fail: the same check against a reference 3 % off does.
     let (d, reference) = OLD_LAYOUT[3];
-    let i = mc
-        .points
-        .iter()
-        .position(|p| (p.thickness_mm - d).abs() < 1e-9)
-        .unwrap_or_else(|| panic!("no point at {d} mm"));
-    let i1: Vec<f64> = mc.runs.iter().map(|c| c.points[i].i1_ua).collect();
-    let [(mean, se), _] = moments(&i1);
+    let [(mean, se), _] = moments(&currents_at(&mc, d).0);
     let (want, se_want) = reference[0];
     assert!(((mean - 1.03 * want) / se.hypot(se_want)).abs() > 4.0);
 }
