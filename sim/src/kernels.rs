@@ -5,7 +5,7 @@
 //! as the scalar formula (Rust never fuses a multiply and an add on its own), so the results
 //! are bit-identical to it; the golden-value tests of the crate check this.
 
-use glam::DVec3;
+use glam::{DVec2, DVec3};
 
 use crate::geometry::Bundles;
 use crate::laws::fr_dielectric;
@@ -169,6 +169,29 @@ fn reflect_diffuse_lanes(
         couple[k] = 1.0 - fr_dielectric(-rd_z, ray.n_medium, ray.n_fibre);
         path[k] = t_up + t_down;
         dir[k] = [rd_x, rd_y, rd_z];
+    }
+}
+}
+
+vector_kernel! {
+/// The bundle slot of a specular reflection's landing point p0 + w·h0, h0 = d + a, at each
+/// thickness d = `thick_mm[n]`: 0 or 1, and 2 for none or where the surface is not above
+/// the fibre (h0 ≤ 0). The same comparisons as `Geometry::region`.
+pub(crate) fn specular_slots(
+    p0: DVec2,
+    w: DVec2,
+    a: f64,
+    bundles: &Bundles,
+    thick_mm: &[f64],
+    slot: &mut [i32],
+) {
+    let n = thick_mm.len().min(slot.len());
+    let (thick_mm, slot) = (&thick_mm[..n], &mut slot[..n]);
+    for k in 0..n {
+        let h0 = thick_mm[k] + a;
+        let land = p0 + w * h0;
+        let on = bundles.slot_f64(land.x, land.y);
+        slot[k] = small_int(if h0 <= 0.0 { 2.0 } else { on });
     }
 }
 }

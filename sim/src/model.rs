@@ -6,8 +6,8 @@ use rand_pcg::Pcg32;
 
 use crate::bubbles::{BubbleLanes, BubbleRay, CounterStream, GapSampler, land_scattered};
 use crate::consts::*;
-use crate::geometry::{Bundles, Geometry};
-use crate::kernels::{DiffuseLanes, DiffuseRay, reflect_diffuse};
+use crate::geometry::Geometry;
+use crate::kernels::{DiffuseLanes, DiffuseRay, reflect_diffuse, specular_slots};
 use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
 
 /// The medium that accretes on the face (thesis §3.4, §5.2.3, §5.3).
@@ -537,6 +537,7 @@ impl SensorModel {
         // F^n, n = 0, 1, …: grown to the most bubbles one ray met.
         let mut forward_pow: Vec<f64> = vec![1.0];
         let mut landed: Vec<u32> = Vec::new();
+        let mut spec_slot: Vec<i32> = Vec::with_capacity(nt);
         let sensor_a = cfg.sensor == SensorKind::A;
         let bundles = geo.bundles();
         // Bounding box of the face, for culling scattered rays.
@@ -776,16 +777,19 @@ impl SensorModel {
                     let att = (-alpha * k_path * (self.thick[i_lo] + a)).exp();
                     let att_step = (-alpha * k_path * cfg.step_mm).exp();
                     let n_bub = frozen_before(&frozen_by[first_wet..i_lo]);
+                    spec_slot.resize(i_hi - i_lo, 2);
+                    specular_slots(
+                        ray.p0,
+                        w,
+                        a,
+                        &bundles,
+                        &self.thick[i_lo..i_hi],
+                        &mut spec_slot,
+                    );
                     add_specular(
                         &mut refl[i_lo..i_hi],
                         &frozen_by[i_lo..i_hi],
-                        SpecularLine {
-                            p0: ray.p0,
-                            w,
-                            a,
-                            bundles: &bundles,
-                            thick_mm: &self.thick[i_lo..i_hi],
-                        },
+                        &spec_slot,
                         &fwd_after,
                         n_bub,
                         [rfl, cpl],
@@ -828,43 +832,29 @@ fn frozen_before(frozen_by: &[u32]) -> usize {
     frozen_by.iter().copied().max().unwrap_or(0) as usize
 }
 
-/// Where a ray's specular reflection lands at the visited thicknesses: p0 + w·h0 with
-/// h0 = d + a, the height of the surface above the ray's fibre.
-struct SpecularLine<'a> {
-    p0: DVec2,
-    w: DVec2,
-    a: f64,
-    bundles: &'a Bundles,
-    thick_mm: &'a [f64],
-}
-
 /// The specular reflection of one ray at the visited thicknesses: at each, the forward flux
 /// left after the bubbles frozen in so far (`fwd_after[n]`, n the running maximum of
-/// `frozen_by` from `n_bub` on) times the Fresnel reflectance and coupling `[rfl, cpl]` times
-/// the absorption, which falls by `att[1]` per step from `att[0]`, added to the bundle the
-/// reflection lands on (none where the surface is not above the fibre, h0 ≤ 0).
-// Its own function: inside the tracer the running values would live on the stack. The
-// landing test runs here, beside the multiplication the loop waits for anyway.
+/// `frozen_by` from `n_bub` on) times
+/// the Fresnel reflectance and coupling `[rfl, cpl]` times the absorption, which falls by
+/// `att[1]` per step from `att[0]`, added to the bundle of `slot`.
+// Its own function: inside the tracer the running values would live on the stack.
 #[inline(never)]
 fn add_specular(
     refl: &mut [[f64; 2]],
     frozen_by: &[u32],
-    line: SpecularLine,
+    slot: &[i32],
     fwd_after: &[f64],
     mut n_bub: usize,
     [rfl, cpl]: [f64; 2],
     [mut att, att_step]: [f64; 2],
 ) {
-    let visited = refl.iter_mut().zip(frozen_by).zip(line.thick_mm);
-    for ((flux, &frozen), &d) in visited {
+    for ((flux, &frozen), &k) in refl.iter_mut().zip(frozen_by).zip(slot) {
         let att_i = att;
         att *= att_step;
         n_bub = n_bub.max(frozen as usize);
-        let h0 = d + line.a;
-        let land = line.p0 + line.w * h0;
-        let k = line.bundles.slot(land.x, land.y);
         // Along the line the bundle changes rarely: a branch predicts well.
-        if k < 2 && h0 > 0.0 {
+        let k = k as u32 as usize;
+        if k < 2 {
             flux[k] += fwd_after[n_bub] * rfl * cpl * att_i;
         }
     }
