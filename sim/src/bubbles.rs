@@ -4,11 +4,11 @@
 //! Every layer of Δ_Ice holds a bubble with probability P_B, independently, so the numbers
 //! of empty layers between bubbles are geometric. Instead of one draw per layer, the walk
 //! draws one gap per bubble ([`GapSampler`], exact up to the 2⁻³² resolution of a draw), and
-//! each bubble's draws come from a counter-based stream ([`CounterStream`]: bubble n of ray
-//! r always gets words 2n and 2n + 1 of the stream of r), so no draw depends on a branch
-//! taken before it. The landing of all scattered rays of one ray is then computed at once
-//! by [`land_scattered`], a loop the compiler vectorises (AVX2 when the CPU has it, with
-//! bit-identical results: the same IEEE-754 operations in the same order per lane).
+//! each bubble's draws come from a counter-based stream ([`CounterStream`]: the words a
+//! bubble uses are fixed by its number, below), so no draw depends on a branch taken before
+//! it. The angles and the landing of all scattered rays of one ray are then computed at once
+//! by [`land_scattered`], loops the compiler vectorises (AVX2 and FMA when the CPU has them,
+//! with bit-identical results: the same IEEE-754 operations in the same order per lane).
 //!
 //! Layout of the draws of bubble n (the even words hold gaps, the odd words angles):
 //! - the gap of empty layers before it: word 2⌊n/2⌋, its upper 32 bits for even n, its
@@ -176,8 +176,8 @@ fn sin_cos_octant(x: f64) -> (f64, f64) {
 
 /// The bubbles of one ray, one entry per bubble in walk order, padded to a multiple of
 /// `LANES` with copies of the last bubble (never read): inputs and outputs of
-/// [`land_scattered`]. Structure of arrays, all f64 (integers exactly), so that the kernel
-/// is a loop of float operations that the compiler vectorises.
+/// [`land_scattered`]. Structure of arrays (layers as f64, exactly), so that the kernel is
+/// made of loops of float operations that the compiler vectorises.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BubbleLanes {
     count: usize,
