@@ -577,7 +577,7 @@ impl SensorModel {
             // the mean thickness d_j = (j+1)Δ − off(z_b), where off is the plane's local
             // offset at the bubble. d_j grows with j (the ray is steeper than the plane:
             // den > 0), so the forward flux at each thickness is a running product, stored
-            // as fwd_after[n] and the count of bubbles per index.
+            // as fwd_after[n] and, per index, the number of bubbles frozen in up to it.
             let off1 = tx * slope_xy.x + ty * slope_xy.y;
             let bray = BubbleRay {
                 p0: ray.p0,
