@@ -42,11 +42,22 @@ def mean_se(values):
     return m, sd / math.sqrt(k)
 
 def main():
+    if not 3 <= len(sys.argv) <= 7:
+        sys.exit(__doc__.strip().splitlines()[-2] + "\n" + __doc__.strip().splitlines()[-1])
     old, new = sys.argv[1], sys.argv[2]
-    k = int(sys.argv[3]) if len(sys.argv) > 3 else 10
-    runs = int(sys.argv[4]) if len(sys.argv) > 4 else 1000
-    seed_old = int(sys.argv[5]) if len(sys.argv) > 5 else 1001
-    seed_new = int(sys.argv[6]) if len(sys.argv) > 6 else 2001
+    for b in (old, new):
+        if not (os.path.isfile(b) and os.access(b, os.X_OK)):
+            sys.exit(f"not an executable foisctl: {b}")
+    try:
+        k, runs, seed_old, seed_new = (
+            int(sys.argv[i]) if len(sys.argv) > i else d
+            for i, d in ((3, 10), (4, 1000), (5, 1001), (6, 2001))
+        )
+    except ValueError as e:
+        sys.exit(f"K, RUNS and the seeds are whole numbers: {e}")
+    if k < 5 or runs < 2:
+        sys.exit("K must be at least 5 (the standard error comes from the spread of the K "
+                 "batches; 10-20 give usable z) and RUNS at least 2")
     with tempfile.TemporaryDirectory() as tmp:
         a = batches(old, range(seed_old, seed_old + k), runs, tmp)
         b = batches(new, range(seed_new, seed_new + k), runs, tmp)
