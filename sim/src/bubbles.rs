@@ -496,6 +496,17 @@ mod tests {
         let forward: Vec<u64> = (0..50).map(|n| s.word(n)).collect();
         let backward: Vec<u64> = (0..50).rev().map(|n| s.word(n)).collect();
         assert!(forward.iter().eq(backward.iter().rev()));
+        // Word n is SplitMix64's output after n + 1 steps from the start (mix64 adds the
+        // first step), and no two words repeat.
+        let mut state = s.start;
+        for &w in &forward {
+            assert_eq!(w, mix64(state));
+            state = state.wrapping_add(GOLDEN_GAMMA);
+        }
+        let mut sorted = forward.clone();
+        sorted.sort_unstable();
+        sorted.dedup();
+        assert_eq!(sorted.len(), forward.len());
         // Different streams and keys differ.
         assert_ne!(CounterStream::new(123, 5).word(0), s.word(0));
         assert_ne!(CounterStream::new(124, 4).word(0), s.word(0));
