@@ -5,9 +5,9 @@
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use fois_protocol::{
-    Ack, AckResult, Baseline, Command, Config, DetectorState, DeviceFrame, DeviceMsg, ErrorCode,
-    ErrorReply, Event, EventKind, FrameDecoder, Hello, HostFrame, MAX_FRAME, Measurement,
-    MeasurementV2, PROTOCOL_VERSION, encode, flags,
+    Ack, AckResult, Baseline, CalibrationRefusal, Command, Config, ConfigV1, DetectorState,
+    DeviceFrame, DeviceMsg, ErrorCode, ErrorReply, Event, EventKind, FrameDecoder, Hello,
+    HostFrame, MAX_FRAME, Measurement, MeasurementV3, PROTOCOL_VERSION, encode, flags,
 };
 
 use crate::dispatch::{self, BUTTON_ID};
@@ -199,7 +199,7 @@ where
 
     /// One output frame: K LED-off/LED-on cycles (settle waits through the
     /// delay), currents, temperature, V_DDA, the ice rule, the outputs, the
-    /// ice estimator. Sends a `MeasurementV2` (the measurement with the
+    /// ice estimator. Sends a `MeasurementV3` (the measurement with the
     /// estimate) if streaming, then any `Event`s (rule transition first, then
     /// faults raised/cleared).
     pub fn run_frame(&mut self, now_ms: u64, tx: &mut impl FnMut(&[u8])) {
@@ -231,11 +231,12 @@ where
             state: self.rule.state(),
         };
         if self.streaming {
-            let msg = MeasurementV2 {
+            let msg = MeasurementV3 {
                 measurement: m.clone(),
                 estimate,
+                gain: None,
             };
-            self.send(DeviceMsg::MeasurementV2(msg), tx);
+            self.send(DeviceMsg::MeasurementV3(msg), tx);
         }
         let event = |kind: EventKind, frames: u16| Event {
             uptime_ms: now_ms,
@@ -536,8 +537,17 @@ where
         let id = frame.id;
         let result = match frame.cmd {
             Command::GetInfo => Ok(AckResult::Info(self.hello())),
-            Command::GetConfig => Ok(AckResult::Config(self.config.clone())),
-            Command::SetConfig(cfg) => self.set_config(cfg, now_ms),
+            Command::GetConfig => Ok(AckResult::ConfigV3(self.config.clone())),
+            // An older host's config: its twelve fields over the node's gain fields.
+            Command::SetConfig(cfg) => self
+                .set_config(cfg.over(&self.config), now_ms)
+                .map(|()| AckResult::Config(ConfigV1::from(&self.config))),
+            Command::SetConfigV3(cfg) => self
+                .set_config(cfg, now_ms)
+                .map(|()| AckResult::ConfigV3(self.config.clone())),
+            // The gain state lives in the gain-tracking estimator; until this
+            // node has one it cannot calibrate or forget a gain.
+            Command::CalibrateGain(_) | Command::ResetGain => Err(ErrorCode::UnknownCommand),
             Command::StartStream { frame_period_ms } => {
                 match dispatch::stream_period(&self.config, frame_period_ms) {
                     Ok(period) => {
@@ -572,7 +582,7 @@ where
         self.reply(id, result, tx);
     }
 
-    fn set_config(&mut self, cfg: Config, now_ms: u64) -> Result<AckResult, ErrorCode> {
+    fn set_config(&mut self, cfg: Config, now_ms: u64) -> Result<(), ErrorCode> {
         cfg.validate().map_err(ErrorCode::InvalidConfig)?;
         self.config = cfg;
         self.config_defaulted = false;
@@ -583,7 +593,7 @@ where
             self.stream_period_ms = None;
         }
         self.changed(now_ms);
-        Ok(AckResult::Config(self.config.clone()))
+        Ok(())
     }
 
     fn calibrate_dark(&mut self, now_ms: u64) -> Result<AckResult, ErrorCode> {
@@ -598,7 +608,7 @@ where
         for _ in 0..CAL_FRAMES {
             let v = self.measure_frame();
             if v.flags & flags::INVALID_MASK != 0 {
-                return Err(ErrorCode::CalibrationFailed);
+                return Err(ErrorCode::CalibrationRefused(CalibrationRefusal::Saturated));
             }
             for ch in 0..2 {
                 let i = v.currents.net_na[ch];
@@ -611,7 +621,7 @@ where
         let tolerance = i64::from(self.config.onset_rise_na / 2);
         for ch in 0..2 {
             if i64::from(max[ch]) - i64::from(min[ch]) > tolerance {
-                return Err(ErrorCode::CalibrationFailed);
+                return Err(ErrorCode::CalibrationRefused(CalibrationRefusal::Noisy));
             }
         }
         let n = i64::from(CAL_FRAMES);

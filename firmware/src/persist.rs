@@ -9,15 +9,16 @@
 //! [`Config::validate`] is *corrupt*: defaults and `CONFIG_DEFAULTED`.
 
 use fois_protocol::framing::CRC;
-use fois_protocol::{Baseline, Config};
+use fois_protocol::{Baseline, Config, ConfigV1};
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// First four bytes of a record.
 pub const MAGIC: [u8; 4] = *b"FOIS";
-/// Record layout version; bump when [`Record`] changes shape. An older
-/// record is refused (defaults + fault), never misread.
-pub const RECORD_VERSION: u16 = 1;
+/// Record layout version; bump when [`Record`] changes shape. A record of
+/// a version this firmware knows ([`RecordV1`]) is read and upgraded; any
+/// other is refused (defaults + fault), never misread.
+pub const RECORD_VERSION: u16 = 2;
 const HEADER: usize = 8;
 const CRC_LEN: usize = 4;
 /// The largest record, bytes.
@@ -28,6 +29,18 @@ pub const MAX_RECORD: usize = HEADER + Record::POSTCARD_MAX_SIZE + CRC_LEN;
 pub struct Record {
     /// The config in force.
     pub config: Config,
+    /// The dark baseline, once calibrated.
+    pub baseline: Option<Baseline>,
+}
+
+/// The record of layout version 1 (firmware of protocol versions 1 and 2):
+/// the config in its version-1 shape. Read at boot and upgraded (the newer
+/// config fields at their defaults), so a firmware update keeps the
+/// node's settings and dark baseline.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RecordV1 {
+    /// The config in force.
+    pub config: ConfigV1,
     /// The dark baseline, once calibrated.
     pub baseline: Option<Baseline>,
 }
@@ -80,13 +93,20 @@ pub fn decode(bytes: &[u8]) -> Result<Record, LoadError> {
     if CRC.checksum(signed) != stored_crc {
         return Err(LoadError::Corrupt);
     }
-    if version != RECORD_VERSION {
-        return Err(LoadError::OldVersion);
-    }
     let body = signed.get(HEADER..).ok_or(LoadError::Corrupt)?;
-    let record: Record = match postcard::take_from_bytes(body) {
-        Ok((r, [])) => r,
-        _ => return Err(LoadError::Corrupt),
+    let record: Record = match version {
+        RECORD_VERSION => match postcard::take_from_bytes(body) {
+            Ok((r, [])) => r,
+            _ => return Err(LoadError::Corrupt),
+        },
+        1 => match postcard::take_from_bytes::<RecordV1>(body) {
+            Ok((r, [])) => Record {
+                config: Config::from(r.config),
+                baseline: r.baseline,
+            },
+            _ => return Err(LoadError::Corrupt),
+        },
+        _ => return Err(LoadError::OldVersion),
     };
     record.config.validate().map_err(|_| LoadError::Corrupt)?;
     Ok(record)
@@ -153,5 +173,47 @@ mod tests {
         };
         let n = encode(&bad, &mut buf);
         assert_eq!(decode(&buf[..n]), Err(LoadError::Corrupt));
+    }
+
+    /// A record written by the firmware of protocol versions 1–2 (layout
+    /// version 1, the version-1 config) is read and upgraded: settings and
+    /// baseline survive a firmware update.
+    #[test]
+    fn layout_version_1_is_upgraded() {
+        let old = RecordV1 {
+            config: ConfigV1 {
+                onset_rise_na: 1_500,
+                ..ConfigV1::from(&Config::default())
+            },
+            baseline: Some(Baseline {
+                i1_na: 310,
+                i2_na: -7,
+            }),
+        };
+        let mut buf = [0xFFu8; 128];
+        let body_len = postcard::to_slice(&old, &mut buf[HEADER..]).unwrap().len();
+        buf[..4].copy_from_slice(&MAGIC);
+        buf[4..6].copy_from_slice(&1u16.to_le_bytes());
+        buf[6..8].copy_from_slice(&(body_len as u16).to_le_bytes());
+        let end = HEADER + body_len;
+        let crc = CRC.checksum(&buf[..end]).to_le_bytes();
+        buf[end..end + CRC_LEN].copy_from_slice(&crc);
+        // The bytes of a version-1 record, as that firmware wrote them.
+        let golden: [u8; 35] = [
+            0x46, 0x4f, 0x49, 0x53, 0x01, 0x00, 0x17, 0x00, 0x64, 0x08, 0xc8, 0x01, 0x90, 0x4e,
+            0x90, 0x4e, 0xdc, 0x0b, 0x1e, 0xc8, 0x01, 0xac, 0x02, 0x64, 0xf4, 0x03, 0x01, 0x01,
+            0xec, 0x04, 0x0d, 0x3b, 0xf4, 0xd5, 0xa0,
+        ];
+        assert_eq!(buf[..end + CRC_LEN], golden);
+        let read = decode(&buf).unwrap();
+        assert_eq!(read.config.onset_rise_na, 1_500);
+        assert_eq!(read.config.gain_tempco_sd_ppm_per_k, 4_000);
+        assert_eq!(read.config.gain_low_permille, 600);
+        assert_eq!(read.baseline, old.baseline);
+        // A version-1 record's body does not pass for a version-2 one.
+        buf[4..6].copy_from_slice(&RECORD_VERSION.to_le_bytes());
+        let crc = CRC.checksum(&buf[..end]).to_le_bytes();
+        buf[end..end + CRC_LEN].copy_from_slice(&crc);
+        assert_eq!(decode(&buf), Err(LoadError::Corrupt));
     }
 }

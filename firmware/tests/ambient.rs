@@ -19,7 +19,7 @@ fn measure(w: &World, node: &mut SimNode) -> Measurement {
     let fs = step(node, w);
     fs.into_iter()
         .find_map(|f| match f.msg {
-            DeviceMsg::MeasurementV2(m) => Some(m.measurement),
+            DeviceMsg::MeasurementV3(m) => Some(m.measurement),
             _ => None,
         })
         .expect("streaming")

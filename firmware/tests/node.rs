@@ -12,7 +12,7 @@ use fois_protocol::*;
 fn measurement(fs: &[DeviceFrame]) -> Measurement {
     fs.iter()
         .find_map(|f| match &f.msg {
-            DeviceMsg::MeasurementV2(m) => Some(m.measurement.clone()),
+            DeviceMsg::MeasurementV3(m) => Some(m.measurement.clone()),
             _ => None,
         })
         .expect("a measurement")
@@ -328,7 +328,7 @@ fn dark_calibration_refuses_saturated_or_unsteady_light() {
     w.set(|s| s.ambient_na = [400_000.0, 0.0]);
     assert_eq!(
         error(command(&mut node, &w, 1, Command::CalibrateDark)).code,
-        ErrorCode::CalibrationFailed
+        ErrorCode::CalibrationRefused(CalibrationRefusal::Saturated)
     );
     // A film coming and going: I1 changes by 200 µA/s, so the four
     // calibration frames (~15 ms) disagree by more than onset/2 = 500 nA.
@@ -336,10 +336,10 @@ fn dark_calibration_refuses_saturated_or_unsteady_light() {
         s.ambient_na = [20_000.0, 0.0];
         s.signal_ramp_na_per_s = [200_000.0, 0.0];
     });
-    assert_eq!(
+    assert!(matches!(
         error(command(&mut node, &w, 2, Command::CalibrateDark)).code,
-        ErrorCode::CalibrationFailed
-    );
+        ErrorCode::CalibrationRefused(_)
+    ));
     assert_eq!(node.baseline(), None);
 }
 
@@ -371,7 +371,7 @@ fn every_command_is_answered() {
     );
     assert_eq!(
         ack(command(&mut node, &w, 2, Command::GetConfig), 2),
-        AckResult::Config(Config::default())
+        AckResult::ConfigV3(Config::default())
     );
     assert_eq!(
         ack(command(&mut node, &w, 3, Command::StopStream), 3),
@@ -449,8 +449,11 @@ fn set_config_validates_applies_and_persists() {
         ..Config::default()
     };
     assert_eq!(
-        ack(command(&mut node, &w, 1, Command::SetConfig(c.clone())), 1),
-        AckResult::Config(c.clone())
+        ack(
+            command(&mut node, &w, 1, Command::SetConfigV3(c.clone())),
+            1
+        ),
+        AckResult::ConfigV3(c.clone())
     );
     assert_eq!(node.config(), &c);
     assert_eq!(node.frame_period_ms(), 200);
@@ -458,7 +461,7 @@ fn set_config_validates_applies_and_persists() {
     let mut bad = c.clone();
     bad.clear_rise_na = bad.onset_rise_na;
     assert_eq!(
-        error(command(&mut node, &w, 2, Command::SetConfig(bad))),
+        error(command(&mut node, &w, 2, Command::SetConfigV3(bad))),
         ErrorReply {
             id: Some(2),
             code: ErrorCode::InvalidConfig(ConfigError::ClearNotBelowOnset)
@@ -467,13 +470,13 @@ fn set_config_validates_applies_and_persists() {
     let mut bad = c.clone();
     bad.settle_us = 19;
     assert_eq!(
-        error(command(&mut node, &w, 3, Command::SetConfig(bad))).code,
+        error(command(&mut node, &w, 3, Command::SetConfigV3(bad))).code,
         ErrorCode::InvalidConfig(ConfigError::BelowMin(ConfigField::SettleUs))
     );
     assert_eq!(node.config(), &c);
     run_until_saved(&mut node, &w);
     // The same config again: nothing to write.
-    command(&mut node, &w, 4, Command::SetConfig(c.clone()));
+    command(&mut node, &w, 4, Command::SetConfigV3(c.clone()));
     assert!(!node.save_pending());
     let (_, _, _, _, _, storage) = node.into_parts();
     assert_eq!(
@@ -482,6 +485,50 @@ fn set_config_validates_applies_and_persists() {
     );
     let (node, _) = node_with(storage);
     assert_eq!(node.config(), &c);
+}
+
+/// A host of protocol version 1/2 sends the old config shape: its twelve
+/// fields are applied, the node's version-3 fields are kept, and the answer
+/// comes back in the old shape; `GetConfig` answers with every field.
+#[test]
+fn an_older_hosts_config_keeps_the_newer_fields() {
+    let (mut node, w) = node();
+    let v3 = Config {
+        gain_tempco_ppm_per_k: -2_500,
+        gain_low_permille: 750,
+        ..Config::default()
+    };
+    command(&mut node, &w, 1, Command::SetConfigV3(v3.clone()));
+    let old = ConfigV1 {
+        onset_frames: 12,
+        ..ConfigV1::from(&Config::default())
+    };
+    assert_eq!(
+        ack(
+            command(&mut node, &w, 2, Command::SetConfig(old.clone())),
+            2
+        ),
+        AckResult::Config(old)
+    );
+    let want = Config {
+        onset_frames: 12,
+        ..v3
+    };
+    assert_eq!(node.config(), &want);
+    assert_eq!(
+        ack(command(&mut node, &w, 3, Command::GetConfig), 3),
+        AckResult::ConfigV3(want)
+    );
+    // The gain band rule is the protocol's: an empty band is refused.
+    let bad = Config {
+        gain_low_permille: 1_000,
+        gain_high_permille: 1_000,
+        ..Config::default()
+    };
+    assert_eq!(
+        error(command(&mut node, &w, 4, Command::SetConfigV3(bad))).code,
+        ErrorCode::InvalidConfig(ConfigError::GainBandEmpty)
+    );
 }
 
 #[test]
@@ -495,8 +542,11 @@ fn storage_failure_is_reported_and_the_change_holds() {
     };
     // Applied at once; the save comes after the quiet time.
     assert_eq!(
-        ack(command(&mut node, &w, 1, Command::SetConfig(c.clone())), 1),
-        AckResult::Config(c.clone())
+        ack(
+            command(&mut node, &w, 1, Command::SetConfigV3(c.clone())),
+            1
+        ),
+        AckResult::ConfigV3(c.clone())
     );
     assert_eq!(node.config(), &c, "holds until the next reset");
     let t0 = w.now_ms();
@@ -542,7 +592,7 @@ fn corrupt_or_old_storage_means_defaults_and_a_fault() {
             EventKind::FaultRaised(flags::CONFIG_DEFAULTED)
         );
         // A good SetConfig repairs it and clears the fault.
-        command(&mut node, &w, 1, Command::SetConfig(Config::default()));
+        command(&mut node, &w, 1, Command::SetConfigV3(Config::default()));
         let fs = step(&mut node, &w);
         assert_eq!(measurement(&fs).flags & flags::CONFIG_DEFAULTED, 0);
         assert_eq!(
@@ -642,7 +692,7 @@ mod fuzz {
                 node.run_frame(w.now_ms(), &mut |b| bytes.extend_from_slice(b));
             }
             let fs = frames(&bytes);
-            let ms = fs.iter().filter(|f| matches!(f.msg, DeviceMsg::MeasurementV2(_))).count();
+            let ms = fs.iter().filter(|f| matches!(f.msg, DeviceMsg::MeasurementV3(_))).count();
             prop_assert!(ms == chunks.len() || !node.is_streaming());
         }
     }
@@ -666,7 +716,7 @@ mod saving {
                 onset_rise_na: 1_000 + u32::from(i) * 100,
                 ..Config::default()
             };
-            command(&mut node, &w, i, Command::SetConfig(c));
+            command(&mut node, &w, i, Command::SetConfigV3(c));
             w.advance_ms(50);
         }
         let last_change = w.now_ms();
@@ -692,7 +742,7 @@ mod saving {
             onset_frames: 40,
             ..node.config().clone()
         };
-        command(&mut node, &w, 30, Command::SetConfig(c.clone()));
+        command(&mut node, &w, 30, Command::SetConfigV3(c.clone()));
         let due = node.save_due_ms().expect("pending");
         assert_eq!(due, saved_at + SAVE_MIN_INTERVAL_MS);
         run_until_saved(&mut node, &w);
@@ -711,7 +761,7 @@ mod saving {
                 onset_rise_na: 1_000 + i,
                 ..Config::default()
             };
-            command(&mut node, &w, 1, Command::SetConfig(c));
+            command(&mut node, &w, 1, Command::SetConfigV3(c));
             let now = w.now_ms() - t0;
             step(&mut node, &w);
             if !node.save_pending() {
@@ -757,7 +807,7 @@ mod saving {
             clear_frames: 500,
             ..Config::default()
         };
-        command(&mut node, &w, 1, Command::SetConfig(c.clone()));
+        command(&mut node, &w, 1, Command::SetConfigV3(c.clone()));
         assert!(node.save_pending());
         assert_eq!(
             ack(command(&mut node, &w, 2, Command::Reset), 2),

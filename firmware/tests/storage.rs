@@ -81,7 +81,7 @@ fn save_through_node<const P: usize>(
     if let Some(b) = r.baseline {
         w.set(|s| s.signal_na = [f64::from(b.i1_na), f64::from(b.i2_na)]);
     }
-    command(&mut node, &w, 1, Command::SetConfig(r.config.clone()));
+    command(&mut node, &w, 1, Command::SetConfigV3(r.config.clone()));
     if r.baseline.is_some() {
         command(&mut node, &w, 2, Command::CalibrateDark);
     }

@@ -255,12 +255,11 @@ impl Observer {
             }
         }
         self.last_seq = Some(f.seq);
-        if let DeviceMsg::MeasurementV2(v2) = &f.msg {
-            let m = &v2.measurement;
+        if let Some((m, estimate)) = f.msg.measurement() {
             let truth = self.env.truth(m.uptime_ms.saturating_mul(1_000_000));
             if truth.cover == Cover::Water && truth.air_temp_c > WATER_FREEZING_BAND_C {
                 o.warm_water_frames += 1;
-                if v2.estimate.as_ref().is_some_and(|e| {
+                if estimate.is_some_and(|e| {
                     matches!(
                         e.medium,
                         fois_protocol::Medium::Glazed | fois_protocol::Medium::Rime
@@ -269,7 +268,7 @@ impl Observer {
                     o.warm_water_called_ice += 1;
                 }
             }
-            if let (true, Some(e)) = (self.record_estimates, &v2.estimate) {
+            if let (true, Some(e)) = (self.record_estimates, estimate) {
                 o.estimates.push(EstSample {
                     t_s: m.uptime_ms as f64 / 1000.0,
                     cover: truth.cover,
@@ -283,7 +282,8 @@ impl Observer {
         match f.msg {
             DeviceMsg::Hello(_) => o.hellos += 1,
             DeviceMsg::Measurement(m)
-            | DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 { measurement: m, .. }) => {
+            | DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 { measurement: m, .. })
+            | DeviceMsg::MeasurementV3(fois_protocol::MeasurementV3 { measurement: m, .. }) => {
                 o.measurements += 1;
                 if !m.is_valid() {
                     o.saturated += 1;
@@ -378,7 +378,7 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
     if let Some(cfg) = &sc.config {
         let bytes = encode_to_vec(&HostFrame {
             id,
-            cmd: Command::SetConfig(cfg.clone()),
+            cmd: Command::SetConfigV3(cfg.clone()),
         });
         node.handle_rx(&bytes, &mut |b: &[u8]| obs.wire(b));
         obs.out.sent.push((id, 0.0));

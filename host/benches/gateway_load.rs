@@ -94,7 +94,10 @@ fn feed(
                 decoder.feed::<DeviceFrame>(&out[..off], |r| {
                     if let Ok(DeviceFrame {
                         seq,
-                        msg: DeviceMsg::Measurement(_) | DeviceMsg::MeasurementV2(_),
+                        msg:
+                            DeviceMsg::Measurement(_)
+                            | DeviceMsg::MeasurementV2(_)
+                            | DeviceMsg::MeasurementV3(_),
                     }) = r
                     {
                         seqs.push(seq);

@@ -28,6 +28,8 @@
 //! | `est_sigma_mm` | mm | its standard deviation |
 //! | `est_kind` | | most likely medium: `dry`, `water`, `glazed`, `rime` |
 //! | `est_p` | 0–1 | posterior probability of that medium |
+//! | `est_gain` | 1 = table | the node's estimate of its optical gain (protocol v3 nodes; empty for older) |
+//! | `est_gain_sigma` | | its standard deviation |
 
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom};
@@ -36,13 +38,15 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use csv::StringRecord;
-use fois_protocol::{DetectorState, DeviceMsg, Event, IceEstimate, Measurement, flags};
+use fois_protocol::{
+    DetectorState, DeviceMsg, Event, GainEstimate, IceEstimate, Measurement, flags,
+};
 
 use crate::text::{ack_text, centi_c_to_c, error_text, event_name, hello_text, na_to_ua};
 use crate::timefmt::{iso_utc, unix_ms_now};
 
 /// The header line (without newline).
-pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,frames_lost,detail,est_thickness_mm,est_sigma_mm,est_kind,est_p";
+pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,frames_lost,detail,est_thickness_mm,est_sigma_mm,est_kind,est_p,est_gain,est_gain_sigma";
 
 /// Rows reach the kernel at least this often (kill -9 loses at most this).
 pub const FLUSH_INTERVAL: Duration = Duration::from_millis(250);
@@ -110,6 +114,8 @@ pub struct Row {
     pub detail: String,
     /// The node's ice estimate (protocol v2 measurements that carry one).
     pub estimate: Option<IceEstimate>,
+    /// The node's optical gain estimate (protocol v3 measurements that carry one).
+    pub gain: Option<GainEstimate>,
 }
 
 impl Row {
@@ -167,6 +173,11 @@ impl Row {
             DeviceMsg::Measurement(m) => Row::measurement(seq, m),
             DeviceMsg::MeasurementV2(m) => Row {
                 estimate: m.estimate,
+                ..Row::measurement(seq, &m.measurement)
+            },
+            DeviceMsg::MeasurementV3(m) => Row {
+                estimate: m.estimate,
+                gain: m.gain,
                 ..Row::measurement(seq, &m.measurement)
             },
             DeviceMsg::Event(e) => Row::event(seq, e),
@@ -341,7 +352,7 @@ fn fixed(v: Option<f64>, decimals: usize) -> String {
 }
 
 /// The fields of a row, in the order of [`HEADER`].
-pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 21] {
+pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 23] {
     let est = r.estimate.as_ref();
     [
         iso_utc(host_unix_ms),
@@ -365,6 +376,8 @@ pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 21] {
         opt(est.map(|e| um_to_mm(e.sigma_um))),
         est.map_or(String::new(), |e| e.medium.name().to_string()),
         opt(est.map(|e| permille_to_p(e.probability_permille))),
+        opt(r.gain.map(|g| format!("{:.4}", g.gain()))),
+        opt(r.gain.map(|g| format!("{:.4}", g.sigma()))),
     ]
 }
 
@@ -572,7 +585,7 @@ mod tests {
         let line = format_row(0, &Row::measurement(42, &meas()));
         assert_eq!(
             line,
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,\n"
         );
         let v2 = DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 {
             measurement: meas(),
@@ -585,7 +598,19 @@ mod tests {
         });
         assert_eq!(
             format_row(0, &Row::device(42, &v2)),
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,2.345,0.310,rime,0.970\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,2.345,0.310,rime,0.970,,\n"
+        );
+        let v3 = DeviceMsg::MeasurementV3(fois_protocol::MeasurementV3 {
+            measurement: meas(),
+            estimate: None,
+            gain: Some(fois_protocol::GainEstimate {
+                gain_ppm: 1_150_260,
+                sigma_ppm: 61_000,
+            }),
+        });
+        assert_eq!(
+            format_row(0, &Row::device(42, &v3)),
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,1.1503,0.0610\n"
         );
         assert_eq!(fields(&line).len(), HEADER.split(',').count());
         let g = format_row(5, &Row::gap(10, 3));
@@ -610,7 +635,7 @@ mod tests {
         let line = format_row(1, &r);
         let f = fields(&line);
         assert_eq!(f[16], "a, \"b\"\nc");
-        assert_eq!(f.len(), 21);
+        assert_eq!(f.len(), 23);
     }
 
     #[test]
@@ -655,7 +680,7 @@ mod tests {
             log.close().unwrap();
         }
         let t = LogTable::read(&p).unwrap();
-        assert_eq!(t.columns.len(), 21);
+        assert_eq!(t.columns.len(), 23);
         let seqs: Vec<&str> = t.rows.iter().map(|r| r[3].as_str()).collect();
         assert_eq!(seqs, ["1", "2"]);
         let text = std::fs::read_to_string(&p).unwrap();
@@ -667,5 +692,21 @@ mod tests {
             CsvLog::open(&other),
             Err(LogError::ForeignHeader(_))
         ));
+        // A log of the layout before the gain columns is not appended to
+        // (its rows would be narrower than the new ones): a clear refusal.
+        let older = dir.path().join("older.csv");
+        let old_header = HEADER.trim_end_matches(",est_gain,est_gain_sigma");
+        std::fs::write(&older, format!("{old_header}\n")).unwrap();
+        let err = CsvLog::open(&older).err().map(|e| e.to_string());
+        assert!(
+            err.as_deref()
+                .is_some_and(|e| e.contains("choose another file")),
+            "{err:?}"
+        );
+        assert_eq!(
+            std::fs::read_to_string(&older).unwrap(),
+            format!("{old_header}\n"),
+            "the older log is left as it was"
+        );
     }
 }

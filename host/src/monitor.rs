@@ -7,13 +7,15 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use fois_protocol::{Command, DetectorState, DeviceMsg, IceEstimate, Measurement, flags};
+use fois_protocol::{
+    Command, DetectorState, DeviceMsg, GainEstimate, IceEstimate, Measurement, flags,
+};
 
 use crate::csvlog::{CsvLog, Row};
 use crate::exit;
 use crate::link::{Incoming, Link, LinkError, SeqEvent, SeqTracker, open_port};
 use crate::text::{
-    ack_text, centi_c_to_c, error_text, estimate_text, event_name, hello_text, na_to_ua,
+    ack_text, centi_c_to_c, error_text, estimate_text, event_name, gain_text, hello_text, na_to_ua,
 };
 
 /// What `monitor` does.
@@ -72,6 +74,9 @@ pub struct MonitorSummary {
     /// The ice estimate of the last measurement (`None` for a protocol v1
     /// node, which sends none, and until a v2 node has one).
     pub last_estimate: Option<IceEstimate>,
+    /// The optical gain estimate of the last measurement (protocol v3
+    /// nodes).
+    pub last_gain: Option<GainEstimate>,
     /// Ice onsets seen.
     pub ice_onsets: u64,
 }
@@ -136,13 +141,21 @@ impl View {
 
 /// The status from the last measurement and the counters: three lines of at
 /// most 80 columns (measurement; state, alarm and the node's ice estimate;
-/// counters). The estimate reads `est ICE rime 2.3 ± 0.3 mm (p 0.97)`, or
-/// `est —` when the node sends none (protocol v1, or no valid frame yet).
+/// counters and the optical gain). The estimate reads `est ICE rime 2.3 ±
+/// 0.3 mm (p 0.97)`, or `est —` when the node sends none (protocol v1, or no
+/// valid frame yet); the gain `gain 1.150 ± 0.060` (protocol v3 nodes).
 pub fn status_lines(m: Option<&Measurement>, s: &MonitorSummary) -> [String; 3] {
-    let counters = format!(
+    let mut counters = format!(
         "frames {}  lost {}  rejected {}",
         s.frames, s.lost, s.rejected
     );
+    if let Some(g) = &s.last_gain {
+        counters.push_str("  ");
+        counters.push_str(&gain_text(g));
+        if m.is_some_and(|m| m.flags & flags::GAIN_OUT_OF_BAND != 0) {
+            counters.push_str(" OUT OF BAND");
+        }
+    }
     let Some(m) = m else {
         return [
             "waiting for measurements".to_string(),
@@ -237,13 +250,8 @@ impl Session<'_> {
                 // A node that reset while we were away may have sent more
                 // frames than before: its uptime going back tells.
                 let uptime = match &f.msg {
-                    DeviceMsg::Measurement(m)
-                    | DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 {
-                        measurement: m,
-                        ..
-                    }) => Some(m.uptime_ms),
                     DeviceMsg::Event(e) => Some(e.uptime_ms),
-                    _ => None,
+                    msg => msg.measurement().map(|(m, _)| m.uptime_ms),
                 };
                 if let Some(u) = uptime {
                     if let Some(last) = self.last_uptime_ms
@@ -262,15 +270,15 @@ impl Session<'_> {
                     self.last_uptime_ms = Some(u);
                 }
                 match &f.msg {
-                    DeviceMsg::Measurement(m) => {
-                        self.sum.measurements += 1;
-                        self.sum.last = Some(m.clone());
-                        self.sum.last_estimate = None;
-                    }
-                    DeviceMsg::MeasurementV2(v2) => {
-                        self.sum.measurements += 1;
-                        self.sum.last = Some(v2.measurement.clone());
-                        self.sum.last_estimate = v2.estimate;
+                    DeviceMsg::Measurement(_)
+                    | DeviceMsg::MeasurementV2(_)
+                    | DeviceMsg::MeasurementV3(_) => {
+                        if let Some((m, estimate)) = f.msg.measurement() {
+                            self.sum.measurements += 1;
+                            self.sum.last = Some(m.clone());
+                            self.sum.last_estimate = estimate.copied();
+                            self.sum.last_gain = f.msg.gain().copied();
+                        }
                     }
                     DeviceMsg::Event(e) => {
                         if e.kind == fois_protocol::EventKind::IceOnset {
@@ -455,10 +463,18 @@ mod tests {
             medium: Medium::Glazed,
             probability_permille: 512,
         });
+        sum.last_gain = Some(GainEstimate {
+            gain_ppm: 1_150_000,
+            sigma_ppm: 60_000,
+        });
         let lines = status_lines(Some(&meas()), &sum);
         assert_eq!(
             lines[1],
             "state ICE  alarm ON (acked)  est ICE glazed 12.3 ± 1.5 mm (p 0.51)"
+        );
+        assert_eq!(
+            lines[2],
+            "frames 9999999  lost 99999  rejected 99999  gain 1.150 ± 0.060"
         );
         for l in &lines {
             assert!(

@@ -2,7 +2,9 @@
 //! event kinds), as the monitor prints them, the log stores them and the
 //! gateway publishes them; the wire's units in the text's (µA, °C).
 
-use fois_protocol::{Ack, AckResult, ErrorReply, EventKind, Hello, IceEstimate, Medium};
+use fois_protocol::{
+    Ack, AckResult, ErrorReply, EventKind, GainEstimate, Hello, IceEstimate, Medium,
+};
 
 /// nA → µA.
 pub fn na_to_ua(na: i64) -> f64 {
@@ -51,6 +53,9 @@ pub fn ack_text(a: &Ack) -> String {
         ),
         AckResult::AlarmAcknowledged => "AlarmAcknowledged".into(),
         AckResult::Resetting => "Resetting".into(),
+        AckResult::ConfigV3(c) => format!("ConfigV3 {c:?}"),
+        AckResult::GainCalibrated(g) => format!("GainCalibrated {}", gain_text(g)),
+        AckResult::GainReset => "GainReset".into(),
     };
     format!("id={} {what}", a.id)
 }
@@ -60,9 +65,17 @@ pub fn error_text(e: &ErrorReply) -> String {
     let id = e.id.map_or("none".to_string(), |i| i.to_string());
     let why = match &e.code {
         fois_protocol::ErrorCode::InvalidConfig(c) => format!("InvalidConfig: {c}"),
+        fois_protocol::ErrorCode::CalibrationRefused(r) => {
+            format!("CalibrationRefused({r:?}): {}", r.describe())
+        }
         other => format!("{other:?}"),
     };
     format!("id={id} {why}")
+}
+
+/// The optical gain as the monitor shows it: `gain 1.150 ± 0.060`.
+pub fn gain_text(g: &GainEstimate) -> String {
+    format!("gain {:.3} ± {:.3}", g.gain(), g.sigma())
 }
 
 /// The estimate as the monitor shows it: `ICE rime 2.3 ± 0.3 mm (p 0.97)`,

@@ -391,7 +391,9 @@ fn make_rime_log(path: &Path) -> usize {
         let f = r.unwrap();
         if matches!(
             f.msg,
-            fois_protocol::DeviceMsg::Measurement(_) | fois_protocol::DeviceMsg::MeasurementV2(_)
+            fois_protocol::DeviceMsg::Measurement(_)
+                | fois_protocol::DeviceMsg::MeasurementV2(_)
+                | fois_protocol::DeviceMsg::MeasurementV3(_)
         ) {
             n += 1;
         }
@@ -534,10 +536,10 @@ fn node_refusal_exits_6_and_other_protocol_version_exits_5() {
     let node = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--ambient", "400"]);
     let (code, _, err) = foisctl(&["calibrate-dark", "--port", &node.path]);
     assert_eq!(code, 6, "{err}");
-    assert!(err.contains("CalibrationFailed"), "{err}");
+    assert!(err.contains("CalibrationRefused(Saturated)"), "{err}");
     drop(node);
 
-    // A "node" that speaks protocol version 2: its Hello (frozen shape) is
+    // A "node" that speaks a protocol version newer than this host's: its Hello (frozen shape) is
     // readable, the version is refused.
     use fois_protocol::{
         DeviceFrame, DeviceMsg, Hello, PROTOCOL_VERSION, ResetReason, encode_to_vec,

@@ -602,7 +602,7 @@ fn mqtt_commands_are_refused_when_disabled_and_carried_out_only_on_their_topic()
     assert_eq!(by("calibrate-dark")["ok"], false);
     let why = by("calibrate-dark")["detail"].as_str().unwrap().to_string();
     assert!(
-        why.contains("NotDry") || why.contains("CalibrationFailed"),
+        why.contains("NotDry") || why.contains("CalibrationRefused"),
         "{why}"
     );
     assert_eq!(by("reboot")["ok"], false);

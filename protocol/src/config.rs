@@ -36,6 +36,94 @@ pub struct Config {
     pub thaw_limit_centi_c: i16,
     /// Start streaming measurements at boot (otherwise wait for `StartStream`).
     pub stream_on_boot: bool,
+    /// Version 3: temperature coefficient of the sensor's optical gain (LED
+    /// output × phototransistor responsivity), ppm per kelvin of the
+    /// optoelectronics' temperature (the MCU's internal sensor: the LED and
+    /// the phototransistors sit with it). 0 = not calibrated.
+    pub gain_tempco_ppm_per_k: i32,
+    /// Version 3: standard deviation of that coefficient, ppm/K: how far the
+    /// node's gain estimate may depart from the compensation as the
+    /// temperature moves (wide when uncalibrated, narrow when measured).
+    pub gain_tempco_sd_ppm_per_k: u32,
+    /// Version 3: lower end of the plausible optical gain, ‰ of the response
+    /// table's gain. Below it the node raises `GAIN_OUT_OF_BAND` (LED
+    /// failing, face fouled).
+    pub gain_low_permille: u16,
+    /// Version 3: upper end of the plausible optical gain, ‰.
+    pub gain_high_permille: u16,
+}
+
+/// The config as versions 1 and 2 carry it on the wire (the first twelve
+/// fields of [`Config`], same order and types). Frozen: it is the payload of
+/// [`Command::SetConfig`](crate::Command::SetConfig) and
+/// [`AckResult::Config`](crate::AckResult::Config), which older nodes and
+/// hosts speak. A version-3 node takes it and keeps its own values of the
+/// newer fields.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[allow(missing_docs)] // each field is the [`Config`] field of the same name
+pub struct ConfigV1 {
+    pub frame_period_ms: u32,
+    pub cycles_per_frame: u16,
+    pub settle_us: u16,
+    pub load_r1_ohm: u32,
+    pub load_r2_ohm: u32,
+    pub onset_rise_na: u32,
+    pub onset_frames: u16,
+    pub clear_rise_na: u32,
+    pub clear_frames: u16,
+    pub freeze_limit_centi_c: i16,
+    pub thaw_limit_centi_c: i16,
+    pub stream_on_boot: bool,
+}
+
+impl ConfigV1 {
+    /// This config's fields over `base`'s newer ones (how a version-3 node
+    /// applies an older host's `SetConfig`).
+    pub fn over(&self, base: &Config) -> Config {
+        Config {
+            frame_period_ms: self.frame_period_ms,
+            cycles_per_frame: self.cycles_per_frame,
+            settle_us: self.settle_us,
+            load_r1_ohm: self.load_r1_ohm,
+            load_r2_ohm: self.load_r2_ohm,
+            onset_rise_na: self.onset_rise_na,
+            onset_frames: self.onset_frames,
+            clear_rise_na: self.clear_rise_na,
+            clear_frames: self.clear_frames,
+            freeze_limit_centi_c: self.freeze_limit_centi_c,
+            thaw_limit_centi_c: self.thaw_limit_centi_c,
+            stream_on_boot: self.stream_on_boot,
+            ..base.clone()
+        }
+    }
+}
+
+impl From<ConfigV1> for Config {
+    /// An older node's config: its fields, the defaults of the newer ones.
+    fn from(old: ConfigV1) -> Config {
+        old.over(&Config::default())
+    }
+}
+
+impl From<&Config> for ConfigV1 {
+    /// The part of a config that versions 1 and 2 carry.
+    fn from(c: &Config) -> ConfigV1 {
+        ConfigV1 {
+            frame_period_ms: c.frame_period_ms,
+            cycles_per_frame: c.cycles_per_frame,
+            settle_us: c.settle_us,
+            load_r1_ohm: c.load_r1_ohm,
+            load_r2_ohm: c.load_r2_ohm,
+            onset_rise_na: c.onset_rise_na,
+            onset_frames: c.onset_frames,
+            clear_rise_na: c.clear_rise_na,
+            clear_frames: c.clear_frames,
+            freeze_limit_centi_c: c.freeze_limit_centi_c,
+            thaw_limit_centi_c: c.thaw_limit_centi_c,
+            stream_on_boot: c.stream_on_boot,
+        }
+    }
 }
 
 impl Default for Config {
@@ -54,6 +142,10 @@ impl Default for Config {
             freeze_limit_centi_c: 50,
             thaw_limit_centi_c: 250,
             stream_on_boot: true,
+            gain_tempco_ppm_per_k: 0,
+            gain_tempco_sd_ppm_per_k: 4_000,
+            gain_low_permille: 600,
+            gain_high_permille: 1_500,
         }
     }
 }
@@ -75,6 +167,10 @@ pub enum ConfigField {
     FreezeLimitCentiC,
     ThawLimitCentiC,
     StreamOnBoot,
+    GainTempcoPpmPerK,
+    GainTempcoSdPpmPerK,
+    GainLowPermille,
+    GainHighPermille,
 }
 
 /// Why a config was refused.
@@ -95,6 +191,8 @@ pub enum ConfigError {
     UnknownField,
     /// The value is not a number of the field's kind (host-side parsing only).
     NotANumber,
+    /// Version 3: `gain_low_permille` must be below `gain_high_permille`.
+    GainBandEmpty,
 }
 
 /// The largest load resistor the node's ADC settles, Ω.
@@ -128,6 +226,9 @@ pub struct FieldSpec {
     pub max: i64,
     /// One line for `--help` and `config get`.
     pub doc: &'static str,
+    /// The first protocol version whose config carries the field (1 or 3):
+    /// a host shows and sets only the fields of the node's version.
+    pub since_version: u16,
 }
 
 const fn spec(
@@ -145,11 +246,26 @@ const fn spec(
         min,
         max,
         doc,
+        since_version: 1,
+    }
+}
+
+const fn spec_v3(
+    field: ConfigField,
+    name: &'static str,
+    unit: &'static str,
+    min: i64,
+    max: i64,
+    doc: &'static str,
+) -> FieldSpec {
+    FieldSpec {
+        since_version: 3,
+        ..spec(field, name, unit, min, max, doc)
     }
 }
 
 /// Every field, in wire order, with its rule.
-pub const FIELDS: [FieldSpec; 12] = [
+pub const FIELDS: [FieldSpec; 16] = [
     spec(
         ConfigField::FramePeriodMs,
         "frame_period_ms",
@@ -246,6 +362,38 @@ pub const FIELDS: [FieldSpec; 12] = [
         1,
         "stream measurements at boot",
     ),
+    spec_v3(
+        ConfigField::GainTempcoPpmPerK,
+        "gain_tempco_ppm_per_k",
+        "ppm/K",
+        -20_000,
+        20_000,
+        "temperature coefficient of the optical gain (0 = not calibrated)",
+    ),
+    spec_v3(
+        ConfigField::GainTempcoSdPpmPerK,
+        "gain_tempco_sd_ppm_per_k",
+        "ppm/K",
+        0,
+        20_000,
+        "uncertainty of that coefficient (wide when uncalibrated)",
+    ),
+    spec_v3(
+        ConfigField::GainLowPermille,
+        "gain_low_permille",
+        "permille",
+        100,
+        1_000,
+        "optical gain below this raises GAIN_OUT_OF_BAND (LED failing, face fouled)",
+    ),
+    spec_v3(
+        ConfigField::GainHighPermille,
+        "gain_high_permille",
+        "permille",
+        1_000,
+        10_000,
+        "optical gain above this raises GAIN_OUT_OF_BAND (must be > low)",
+    ),
 ];
 
 impl ConfigField {
@@ -265,6 +413,10 @@ impl ConfigField {
             ConfigField::FreezeLimitCentiC => 9,
             ConfigField::ThawLimitCentiC => 10,
             ConfigField::StreamOnBoot => 11,
+            ConfigField::GainTempcoPpmPerK => 12,
+            ConfigField::GainTempcoSdPpmPerK => 13,
+            ConfigField::GainLowPermille => 14,
+            ConfigField::GainHighPermille => 15,
         };
         &FIELDS[index]
     }
@@ -296,6 +448,10 @@ impl Config {
             ConfigField::FreezeLimitCentiC => self.freeze_limit_centi_c.into(),
             ConfigField::ThawLimitCentiC => self.thaw_limit_centi_c.into(),
             ConfigField::StreamOnBoot => self.stream_on_boot.into(),
+            ConfigField::GainTempcoPpmPerK => self.gain_tempco_ppm_per_k.into(),
+            ConfigField::GainTempcoSdPpmPerK => self.gain_tempco_sd_ppm_per_k.into(),
+            ConfigField::GainLowPermille => self.gain_low_permille.into(),
+            ConfigField::GainHighPermille => self.gain_high_permille.into(),
         }
     }
 
@@ -341,6 +497,18 @@ impl Config {
                 self.thaw_limit_centi_c = value.try_into().map_err(|_| too_big)?
             }
             ConfigField::StreamOnBoot => self.stream_on_boot = value != 0,
+            ConfigField::GainTempcoPpmPerK => {
+                self.gain_tempco_ppm_per_k = value.try_into().map_err(|_| too_big)?
+            }
+            ConfigField::GainTempcoSdPpmPerK => {
+                self.gain_tempco_sd_ppm_per_k = value.try_into().map_err(|_| too_big)?
+            }
+            ConfigField::GainLowPermille => {
+                self.gain_low_permille = value.try_into().map_err(|_| too_big)?
+            }
+            ConfigField::GainHighPermille => {
+                self.gain_high_permille = value.try_into().map_err(|_| too_big)?
+            }
         }
         Ok(())
     }
@@ -377,6 +545,9 @@ impl Config {
         if self.thaw_limit_centi_c <= self.freeze_limit_centi_c {
             return Err(ConfigError::ThawNotAboveFreeze);
         }
+        if self.gain_low_permille >= self.gain_high_permille {
+            return Err(ConfigError::GainBandEmpty);
+        }
         // Each cycle holds the LED off and on for a settle time each; the K
         // cycles must leave at least half the frame period free.
         let busy_us = u64::from(self.cycles_per_frame) * 2 * u64::from(self.settle_us);
@@ -409,6 +580,9 @@ impl core::fmt::Display for ConfigError {
             }
             ConfigError::UnknownField => f.write_str("no config field has that name"),
             ConfigError::NotANumber => f.write_str("the value is not an integer"),
+            ConfigError::GainBandEmpty => {
+                f.write_str("gain_low_permille must be below gain_high_permille")
+            }
         }
     }
 }
@@ -484,6 +658,14 @@ mod tests {
         let mut c = Config::default();
         c.thaw_limit_centi_c = c.freeze_limit_centi_c;
         assert_eq!(c.validate(), Err(ConfigError::ThawNotAboveFreeze));
+        let mut c = Config {
+            gain_low_permille: 1_000,
+            gain_high_permille: 1_000,
+            ..Config::default()
+        };
+        assert_eq!(c.validate(), Err(ConfigError::GainBandEmpty));
+        c.gain_high_permille = 1_001;
+        assert_eq!(c.validate(), Ok(()));
         // 64 cycles x 2 x 5000 us = 640 ms > half of 100 ms.
         let mut c = Config {
             cycles_per_frame: 64,
@@ -521,5 +703,35 @@ mod tests {
             c.set_from_str("freeze_limit_centi_c", "-2001"),
             Err(ConfigError::BelowMin(ConfigField::FreezeLimitCentiC))
         );
+    }
+
+    #[test]
+    fn the_v1_shape_is_the_first_twelve_fields() {
+        // The fields a version-1/2 node knows are exactly those marked so,
+        // and they come first (wire order).
+        let v1: Vec<_> = FIELDS.iter().filter(|s| s.since_version == 1).collect();
+        assert_eq!(v1.len(), 12);
+        assert!(FIELDS[..12].iter().all(|s| s.since_version == 1));
+        assert!(FIELDS[12..].iter().all(|s| s.since_version == 3));
+
+        let node = Config {
+            gain_tempco_ppm_per_k: -3_500,
+            gain_low_permille: 800,
+            ..Config::default()
+        };
+        let old_host = ConfigV1 {
+            onset_rise_na: 2_000,
+            ..ConfigV1::from(&Config::default())
+        };
+        // An older host's SetConfig changes its twelve fields and keeps the node's gain fields.
+        let applied = old_host.over(&node);
+        assert_eq!(applied.onset_rise_na, 2_000);
+        assert_eq!(applied.gain_tempco_ppm_per_k, -3_500);
+        assert_eq!(applied.gain_low_permille, 800);
+        assert_eq!(ConfigV1::from(&applied), old_host);
+        // An older node's config reads with the newer fields at their defaults.
+        let read = Config::from(old_host.clone());
+        assert_eq!(read.gain_tempco_sd_ppm_per_k, 4_000);
+        assert_eq!(read.onset_rise_na, 2_000);
     }
 }

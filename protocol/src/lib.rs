@@ -12,7 +12,7 @@ pub mod config;
 pub mod framing;
 pub mod messages;
 
-pub use config::{Config, ConfigError, ConfigField, FIELDS, FieldSpec, LOAD_R_MAX_OHM};
+pub use config::{Config, ConfigError, ConfigField, ConfigV1, FIELDS, FieldSpec, LOAD_R_MAX_OHM};
 #[cfg(any(feature = "std", test))]
 pub use framing::encode_to_vec;
 pub use framing::{
@@ -22,7 +22,7 @@ pub use messages::*;
 
 /// The protocol version this crate speaks (in [`Hello::protocol_version`]).
 /// Bump it on any breaking change (see `protocol/README.md`, Compatibility).
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// The oldest protocol version a host built from this crate still reads.
 /// Every version only adds variants at the end of its enums, so a frame of

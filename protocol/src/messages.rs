@@ -10,7 +10,7 @@
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
-use crate::config::{Config, ConfigError};
+use crate::config::{Config, ConfigError, ConfigV1};
 
 /// Every frame a node sends: a sequence number that grows by one per frame
 /// (wrapping), so the host can count lost frames, and the message.
@@ -41,6 +41,10 @@ pub enum DeviceMsg {
     /// node's ice estimate. A version-2 node streams this instead of
     /// [`DeviceMsg::Measurement`]; a host reads both.
     MeasurementV2(MeasurementV2),
+    /// Version 3: the measurement, the ice estimate and the node's estimate
+    /// of its own optical gain. A version-3 node streams this instead of
+    /// [`DeviceMsg::MeasurementV2`].
+    MeasurementV3(MeasurementV3),
 }
 
 impl DeviceMsg {
@@ -51,6 +55,16 @@ impl DeviceMsg {
         match self {
             DeviceMsg::Measurement(m) => Some((m, None)),
             DeviceMsg::MeasurementV2(m) => Some((&m.measurement, m.estimate.as_ref())),
+            DeviceMsg::MeasurementV3(m) => Some((&m.measurement, m.estimate.as_ref())),
+            _ => None,
+        }
+    }
+
+    /// The node's optical gain estimate of a [`DeviceMsg::MeasurementV3`],
+    /// if it sent one. `None` for every other message.
+    pub fn gain(&self) -> Option<&GainEstimate> {
+        match self {
+            DeviceMsg::MeasurementV3(m) => m.gain.as_ref(),
             _ => None,
         }
     }
@@ -164,6 +178,17 @@ pub mod flags {
     /// start: the node runs on its internal RC oscillator, whose drift over
     /// temperature can exceed what the UART tolerates.
     pub const CLOCK_FALLBACK: u16 = 1 << 10;
+    /// Version 3: the brown-out reset level in the option bytes is not the
+    /// one set when the board was provisioned: the node may run on a
+    /// sagging supply instead of resetting.
+    pub const BOR_NOT_SET: u16 = 1 << 11;
+    /// Version 3: the node booted without its flash store after repeated
+    /// panic resets in a row: defaults in use, nothing is saved until reset.
+    pub const STORE_SKIPPED: u16 = 1 << 12;
+    /// Version 3: the estimated optical gain left the configured plausible
+    /// band (`gain_low_permille`…`gain_high_permille`): LED failing, face
+    /// fouled or scratched. A maintenance signal.
+    pub const GAIN_OUT_OF_BAND: u16 = 1 << 13;
 
     /// Bits that make a frame's currents unusable.
     pub const INVALID_MASK: u16 = SATURATED_CH1 | SATURATED_CH2;
@@ -173,7 +198,43 @@ pub mod flags {
         | CONFIG_DEFAULTED
         | VDDA_OUT_OF_RANGE
         | STORAGE_FAILED
-        | CLOCK_FALLBACK;
+        | CLOCK_FALLBACK
+        | BOR_NOT_SET
+        | STORE_SKIPPED
+        | GAIN_OUT_OF_BAND;
+
+    /// Every defined bit with its name in text formats (CSV logs, MQTT
+    /// payloads, Modbus documentation): the one list of flag names.
+    pub const NAMES: [(u16, &str); 14] = [
+        (SATURATED_CH1, "saturated_ch1"),
+        (SATURATED_CH2, "saturated_ch2"),
+        (NTC_OPEN, "ntc_open"),
+        (NTC_SHORT, "ntc_short"),
+        (CONFIG_DEFAULTED, "config_defaulted"),
+        (NO_BASELINE, "no_baseline"),
+        (ALARM, "alarm"),
+        (ALARM_ACKED, "alarm_acked"),
+        (VDDA_OUT_OF_RANGE, "vdda_out_of_range"),
+        (STORAGE_FAILED, "storage_failed"),
+        (CLOCK_FALLBACK, "clock_fallback"),
+        (BOR_NOT_SET, "bor_not_set"),
+        (STORE_SKIPPED, "store_skipped"),
+        (GAIN_OUT_OF_BAND, "gain_out_of_band"),
+    ];
+
+    /// The name of one bit (`None` for a reserved bit or several bits).
+    pub fn name(bit: u16) -> Option<&'static str> {
+        NAMES.iter().find(|(b, _)| *b == bit).map(|(_, n)| *n)
+    }
+
+    /// The names of the bits set in `bits`, in bit order (reserved bits are
+    /// skipped: hosts ignore bits they do not know).
+    pub fn names(bits: u16) -> impl Iterator<Item = &'static str> {
+        NAMES
+            .iter()
+            .filter(move |(b, _)| bits & b != 0)
+            .map(|(_, n)| *n)
+    }
 }
 
 /// One output frame: K LED-on/LED-off cycles averaged.
@@ -217,6 +278,54 @@ pub struct MeasurementV2 {
     /// The ice estimate after this frame; `None` when the node has none
     /// (estimator not running, e.g. not yet initialised).
     pub estimate: Option<IceEstimate>,
+}
+
+/// Version 3: a [`MeasurementV2`]'s content and the node's estimate of its
+/// own optical gain.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MeasurementV3 {
+    /// The frame's currents, temperature, flags and detector state.
+    pub measurement: Measurement,
+    /// The ice estimate after this frame, if any.
+    pub estimate: Option<IceEstimate>,
+    /// The optical gain estimate, if the node has one.
+    pub gain: Option<GainEstimate>,
+}
+
+/// Version 3: the sensor's relative optical gain (LED output × fibre
+/// coupling × phototransistor responsivity × load resistor, against the
+/// gain the node's response table was built for) as the node estimates it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GainEstimate {
+    /// Estimated gain, ppm (1 000 000 = the response table's gain).
+    pub gain_ppm: u32,
+    /// Its standard deviation, ppm.
+    pub sigma_ppm: u32,
+}
+
+impl GainEstimate {
+    /// The gain as a plain factor (1.0 = the response table's gain).
+    pub fn gain(&self) -> f64 {
+        f64::from(self.gain_ppm) * 1e-6
+    }
+
+    /// Its standard deviation as a plain factor.
+    pub fn sigma(&self) -> f64 {
+        f64::from(self.sigma_ppm) * 1e-6
+    }
+}
+
+/// Version 3: a calibration target's expected net currents at the response
+/// table's gain (gain 1), for [`Command::CalibrateGain`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct GainTarget {
+    /// Expected channel 1 net current, nA.
+    pub i1_na: u32,
+    /// Expected channel 2 net current, nA.
+    pub i2_na: u32,
 }
 
 /// What covers the sensor face, as the node's estimator sees it.
@@ -296,12 +405,20 @@ pub enum EventKind {
     FaultRaised(u16),
     /// Fault bits that became clear.
     FaultCleared(u16),
+    /// Version 3: sent once after a boot that followed a panic reset.
+    PanicReset {
+        /// Source line of the panic in the firmware (0 when unknown).
+        line: u32,
+        /// Panic resets in a row, this one included; at the node's limit it
+        /// boots without its flash store (`STORE_SKIPPED`).
+        resets_in_row: u8,
+    },
 }
 
 impl EventKind {
     /// The kind as a snake_case word without its fault bits (`ice_onset`,
     /// `ice_cleared`, `wet_onset`, `wet_cleared`, `fault_raised`,
-    /// `fault_cleared`): its name in text formats (scenario files, MQTT
+    /// `fault_cleared`, `panic_reset`): its name in text formats (scenario files, MQTT
     /// payloads).
     pub const fn name(&self) -> &'static str {
         match self {
@@ -311,6 +428,7 @@ impl EventKind {
             EventKind::WetCleared => "wet_cleared",
             EventKind::FaultRaised(_) => "fault_raised",
             EventKind::FaultCleared(_) => "fault_cleared",
+            EventKind::PanicReset { .. } => "panic_reset",
         }
     }
 }
@@ -331,8 +449,10 @@ pub struct Ack {
 pub enum AckResult {
     /// Answer to [`Command::GetInfo`].
     Info(Hello),
-    /// Answer to [`Command::GetConfig`] and [`Command::SetConfig`] (the config now in force).
-    Config(Config),
+    /// Answer of a version-1/2 node to [`Command::GetConfig`] and of any
+    /// node to [`Command::SetConfig`] (the config now in force, in the
+    /// version-1 shape).
+    Config(ConfigV1),
     /// Streaming runs at this frame period.
     Streaming {
         /// Output frame period, ms.
@@ -346,6 +466,15 @@ pub enum AckResult {
     AlarmAcknowledged,
     /// The node resets right after this frame.
     Resetting,
+    /// Version 3: answer to [`Command::GetConfig`] and
+    /// [`Command::SetConfigV3`]: the whole config now in force.
+    ConfigV3(Config),
+    /// Version 3: gain calibration done: the gain now in force (it becomes
+    /// the estimator's prior and is saved).
+    GainCalibrated(GainEstimate),
+    /// Version 3: the learned gain was forgotten; the estimator starts again
+    /// from its wide prior.
+    GainReset,
 }
 
 /// Dark (dry-face) baseline of both channels, subtracted by the ice rule.
@@ -389,6 +518,48 @@ pub enum ErrorCode {
     /// Version 2: dark calibration refused because the detector is not
     /// `Dry` (water or ice on the face would become the baseline).
     NotDry,
+    /// Version 3: a dark or gain calibration was refused, and why. (A
+    /// version-3 node sends this instead of `CalibrationFailed`.)
+    CalibrationRefused(CalibrationRefusal),
+}
+
+/// Version 3: why a calibration was refused.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum CalibrationRefusal {
+    /// A channel saturated (too much ambient light).
+    Saturated,
+    /// The currents drifted steadily during the calibration (a trend).
+    Trend,
+    /// The currents jumped during the calibration (a step: a cloud edge,
+    /// a hand, a drop).
+    Step,
+    /// The noise was too high to reach the required accuracy in the time
+    /// the calibration may take.
+    Noisy,
+    /// The gain the target implies is outside what the node accepts.
+    ImplausibleGain,
+    /// The target's expected currents are unusable (zero, or too small to
+    /// measure).
+    InvalidTarget,
+}
+
+impl CalibrationRefusal {
+    /// A short sentence for users.
+    pub const fn describe(self) -> &'static str {
+        match self {
+            CalibrationRefusal::Saturated => "a channel saturated (too much ambient light)",
+            CalibrationRefusal::Trend => "the currents drifted during the calibration",
+            CalibrationRefusal::Step => {
+                "the currents jumped during the calibration (light changed, something moved)"
+            }
+            CalibrationRefusal::Noisy => "too noisy to reach the required accuracy in time",
+            CalibrationRefusal::ImplausibleGain => {
+                "the implied gain is outside the plausible range"
+            }
+            CalibrationRefusal::InvalidTarget => "the target's expected currents are unusable",
+        }
+    }
 }
 
 /// A frame from the host: an id (echoed in the answer) and a command.
@@ -409,8 +580,9 @@ pub enum Command {
     GetInfo,
     /// Answer with the config in force.
     GetConfig,
-    /// Validate, apply and persist a whole config.
-    SetConfig(Config),
+    /// Validate, apply and persist a config of the version-1 shape (a
+    /// version-3 node keeps its values of the newer fields).
+    SetConfig(ConfigV1),
     /// Stream measurements at this frame period (ms), or at the config's when `None`.
     StartStream {
         /// Output frame period, ms; `None` = the config's `frame_period_ms`.
@@ -424,4 +596,62 @@ pub enum Command {
     AckAlarm,
     /// Reset the node.
     Reset,
+    /// Version 3: validate, apply and persist a whole config.
+    SetConfigV3(Config),
+    /// Version 3: with a reference target of known response on the face,
+    /// measure the optical gain and make it the estimator's prior.
+    CalibrateGain(GainTarget),
+    /// Version 3: forget the learned optical gain (back to the wide prior).
+    ResetGain,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn flag_names_cover_every_defined_bit_once() {
+        let mut all = 0u16;
+        for (bit, name) in flags::NAMES {
+            assert_eq!(bit.count_ones(), 1, "{name}");
+            assert_eq!(all & bit, 0, "{name} listed twice");
+            all |= bit;
+            assert_eq!(flags::name(bit), Some(name));
+        }
+        // Bits 0..=13 are defined, 14 and 15 reserved.
+        assert_eq!(all, 0x3FFF);
+        assert_eq!(flags::FAULT_MASK & !all, 0);
+        assert_eq!(flags::name(1 << 14), None);
+        let names: Vec<_> =
+            flags::names(flags::ALARM | flags::GAIN_OUT_OF_BAND | (1 << 15)).collect();
+        assert_eq!(names, ["alarm", "gain_out_of_band"]);
+    }
+
+    #[test]
+    fn gain_reads_only_from_version_3_measurements() {
+        let m = Measurement {
+            uptime_ms: 0,
+            i1_na: 0,
+            i2_na: 0,
+            ambient1_na: 0,
+            ambient2_na: 0,
+            temperature_centi_c: 0,
+            vdda_mv: 3_300,
+            flags: 0,
+            state: DetectorState::Dry,
+        };
+        let gain = GainEstimate {
+            gain_ppm: 1_150_000,
+            sigma_ppm: 60_000,
+        };
+        let v3 = DeviceMsg::MeasurementV3(MeasurementV3 {
+            measurement: m.clone(),
+            estimate: None,
+            gain: Some(gain),
+        });
+        assert_eq!(v3.gain(), Some(&gain));
+        assert_eq!(v3.measurement(), Some((&m, None)));
+        assert!((gain.gain() - 1.15).abs() < 1e-12 && (gain.sigma() - 0.06).abs() < 1e-12);
+        assert_eq!(DeviceMsg::Measurement(m).gain(), None);
+    }
 }

@@ -18,8 +18,8 @@ fn hello() -> Hello {
     }
 }
 
-fn config() -> Config {
-    Config {
+fn config() -> ConfigV1 {
+    ConfigV1 {
         frame_period_ms: 100,
         cycles_per_frame: 8,
         settle_us: 200,
@@ -32,6 +32,30 @@ fn config() -> Config {
         freeze_limit_centi_c: 100,
         thaw_limit_centi_c: 300,
         stream_on_boot: true,
+    }
+}
+
+fn config_v3() -> Config {
+    Config {
+        gain_tempco_ppm_per_k: -3_500,
+        gain_tempco_sd_ppm_per_k: 1_000,
+        gain_low_permille: 700,
+        gain_high_permille: 1_400,
+        ..Config::from(config())
+    }
+}
+
+fn measurement() -> Measurement {
+    Measurement {
+        uptime_ms: 1_000,
+        i1_na: 25_000,
+        i2_na: -12,
+        ambient1_na: 40_000,
+        ambient2_na: 300,
+        temperature_centi_c: -512,
+        vdda_mv: 3_300,
+        flags: flags::ALARM | flags::GAIN_OUT_OF_BAND,
+        state: DetectorState::Ice,
     }
 }
 
@@ -245,6 +269,108 @@ fn cases() -> Vec<(&'static str, Vec<u8>)> {
                 }),
             ),
         ),
+        // Version 3 additions.
+        (
+            "measurement_v3",
+            device(
+                16,
+                DeviceMsg::MeasurementV3(MeasurementV3 {
+                    measurement: measurement(),
+                    estimate: Some(IceEstimate {
+                        thickness_um: 10_250,
+                        sigma_um: 1_400,
+                        medium: Medium::Rime,
+                        probability_permille: 990,
+                    }),
+                    gain: Some(GainEstimate {
+                        gain_ppm: 1_150_000,
+                        sigma_ppm: 60_000,
+                    }),
+                }),
+            ),
+        ),
+        (
+            "measurement_v3_no_gain",
+            device(
+                17,
+                DeviceMsg::MeasurementV3(MeasurementV3 {
+                    measurement: measurement(),
+                    estimate: None,
+                    gain: None,
+                }),
+            ),
+        ),
+        (
+            "event_panic_reset",
+            device(
+                18,
+                DeviceMsg::Event(Event {
+                    uptime_ms: 3,
+                    kind: EventKind::PanicReset {
+                        line: 412,
+                        resets_in_row: 2,
+                    },
+                    i1_na: 0,
+                    i2_na: 0,
+                    rise1_na: 0,
+                    temperature_centi_c: -1_000,
+                    frames: 0,
+                }),
+            ),
+        ),
+        (
+            "ack_config_v3",
+            device(
+                19,
+                DeviceMsg::Ack(Ack {
+                    id: 20,
+                    result: AckResult::ConfigV3(config_v3()),
+                }),
+            ),
+        ),
+        (
+            "ack_gain_calibrated",
+            device(
+                20,
+                DeviceMsg::Ack(Ack {
+                    id: 21,
+                    result: AckResult::GainCalibrated(GainEstimate {
+                        gain_ppm: 870_000,
+                        sigma_ppm: 12_000,
+                    }),
+                }),
+            ),
+        ),
+        (
+            "ack_gain_reset",
+            device(
+                21,
+                DeviceMsg::Ack(Ack {
+                    id: 22,
+                    result: AckResult::GainReset,
+                }),
+            ),
+        ),
+        (
+            "error_calibration_step",
+            device(
+                22,
+                DeviceMsg::Error(ErrorReply {
+                    id: Some(23),
+                    code: ErrorCode::CalibrationRefused(CalibrationRefusal::Step),
+                }),
+            ),
+        ),
+        (
+            "error_gain_band",
+            device(
+                23,
+                DeviceMsg::Error(ErrorReply {
+                    id: Some(24),
+                    code: ErrorCode::InvalidConfig(ConfigError::GainBandEmpty),
+                }),
+            ),
+        ),
         ("cmd_get_info", host(1, Command::GetInfo)),
         ("cmd_get_config", host(2, Command::GetConfig)),
         ("cmd_set_config", host(3, Command::SetConfig(config()))),
@@ -261,6 +387,22 @@ fn cases() -> Vec<(&'static str, Vec<u8>)> {
         ("cmd_dark", host(6, Command::CalibrateDark)),
         ("cmd_ack_alarm", host(7, Command::AckAlarm)),
         ("cmd_reset", host(8, Command::Reset)),
+        // Version 3 additions.
+        (
+            "cmd_set_config_v3",
+            host(9, Command::SetConfigV3(config_v3())),
+        ),
+        (
+            "cmd_calibrate_gain",
+            host(
+                10,
+                Command::CalibrateGain(GainTarget {
+                    i1_na: 25_200,
+                    i2_na: 9_560,
+                }),
+            ),
+        ),
+        ("cmd_reset_gain", host(11, Command::ResetGain)),
     ]
 }
 
@@ -306,6 +448,33 @@ const GOLDEN: &[(&str, &str)] = &[
         "04 0e 05 05 01 01 01 05 e8 07 e4 19 01 01 05 86 49 a3 42 00",
     ),
     ("error_not_dry", "0a 0f 04 01 10 07 5e 1a 74 1e 00"),
+    // Version 3 additions (recorded with the bump to version 3).
+    (
+        "measurement_v3",
+        "28 10 06 e8 07 d0 86 03 17 c0 b8 02 ac 02 ff 07 e4 19 c0 40 02 01 8a 50 f8 0a 03 de 07 01 b0 98 46 e0 d4 03 f8 29 90 4c 00",
+    ),
+    (
+        "measurement_v3_no_gain",
+        "15 11 06 e8 07 d0 86 03 17 c0 b8 02 ac 02 ff 07 e4 19 c0 40 02 01 05 37 30 c7 6f 00",
+    ),
+    (
+        "event_panic_reset",
+        "08 12 02 03 06 9c 03 02 01 01 03 cf 0f 05 98 b7 32 8b 00",
+    ),
+    (
+        "ack_config_v3",
+        "26 13 03 14 07 64 08 c8 01 f0 ab 01 f0 ab 01 e8 07 05 f4 03 32 c8 01 d8 04 01 d7 36 e8 07 bc 05 f8 0a 35 ed f1 a0 00",
+    ),
+    (
+        "ack_gain_calibrated",
+        "0e 14 03 15 08 f0 8c 35 e0 5d 34 91 a0 c6 00",
+    ),
+    ("ack_gain_reset", "09 15 03 16 09 9b cb 81 21 00"),
+    (
+        "error_calibration_step",
+        "0b 16 04 01 17 08 02 51 df cf 16 00",
+    ),
+    ("error_gain_band", "0b 17 04 01 18 03 07 8d 66 51 45 00"),
     ("cmd_get_info", "02 01 05 be 23 c2 58 00"),
     ("cmd_get_config", "07 02 01 eb 40 e8 04 00"),
     (
@@ -317,6 +486,16 @@ const GOLDEN: &[(&str, &str)] = &[
     ("cmd_dark", "07 06 05 f6 41 e9 67 00"),
     ("cmd_ack_alarm", "07 07 06 0d 21 fb e7 00"),
     ("cmd_reset", "07 08 07 54 0d 64 17 00"),
+    // Version 3 additions.
+    (
+        "cmd_set_config_v3",
+        "24 09 08 64 08 c8 01 f0 ab 01 f0 ab 01 e8 07 05 f4 03 32 c8 01 d8 04 01 d7 36 e8 07 bc 05 f8 0a 24 f6 2a d9 00",
+    ),
+    (
+        "cmd_calibrate_gain",
+        "0c 0a 09 f0 c4 01 d8 4a 5a 75 22 71 00",
+    ),
+    ("cmd_reset_gain", "07 0b 0a 2a 22 f8 42 00"),
 ];
 
 fn hex(bytes: &[u8]) -> String {
@@ -345,10 +524,11 @@ fn wire_format_matches_golden_bytes() {
 
 #[test]
 fn protocol_version_is_frozen_with_these_bytes() {
-    // The snapshots above belong to version 2: the 21 of version 1 (unchanged:
-    // version 2 only added variants at the ends of its enums, so a version-1
-    // stream decodes with these types) and the version-2 additions. A new
+    // The snapshots above belong to version 3: the 21 of version 1 and the 3
+    // of version 2 (unchanged: each version only added variants at the ends
+    // of its enums and froze the old config shape as `ConfigV1`, so older
+    // streams decode with these types) and the version-3 additions. A new
     // version gets new snapshots.
-    assert_eq!(PROTOCOL_VERSION, 2);
+    assert_eq!(PROTOCOL_VERSION, 3);
     assert_eq!(OLDEST_READABLE_VERSION, 1);
 }

@@ -98,7 +98,26 @@ fn max_frame_bounds_the_widest_messages() {
             }),
         }),
     };
-    let widest_config = Config {
+    let widest_measurement_v3 = DeviceFrame {
+        seq: u32::MAX,
+        msg: DeviceMsg::MeasurementV3(MeasurementV3 {
+            measurement: match widest_measurement.msg.clone() {
+                DeviceMsg::Measurement(m) => m,
+                _ => unreachable!(),
+            },
+            estimate: Some(IceEstimate {
+                thickness_um: u16::MAX,
+                sigma_um: u16::MAX,
+                medium: Medium::Rime,
+                probability_permille: u16::MAX,
+            }),
+            gain: Some(GainEstimate {
+                gain_ppm: u32::MAX,
+                sigma_ppm: u32::MAX,
+            }),
+        }),
+    };
+    let widest_config_v1 = ConfigV1 {
         frame_period_ms: u32::MAX,
         cycles_per_frame: u16::MAX,
         settle_us: u16::MAX,
@@ -112,30 +131,61 @@ fn max_frame_bounds_the_widest_messages() {
         thaw_limit_centi_c: i16::MIN,
         stream_on_boot: true,
     };
+    let widest_config = Config {
+        gain_tempco_ppm_per_k: i32::MIN,
+        gain_tempco_sd_ppm_per_k: u32::MAX,
+        gain_low_permille: u16::MAX,
+        gain_high_permille: u16::MAX,
+        ..Config::from(widest_config_v1.clone())
+    };
     let widest_ack = DeviceFrame {
         seq: u32::MAX,
         msg: DeviceMsg::Ack(Ack {
             id: u16::MAX,
-            result: AckResult::Config(widest_config.clone()),
+            result: AckResult::Config(widest_config_v1.clone()),
+        }),
+    };
+    let widest_ack_v3 = DeviceFrame {
+        seq: u32::MAX,
+        msg: DeviceMsg::Ack(Ack {
+            id: u16::MAX,
+            result: AckResult::ConfigV3(widest_config.clone()),
         }),
     };
     let widest_cmd = HostFrame {
         id: u16::MAX,
-        cmd: Command::SetConfig(widest_config),
+        cmd: Command::SetConfig(widest_config_v1),
+    };
+    let widest_cmd_v3 = HostFrame {
+        id: u16::MAX,
+        cmd: Command::SetConfigV3(widest_config),
     };
     let sizes = [
         postcard::to_stdvec(&widest_measurement).unwrap().len(),
         postcard::to_stdvec(&widest_measurement_v2).unwrap().len(),
+        postcard::to_stdvec(&widest_measurement_v3).unwrap().len(),
         postcard::to_stdvec(&widest_ack).unwrap().len(),
+        postcard::to_stdvec(&widest_ack_v3).unwrap().len(),
         postcard::to_stdvec(&widest_cmd).unwrap().len(),
+        postcard::to_stdvec(&widest_cmd_v3).unwrap().len(),
     ];
     for s in sizes {
         assert!(s <= MAX_PAYLOAD, "payload {s} > MAX_PAYLOAD {MAX_PAYLOAD}");
     }
-    // The widest MeasurementV2 (version 2) is the largest message: MAX_PAYLOAD is exact.
-    assert_eq!(sizes[1], MAX_PAYLOAD);
+    // The widest `Ack(ConfigV3)` (version 3) is the largest message:
+    // MAX_PAYLOAD is exact.
+    assert_eq!(sizes[4], MAX_PAYLOAD);
     assert_eq!(sizes.iter().max().copied(), Some(MAX_PAYLOAD));
-    for f in [&widest_measurement, &widest_measurement_v2, &widest_ack] {
+    for f in [
+        &widest_measurement,
+        &widest_measurement_v2,
+        &widest_measurement_v3,
+        &widest_ack,
+        &widest_ack_v3,
+    ] {
+        assert!(encode_to_vec(f).len() <= MAX_FRAME);
+    }
+    for f in [&widest_cmd, &widest_cmd_v3] {
         assert!(encode_to_vec(f).len() <= MAX_FRAME);
     }
     println!("MAX_PAYLOAD = {MAX_PAYLOAD} B, MAX_FRAME = {MAX_FRAME} B, sizes {sizes:?}");
@@ -178,5 +228,26 @@ fn typical_measurement_frame_size() {
     };
     let n2 = encode_to_vec(&v2).len();
     assert!(n2 <= 48, "typical version-2 measurement frame is {n2} B");
-    println!("typical measurement frame: v1 {n} B, v2 {n2} B");
+    let DeviceMsg::MeasurementV2(MeasurementV2 {
+        measurement,
+        estimate,
+    }) = v2.msg
+    else {
+        unreachable!()
+    };
+    let v3 = DeviceFrame {
+        seq: 123_456,
+        msg: DeviceMsg::MeasurementV3(MeasurementV3 {
+            measurement,
+            estimate,
+            gain: Some(GainEstimate {
+                gain_ppm: 1_032_000,
+                sigma_ppm: 41_000,
+            }),
+        }),
+    };
+    let n3 = encode_to_vec(&v3).len();
+    // 19 200 Bd (long field cables) carries 1 920 B/s: at 10 Hz a frame must stay under 192 B.
+    assert!(n3 <= 56, "typical version-3 measurement frame is {n3} B");
+    println!("typical measurement frame: v1 {n} B, v2 {n2} B, v3 {n3} B");
 }

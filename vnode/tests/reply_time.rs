@@ -109,7 +109,7 @@ fn calibration_behind_an_erasing_save_answers_within_the_host_timeout() {
     changed.onset_frames += 1;
     let set = encode_to_vec(&HostFrame {
         id: 1,
-        cmd: Command::SetConfig(changed),
+        cmd: Command::SetConfigV3(changed),
     });
     node.advance_to(3_000_000_000, &mut tx);
     node.handle_rx(&set, &mut tx);

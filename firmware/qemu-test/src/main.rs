@@ -133,7 +133,7 @@ fn step(node: &mut SimNode<'_>, w: &SimBoard, sink: &mut Sink) {
 
 fn measurement(sink: &mut Sink) -> Option<fois_protocol::Measurement> {
     sink.take().find_map(|m| match m {
-        DeviceMsg::MeasurementV2(m) => Some(m.measurement),
+        DeviceMsg::MeasurementV3(m) => Some(m.measurement),
         _ => None,
     })
 }
@@ -350,7 +350,7 @@ fn t_node_currents_and_commands() -> TestResult {
     check!(
         got == Some(DeviceMsg::Ack(Ack {
             id: 5,
-            result: AckResult::Config(Config::default())
+            result: AckResult::ConfigV3(Config::default())
         })),
         "    {:?}",
         got

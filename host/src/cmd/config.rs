@@ -2,7 +2,7 @@
 //! checked on the host with the node's own rule before anything is sent.
 
 use clap::{Args, Subcommand};
-use fois_protocol::{AckResult, Command, Config, ConfigError, FIELDS};
+use fois_protocol::{AckResult, Command, Config, ConfigError, ConfigV1, FIELDS};
 
 use super::request::{RequestArgs, expect_ack};
 use crate::exit::{self, Exit};
@@ -112,12 +112,58 @@ pub fn apply(base: &Config, sets: &[Assignment]) -> Result<Config, Exit> {
     Ok(c)
 }
 
-/// The config as a table: key, value, unit, range, meaning.
-pub fn config_table(c: &Config) -> String {
+/// The config a node holds, in the shape its protocol version carries.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum NodeConfig {
+    /// A version-1/2 node: the twelve fields of [`ConfigV1`].
+    V1(ConfigV1),
+    /// A version-3 node: every field.
+    V3(Config),
+}
+
+impl NodeConfig {
+    /// The config with every field (a version-1/2 node's newer fields at
+    /// their defaults: it has none).
+    pub fn full(&self) -> Config {
+        match self {
+            NodeConfig::V1(c) => Config::from(c.clone()),
+            NodeConfig::V3(c) => c.clone(),
+        }
+    }
+
+    /// The newest protocol version whose config fields this node holds.
+    pub fn fields_version(&self) -> u16 {
+        match self {
+            NodeConfig::V1(_) => 1,
+            NodeConfig::V3(_) => 3,
+        }
+    }
+
+    /// The config of the node's answer to `GetConfig` or `SetConfig*`.
+    pub fn from_ack(result: &AckResult) -> Option<NodeConfig> {
+        match result {
+            AckResult::Config(c) => Some(NodeConfig::V1(c.clone())),
+            AckResult::ConfigV3(c) => Some(NodeConfig::V3(c.clone())),
+            _ => None,
+        }
+    }
+
+    /// The command that sets `wanted` on this node, in its version's shape.
+    pub fn set_command(&self, wanted: &Config) -> Command {
+        match self {
+            NodeConfig::V1(_) => Command::SetConfig(ConfigV1::from(wanted)),
+            NodeConfig::V3(_) => Command::SetConfigV3(wanted.clone()),
+        }
+    }
+}
+
+/// The config as a table: key, value, unit, range, meaning; only the fields
+/// a node of protocol `fields_version` has.
+pub fn config_table(c: &Config, fields_version: u16) -> String {
     let mut s = String::new();
-    for f in FIELDS.iter() {
+    for f in FIELDS.iter().filter(|f| f.since_version <= fields_version) {
         s.push_str(&format!(
-            "{:<22} {:>8} {:<7} [{}..={}]  {}\n",
+            "{:<24} {:>8} {:<8} [{}..={}]  {}\n",
             f.name,
             c.get(f.field),
             f.unit,
@@ -129,64 +175,80 @@ pub fn config_table(c: &Config) -> String {
     s
 }
 
+fn get(
+    link: &mut crate::link::Link<Box<dyn serialport::SerialPort>>,
+    t: &RequestArgs,
+) -> anyhow::Result<NodeConfig> {
+    let reply = link.request(Command::GetConfig, t.timeout())?;
+    if let Reply::Ack(a) = &reply
+        && let Some(c) = NodeConfig::from_ack(&a.result)
+    {
+        return Ok(c);
+    }
+    expect_ack(reply)?;
+    Err(Exit::new(
+        exit::FAILURE,
+        "the node answered GetConfig with something else",
+    )
+    .into())
+}
+
 /// `config get`: print the node's config.
 pub fn config_get(t: &RequestArgs) -> anyhow::Result<Config> {
     let mut link = t.connect()?;
-    let reply = link.request(Command::GetConfig, t.timeout())?;
-    match reply {
-        Reply::Ack(fois_protocol::Ack {
-            result: AckResult::Config(c),
-            ..
-        }) => {
-            print!("{}", config_table(&c));
-            Ok(c)
-        }
-        other => {
-            expect_ack(other)?;
-            Err(Exit::new(
-                exit::FAILURE,
-                "the node answered GetConfig with something else",
-            )
-            .into())
+    let c = get(&mut link, t)?;
+    print!("{}", config_table(&c.full(), c.fields_version()));
+    Ok(c.full())
+}
+
+/// Refuse keys the node's protocol version does not have, before sending.
+pub fn check_keys_for(node: &NodeConfig, sets: &[Assignment]) -> Result<(), Exit> {
+    let version = node.fields_version();
+    for a in sets {
+        if let Some(field) = fois_protocol::ConfigField::from_name(&a.key)
+            && field.spec().since_version > version
+        {
+            return Err(Exit::new(
+                exit::INVALID_VALUE,
+                format!(
+                    "refused on the host, nothing sent: {} needs a node of protocol version {} \
+                     or newer (this node's config has the version-{version} fields; update its firmware)",
+                    a.key,
+                    field.spec().since_version
+                ),
+            ));
         }
     }
+    Ok(())
 }
 
 /// `config set`: check on the host, send, print what the node now uses.
 pub fn config_set(t: &RequestArgs, args: &[String]) -> anyhow::Result<Config> {
     let sets = parse_assignments(args)?;
     let mut link = t.connect()?;
-    let current = match link.request(Command::GetConfig, t.timeout())? {
-        Reply::Ack(fois_protocol::Ack {
-            result: AckResult::Config(c),
-            ..
-        }) => c,
-        other => {
-            expect_ack(other)?;
-            return Err(Exit::new(exit::FAILURE, "unexpected answer to GetConfig").into());
-        }
-    };
+    let node = get(&mut link, t)?;
+    check_keys_for(&node, &sets)?;
+    let current = node.full();
     let wanted = apply(&current, &sets)?;
-    let reply = link.request(Command::SetConfig(wanted.clone()), t.timeout())?;
-    match expect_ack(reply)? {
-        AckResult::Config(now) => {
-            for f in FIELDS.iter() {
-                let (a, b) = (current.get(f.field), now.get(f.field));
-                if a != b {
-                    println!("{}: {a} -> {b} {}", f.name, f.unit);
-                }
-            }
-            if now != wanted {
-                return Err(Exit::new(
-                    exit::REFUSED,
-                    "the node's config differs from the one sent",
-                )
-                .into());
-            }
-            Ok(now)
+    let reply = link.request(node.set_command(&wanted), t.timeout())?;
+    let result = expect_ack(reply)?;
+    let Some(now) = NodeConfig::from_ack(&result) else {
+        return Err(Exit::new(exit::FAILURE, "unexpected answer to SetConfig").into());
+    };
+    let now = now.full();
+    for f in FIELDS
+        .iter()
+        .filter(|f| f.since_version <= node.fields_version())
+    {
+        let (a, b) = (current.get(f.field), now.get(f.field));
+        if a != b {
+            println!("{}: {a} -> {b} {}", f.name, f.unit);
         }
-        _ => Err(Exit::new(exit::FAILURE, "unexpected answer to SetConfig").into()),
     }
+    if now != wanted {
+        return Err(Exit::new(exit::REFUSED, "the node's config differs from the one sent").into());
+    }
+    Ok(now)
 }
 
 #[cfg(test)]
@@ -222,5 +284,26 @@ mod tests {
         let sets = parse_assignments(&s(&["onset_rise_na=3000", "clear_rise_na=2000"])).unwrap();
         let c = apply(&Config::default(), &sets).unwrap();
         assert_eq!((c.onset_rise_na, c.clear_rise_na), (3000, 2000));
+    }
+
+    #[test]
+    fn an_older_node_gets_the_old_shape_and_no_gain_keys() {
+        let old = NodeConfig::V1(ConfigV1::from(&Config::default()));
+        let new = NodeConfig::V3(Config::default());
+        let sets = parse_assignments(&s(&["gain_tempco_ppm_per_k=-3000"])).unwrap();
+        let e = check_keys_for(&old, &sets).unwrap_err();
+        assert_eq!(e.code, exit::INVALID_VALUE);
+        assert!(e.message.contains("protocol version 3"), "{}", e.message);
+        assert!(check_keys_for(&new, &sets).is_ok());
+        let wanted = apply(&new.full(), &sets).unwrap();
+        assert_eq!(wanted.gain_tempco_ppm_per_k, -3_000);
+        assert!(matches!(old.set_command(&wanted), Command::SetConfig(_)));
+        assert_eq!(
+            new.set_command(&wanted),
+            Command::SetConfigV3(wanted.clone())
+        );
+        // The table of an older node shows its twelve fields only.
+        assert_eq!(config_table(&old.full(), 1).lines().count(), 12);
+        assert_eq!(config_table(&new.full(), 3).lines().count(), 16);
     }
 }

@@ -47,6 +47,16 @@ pub enum Cmd {
     /// baseline (the node checks that the channels are steady).
     #[command(after_help = exit::TABLE)]
     CalibrateDark(request::RequestArgs),
+    /// With a reference target of known response on the clean face, measure
+    /// the sensor's optical gain (LED, fibres, phototransistors) against the
+    /// target's expected currents; the node keeps it as its gain prior.
+    /// Protocol-3 nodes; the procedure is in firmware/README.md.
+    #[command(after_help = exit::TABLE)]
+    CalibrateGain(request::CalibrateGainArgs),
+    /// Make the node forget its learned optical gain (back to its wide
+    /// prior), e.g. after cleaning the face or replacing the LED.
+    #[command(after_help = exit::TABLE)]
+    ResetGain(request::RequestArgs),
     /// Acknowledge the ice alarm (the output stays on while ice remains).
     #[command(after_help = exit::TABLE)]
     Ack(request::RequestArgs),
@@ -107,6 +117,8 @@ impl Cli {
             }
             Cmd::Config(a) => config::run(a),
             Cmd::CalibrateDark(a) => request::calibrate_dark(&a),
+            Cmd::CalibrateGain(a) => request::calibrate_gain(&a),
+            Cmd::ResetGain(a) => request::reset_gain(&a),
             Cmd::Ack(a) => request::ack(&a),
             Cmd::VirtualNode(a) => {
                 install_ctrlc();

@@ -1,11 +1,11 @@
 //! Commands that send one request and wait for the node's `Ack` or `Error`:
-//! `calibrate-dark` and `ack` here, and the connection and reply handling
-//! that `config get|set` shares.
+//! `calibrate-dark`, `calibrate-gain`, `reset-gain` and `ack` here, and the
+//! connection and reply handling that `config get|set` shares.
 
 use std::time::Duration;
 
 use clap::Args;
-use fois_protocol::{AckResult, Command};
+use fois_protocol::{AckResult, Command, GainTarget};
 
 use super::args::PortArgs;
 use crate::exit::{self, Exit};
@@ -75,4 +75,70 @@ pub fn calibrate_dark(args: &RequestArgs) -> anyhow::Result<()> {
 /// `foisctl ack`: acknowledge the alarm.
 pub fn ack(args: &RequestArgs) -> anyhow::Result<()> {
     request(args, Command::AckAlarm).map(|_| ())
+}
+
+/// `foisctl calibrate-gain`: the reference target and the node.
+#[derive(Debug, Clone, Args)]
+pub struct CalibrateGainArgs {
+    /// The port and the answer timeout.
+    #[command(flatten)]
+    pub request: RequestArgs,
+    /// The target's expected channel-1 net current at gain 1, µA (from its
+    /// data sheet or a reference node).
+    #[arg(long, value_name = "UA", value_parser = target_ua)]
+    pub i1_ua: f64,
+    /// The target's expected channel-2 net current at gain 1, µA.
+    #[arg(long, value_name = "UA", value_parser = target_ua)]
+    pub i2_ua: f64,
+}
+
+/// A target current: finite, > 0 and < 1 A (nA on the wire, as a u32).
+fn target_ua(s: &str) -> Result<f64, String> {
+    let v: f64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{s}` is not a number of µA"))?;
+    if !(v.is_finite() && v > 0.0 && v * 1000.0 < f64::from(u32::MAX)) {
+        return Err(format!(
+            "{s} µA is not a usable target current (0 < I < 4.29e6 µA)"
+        ));
+    }
+    Ok(v)
+}
+
+impl CalibrateGainArgs {
+    /// The target as the wire carries it (nA).
+    pub fn target(&self) -> GainTarget {
+        let na = |ua: f64| (ua * 1000.0).round() as u32;
+        GainTarget {
+            i1_na: na(self.i1_ua),
+            i2_na: na(self.i2_ua),
+        }
+    }
+}
+
+/// `foisctl calibrate-gain`: with the reference target on the face, the
+/// node measures its optical gain against the target's expected currents.
+pub fn calibrate_gain(args: &CalibrateGainArgs) -> anyhow::Result<()> {
+    request(&args.request, Command::CalibrateGain(args.target())).map(|_| ())
+}
+
+/// `foisctl reset-gain`: the node forgets its learned optical gain.
+pub fn reset_gain(args: &RequestArgs) -> anyhow::Result<()> {
+    request(args, Command::ResetGain).map(|_| ())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn target_currents_are_checked_and_rounded_to_na() {
+        assert!(target_ua("0").is_err());
+        assert!(target_ua("-3").is_err());
+        assert!(target_ua("nan").is_err());
+        assert!(target_ua("1e9").is_err());
+        assert!(target_ua("x").unwrap_err().contains("not a number"));
+        assert_eq!(target_ua(" 25.2 "), Ok(25.2));
+    }
 }

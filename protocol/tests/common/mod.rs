@@ -102,6 +102,26 @@ pub fn measurement_v2() -> impl Strategy<Value = MeasurementV2> {
     })
 }
 
+pub fn gain_estimate() -> impl Strategy<Value = GainEstimate> {
+    (any::<u32>(), any::<u32>()).prop_map(|(gain_ppm, sigma_ppm)| GainEstimate {
+        gain_ppm,
+        sigma_ppm,
+    })
+}
+
+pub fn measurement_v3() -> impl Strategy<Value = MeasurementV3> {
+    (
+        measurement(),
+        proptest::option::of(ice_estimate()),
+        proptest::option::of(gain_estimate()),
+    )
+        .prop_map(|(measurement, estimate, gain)| MeasurementV3 {
+            measurement,
+            estimate,
+            gain,
+        })
+}
+
 pub fn event_kind() -> impl Strategy<Value = EventKind> {
     prop_oneof![
         Just(EventKind::IceOnset),
@@ -110,6 +130,10 @@ pub fn event_kind() -> impl Strategy<Value = EventKind> {
         Just(EventKind::WetCleared),
         any::<u16>().prop_map(EventKind::FaultRaised),
         any::<u16>().prop_map(EventKind::FaultCleared),
+        (any::<u32>(), any::<u8>()).prop_map(|(line, resets_in_row)| EventKind::PanicReset {
+            line,
+            resets_in_row
+        }),
     ]
 }
 
@@ -136,14 +160,15 @@ pub fn event() -> impl Strategy<Value = Event> {
         )
 }
 
-/// Any config, valid or not: the wire carries what it is given.
-pub fn config() -> impl Strategy<Value = Config> {
+/// Any config of the version-1 shape, valid or not: the wire carries what
+/// it is given.
+pub fn config_v1() -> impl Strategy<Value = ConfigV1> {
     (
         (any::<u32>(), any::<u16>(), any::<u16>(), any::<u32>()),
         (any::<u32>(), any::<u32>(), any::<u16>(), any::<u32>()),
         (any::<u16>(), any::<i16>(), any::<i16>(), any::<bool>()),
     )
-        .prop_map(|((a, b, c, d), (e, f, g, h), (i, j, k, l))| Config {
+        .prop_map(|((a, b, c, d), (e, f, g, h), (i, j, k, l))| ConfigV1 {
             frame_period_ms: a,
             cycles_per_frame: b,
             settle_us: c,
@@ -159,6 +184,35 @@ pub fn config() -> impl Strategy<Value = Config> {
         })
 }
 
+/// Any whole config (version 3), valid or not.
+pub fn config() -> impl Strategy<Value = Config> {
+    (
+        config_v1(),
+        any::<i32>(),
+        any::<u32>(),
+        any::<u16>(),
+        any::<u16>(),
+    )
+        .prop_map(|(v1, tempco, tempco_sd, low, high)| Config {
+            gain_tempco_ppm_per_k: tempco,
+            gain_tempco_sd_ppm_per_k: tempco_sd,
+            gain_low_permille: low,
+            gain_high_permille: high,
+            ..Config::from(v1)
+        })
+}
+
+pub fn calibration_refusal() -> impl Strategy<Value = CalibrationRefusal> {
+    prop_oneof![
+        Just(CalibrationRefusal::Saturated),
+        Just(CalibrationRefusal::Trend),
+        Just(CalibrationRefusal::Step),
+        Just(CalibrationRefusal::Noisy),
+        Just(CalibrationRefusal::ImplausibleGain),
+        Just(CalibrationRefusal::InvalidTarget),
+    ]
+}
+
 pub fn config_field() -> impl Strategy<Value = ConfigField> {
     (0..FIELDS.len()).prop_map(|i| FIELDS[i].field)
 }
@@ -172,19 +226,23 @@ pub fn config_error() -> impl Strategy<Value = ConfigError> {
         Just(ConfigError::CyclesDoNotFitPeriod),
         Just(ConfigError::UnknownField),
         Just(ConfigError::NotANumber),
+        Just(ConfigError::GainBandEmpty),
     ]
 }
 
 pub fn ack_result() -> impl Strategy<Value = AckResult> {
     prop_oneof![
         hello().prop_map(AckResult::Info),
-        config().prop_map(AckResult::Config),
+        config_v1().prop_map(AckResult::Config),
         any::<u32>().prop_map(|frame_period_ms| AckResult::Streaming { frame_period_ms }),
         Just(AckResult::Stopped),
         (any::<i32>(), any::<i32>())
             .prop_map(|(i1_na, i2_na)| AckResult::DarkCalibrated(Baseline { i1_na, i2_na })),
         Just(AckResult::AlarmAcknowledged),
         Just(AckResult::Resetting),
+        config().prop_map(AckResult::ConfigV3),
+        gain_estimate().prop_map(AckResult::GainCalibrated),
+        Just(AckResult::GainReset),
     ]
 }
 
@@ -198,6 +256,7 @@ pub fn error_code() -> impl Strategy<Value = ErrorCode> {
         Just(ErrorCode::CalibrationFailed),
         Just(ErrorCode::StorageFailed),
         Just(ErrorCode::NotDry),
+        calibration_refusal().prop_map(ErrorCode::CalibrationRefused),
     ]
 }
 
@@ -210,6 +269,7 @@ pub fn device_msg() -> impl Strategy<Value = DeviceMsg> {
         (any::<Option<u16>>(), error_code())
             .prop_map(|(id, code)| DeviceMsg::Error(ErrorReply { id, code })),
         measurement_v2().prop_map(DeviceMsg::MeasurementV2),
+        measurement_v3().prop_map(DeviceMsg::MeasurementV3),
     ]
 }
 
@@ -221,12 +281,16 @@ pub fn command() -> impl Strategy<Value = Command> {
     prop_oneof![
         Just(Command::GetInfo),
         Just(Command::GetConfig),
-        config().prop_map(Command::SetConfig),
+        config_v1().prop_map(Command::SetConfig),
         any::<Option<u32>>().prop_map(|frame_period_ms| Command::StartStream { frame_period_ms }),
         Just(Command::StopStream),
         Just(Command::CalibrateDark),
         Just(Command::AckAlarm),
         Just(Command::Reset),
+        config().prop_map(Command::SetConfigV3),
+        (any::<u32>(), any::<u32>())
+            .prop_map(|(i1_na, i2_na)| Command::CalibrateGain(GainTarget { i1_na, i2_na })),
+        Just(Command::ResetGain),
     ]
 }
 
