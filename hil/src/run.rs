@@ -9,7 +9,7 @@ use std::time::{Duration, Instant};
 
 use fois_protocol::{
     AckResult, Command, DetectorState, DeviceFrame, DeviceMsg, ErrorCode, EventKind, FrameDecoder,
-    HostFrame, MAX_FRAME, encode_to_vec, flags,
+    HostFrame, MAX_FRAME, SeqEvent, SeqTracker, encode_to_vec, flags,
 };
 use fois_vnode::{Cover, Environment, NodeOptions, Truth, VirtualNode};
 
@@ -201,7 +201,7 @@ struct Observer {
     record_estimates: bool,
     decoder: FrameDecoder<MAX_FRAME>,
     link: Option<(f64, f64, SplitMix)>,
-    last_seq: Option<u32>,
+    seq: SeqTracker,
     out: Outcome,
     expected_ids: Vec<u16>,
 }
@@ -240,21 +240,19 @@ impl Observer {
         let now_s = self.out.virtual_s;
         let o = &mut self.out;
         o.decoded += 1;
-        let restart = matches!(f.msg, DeviceMsg::Hello(_)) && f.seq == 0;
-        if let Some(prev) = self.last_seq
-            && !restart
-        {
-            let want = prev.wrapping_add(1);
-            if f.seq != want {
-                if f.seq > want {
-                    o.seq_missing += u64::from(f.seq - want);
-                } else {
-                    o.inconsistencies
-                        .push(format!("sequence went back from {prev} to {}", f.seq));
-                }
-            }
+        // The protocol's sequence-gap rule; a restart is expected only as a
+        // `Hello` with seq 0 (a reboot), anything else going back is wrong.
+        let prev = self.seq.last();
+        match self.seq.observe(f.seq) {
+            SeqEvent::Gap(n) => o.seq_missing += n,
+            SeqEvent::Restart if matches!(f.msg, DeviceMsg::Hello(_)) && f.seq == 0 => {}
+            SeqEvent::Restart | SeqEvent::Duplicate => o.inconsistencies.push(format!(
+                "sequence went back from {} to {}",
+                prev.unwrap_or(0),
+                f.seq
+            )),
+            SeqEvent::First | SeqEvent::InOrder => {}
         }
-        self.last_seq = Some(f.seq);
         if let Some((m, estimate)) = f.msg.measurement() {
             let truth = self.env.truth(m.uptime_ms.saturating_mul(1_000_000));
             if truth.cover == Cover::Water && truth.air_temp_c > WATER_FREEZING_BAND_C {
@@ -359,7 +357,7 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
             .link
             .as_ref()
             .map(|l| (l.corrupt_probability, l.drop_probability, SplitMix(l.seed))),
-        last_seq: None,
+        seq: SeqTracker::new(),
         out: Outcome {
             sensor: match sc.sensor {
                 fois_sim::SensorKind::A => "A",

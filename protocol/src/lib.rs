@@ -5,12 +5,14 @@
 //! - [`messages`]: every message of both directions, the flags.
 //! - [`config`]: the node's configuration and its one validation rule.
 //! - [`framing`]: COBS + CRC-32 frames, the streaming decoder.
+//! - [`seq`]: the sequence-gap rule (lost frames, restarts) every host reader uses.
 
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
 
 pub mod config;
 pub mod framing;
 pub mod messages;
+pub mod seq;
 
 pub use config::{Config, ConfigError, ConfigField, ConfigV1, FIELDS, FieldSpec, LOAD_R_MAX_OHM};
 #[cfg(any(feature = "std", test))]
@@ -19,6 +21,7 @@ pub use framing::{
     DecodeStats, EncodeError, FrameDecoder, FrameError, MAX_FRAME, MAX_PAYLOAD, encode,
 };
 pub use messages::*;
+pub use seq::{SeqEvent, SeqTracker};
 
 /// The protocol version this crate speaks (in [`Hello::protocol_version`]).
 /// Bump it on any breaking change (see `protocol/README.md`, Compatibility).
