@@ -9,6 +9,7 @@
 //! - [`flash`]: the board's store flash in RAM, stalling the virtual clock.
 //! - [`node`]: the virtual node, its options and its storage.
 //! - [`scenario`]: the TOML scenario format.
+//! - `pty` (feature `pty`): a virtual node served on a pseudo-terminal.
 
 pub mod adc;
 pub mod clock;
@@ -16,6 +17,8 @@ pub mod environment;
 pub mod flash;
 pub mod frontend;
 pub mod node;
+#[cfg(feature = "pty")]
+pub mod pty;
 pub mod scenario;
 
 pub use adc::SimAdc;

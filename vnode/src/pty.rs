@@ -1,0 +1,180 @@
+//! Serving a [`VirtualNode`] on a pseudo-terminal (feature `pty`), so any
+//! serial tool, `foisctl monitor` and the fleet gateway talk to it as to a
+//! board: what `foisctl virtual-node` and `foisctl demo` run, and what the
+//! gateway's tests and load benchmark serve their nodes with.
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use crate::VirtualNode;
+
+/// How to serve a virtual node on a pseudo-terminal.
+#[derive(Debug, Clone)]
+pub struct ServeOptions {
+    /// Virtual seconds per real second.
+    pub speed: f64,
+    /// Stop after this much real time.
+    pub duration: Option<Duration>,
+}
+
+/// A pseudo-terminal: the node writes to the master, clients open `path`.
+pub struct Pty {
+    master: serialport::TTYPort,
+    // Held open so the master never sees a hang-up while no client is there.
+    _slave: serialport::TTYPort,
+    path: PathBuf,
+}
+
+impl Pty {
+    /// Open a pty pair (raw mode).
+    pub fn open() -> anyhow::Result<Pty> {
+        use anyhow::Context;
+        use serialport::SerialPort;
+        let (mut master, slave) =
+            serialport::TTYPort::pair().context("cannot create a pseudo-terminal")?;
+        let path = PathBuf::from(slave.name().context("the pty has no name")?);
+        master.set_timeout(Duration::ZERO)?;
+        // A program started later (a gateway under test, a shell) must not
+        // inherit the pair: a copy of the master in another process would
+        // keep the pty alive after this one closes it, and its clients
+        // would never see the hang-up of an unplugged node.
+        #[cfg(unix)]
+        for fd in [
+            std::os::fd::AsRawFd::as_raw_fd(&master),
+            std::os::fd::AsRawFd::as_raw_fd(&slave),
+        ] {
+            // SAFETY: fcntl on a descriptor this process owns and keeps
+            // open; F_SETFD only changes its close-on-exec flag.
+            if unsafe { libc::fcntl(fd, libc::F_SETFD, libc::FD_CLOEXEC) } != 0 {
+                anyhow::bail!(
+                    "cannot mark the pseudo-terminal close-on-exec: {}",
+                    std::io::Error::last_os_error()
+                );
+            }
+        }
+        Ok(Pty {
+            master,
+            _slave: slave,
+            path,
+        })
+    }
+
+    /// The client side's path (/dev/pts/N).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+}
+
+/// Bytes the node wrote that no reader took (pty buffer full).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct ServeStats {
+    /// Frames sent.
+    pub frames_sent: u64,
+    /// Frames dropped (pty buffer full: nobody reading).
+    pub frames_dropped: u64,
+    /// Bytes received from clients.
+    pub bytes_received: u64,
+}
+
+fn write_frame(master: &mut serialport::TTYPort, bytes: &[u8], stats: &mut ServeStats) {
+    // Like a UART with nobody listening: what does not fit is lost.
+    let mut off = 0;
+    while off < bytes.len() {
+        match master.write(&bytes[off..]) {
+            Ok(0) => break,
+            Ok(n) => off += n,
+            Err(_) => break,
+        }
+    }
+    if off == bytes.len() {
+        stats.frames_sent += 1;
+    } else {
+        stats.frames_dropped += 1;
+    }
+}
+
+/// Serve `node` on `pty` until `stop` is set or the duration ends. Virtual
+/// time runs `speed` times faster than real time.
+pub fn serve(
+    node: &mut VirtualNode,
+    pty: &mut Pty,
+    opts: &ServeOptions,
+    stop: &AtomicBool,
+) -> anyhow::Result<ServeStats> {
+    let mut stats = ServeStats::default();
+    let start = Instant::now();
+    let t0 = node.clock().now_ns();
+    let speed = if opts.speed.is_finite() && opts.speed > 0.0 {
+        opts.speed
+    } else {
+        1.0
+    };
+    let mut buf = [0u8; 1024];
+    while !stop.load(Ordering::Relaxed) {
+        let elapsed = start.elapsed();
+        if opts.duration.is_some_and(|d| elapsed >= d) {
+            break;
+        }
+        let target = t0 + (elapsed.as_secs_f64() * speed * 1e9) as u64;
+        let master = &mut pty.master;
+        // Host → node.
+        loop {
+            match master.read(&mut buf) {
+                Ok(0) => break,
+                Ok(n) => {
+                    stats.bytes_received += n as u64;
+                    let mut tx = |b: &[u8]| write_frame(master, b, &mut stats);
+                    node.handle_rx(&buf[..n], &mut tx);
+                }
+                Err(_) => break,
+            }
+        }
+        let master = &mut pty.master;
+        let mut tx = |b: &[u8]| write_frame(master, b, &mut stats);
+        node.advance_to(target, &mut tx);
+        // Sleep until the next frame is due in real time (≤ 5 ms, so
+        // commands are answered promptly).
+        let due = node.next_due_ns().saturating_sub(t0) as f64 / speed / 1e9;
+        let wait = (due - start.elapsed().as_secs_f64()).clamp(0.0, 0.005);
+        std::thread::sleep(Duration::from_secs_f64(wait.max(0.0005)));
+    }
+    Ok(stats)
+}
+
+/// Replace `link` by a symlink to `target` (removed by [`LinkGuard`]'s drop).
+pub fn make_link(link: &Path, target: &Path) -> anyhow::Result<LinkGuard> {
+    use anyhow::Context;
+    if let Ok(meta) = std::fs::symlink_metadata(link) {
+        if meta.file_type().is_symlink() {
+            std::fs::remove_file(link)?;
+        } else {
+            anyhow::bail!(
+                "{} exists and is not a symlink; choose another --link path",
+                link.display()
+            );
+        }
+    }
+    #[cfg(unix)]
+    std::os::unix::fs::symlink(target, link)
+        .with_context(|| format!("cannot create the link {}", link.display()))?;
+    Ok(LinkGuard {
+        link: link.to_path_buf(),
+        target: target.to_path_buf(),
+    })
+}
+
+/// Removes the symlink on drop (if it still points to our pty).
+pub struct LinkGuard {
+    link: PathBuf,
+    target: PathBuf,
+}
+
+impl Drop for LinkGuard {
+    fn drop(&mut self) {
+        if std::fs::read_link(&self.link).is_ok_and(|t| t == self.target) {
+            let _ = std::fs::remove_file(&self.link);
+        }
+    }
+}
