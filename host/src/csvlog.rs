@@ -38,12 +38,10 @@ use std::time::{Duration, Instant};
 
 use anyhow::Context;
 use csv::StringRecord;
-use fois_protocol::{
-    DetectorState, DeviceMsg, Event, GainEstimate, IceEstimate, Measurement, flags,
-};
-
-use crate::text::{ack_text, centi_c_to_c, error_text, event_name, hello_text, na_to_ua};
-use crate::timefmt::{iso_utc, unix_ms_now};
+use fois_link::reading::{EventReading, Reading};
+use fois_link::text::{ack_text, error_text, event_name, hello_text};
+use fois_link::timefmt::{iso_utc, unix_ms_now};
+use fois_protocol::{DeviceMsg, Event};
 
 /// The header line (without newline).
 pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,frames_lost,detail,est_thickness_mm,est_sigma_mm,est_kind,est_p,est_gain,est_gain_sigma";
@@ -86,36 +84,18 @@ pub struct Row {
     pub kind: &'static str,
     /// Node sequence number.
     pub seq: Option<u32>,
-    /// Node uptime, ms.
+    /// Node uptime, ms (rows that are not a measurement or an event, e.g.
+    /// `node_restart`; a reading carries its own).
     pub uptime_ms: Option<u64>,
-    /// I1, µA.
-    pub i1_ua: Option<f64>,
-    /// I2, µA.
-    pub i2_ua: Option<f64>,
-    /// Ambient 1, µA.
-    pub ambient1_ua: Option<f64>,
-    /// Ambient 2, µA.
-    pub ambient2_ua: Option<f64>,
-    /// Air temperature, °C.
-    pub temperature_c: Option<f64>,
-    /// V_DDA, mV.
-    pub vdda_mv: Option<u16>,
-    /// Detector state.
-    pub state: Option<DetectorState>,
-    /// Alarm output.
-    pub alarm: Option<bool>,
-    /// Currents usable.
-    pub valid: Option<bool>,
-    /// Raw flags.
-    pub flags: Option<u16>,
+    /// A measurement row's values (`fois_link::Reading`: µA, °C, mm, the
+    /// estimates).
+    pub reading: Option<Reading>,
+    /// An event row's values.
+    pub event: Option<EventReading>,
     /// Frames lost (gap rows).
     pub frames_lost: Option<u64>,
     /// Free text.
     pub detail: String,
-    /// The node's ice estimate (protocol v2 measurements that carry one).
-    pub estimate: Option<IceEstimate>,
-    /// The node's optical gain estimate (protocol v3 measurements that carry one).
-    pub gain: Option<GainEstimate>,
 }
 
 impl Row {
@@ -129,40 +109,28 @@ impl Row {
     }
 
     /// A measurement row.
-    pub fn measurement(seq: u32, m: &Measurement) -> Row {
+    pub fn measurement(seq: u32, reading: Reading) -> Row {
         Row {
             kind: "measurement",
             seq: Some(seq),
-            uptime_ms: Some(m.uptime_ms),
-            i1_ua: Some(na_to_ua(m.i1_na.into())),
-            i2_ua: Some(na_to_ua(m.i2_na.into())),
-            ambient1_ua: Some(na_to_ua(m.ambient1_na.into())),
-            ambient2_ua: Some(na_to_ua(m.ambient2_na.into())),
-            temperature_c: Some(centi_c_to_c(m.temperature_centi_c)),
-            vdda_mv: Some(m.vdda_mv),
-            state: Some(m.state),
-            alarm: Some(m.flags & flags::ALARM != 0),
-            valid: Some(m.is_valid()),
-            flags: Some(m.flags),
+            reading: Some(reading),
             ..Row::default()
         }
     }
 
     /// An event row.
     pub fn event(seq: u32, e: &Event) -> Row {
+        let r = EventReading::new(e);
         Row {
             kind: "event",
             seq: Some(seq),
-            uptime_ms: Some(e.uptime_ms),
-            i1_ua: Some(na_to_ua(e.i1_na.into())),
-            i2_ua: Some(na_to_ua(e.i2_na.into())),
-            temperature_c: Some(centi_c_to_c(e.temperature_centi_c)),
             detail: format!(
                 "{} rise1_ua={:.3} frames={}",
                 event_name(&e.kind),
-                na_to_ua(e.rise1_na.into()),
-                e.frames
+                r.rise1_ua,
+                r.frames
             ),
+            event: Some(r),
             ..Row::default()
         }
     }
@@ -170,15 +138,13 @@ impl Row {
     /// A row for any device message.
     pub fn device(seq: u32, msg: &DeviceMsg) -> Row {
         match msg {
-            DeviceMsg::Measurement(m) => Row::measurement(seq, m),
-            DeviceMsg::MeasurementV2(m) => Row {
-                estimate: m.estimate,
-                ..Row::measurement(seq, &m.measurement)
-            },
-            DeviceMsg::MeasurementV3(m) => Row {
-                estimate: m.estimate,
-                gain: m.gain,
-                ..Row::measurement(seq, &m.measurement)
+            DeviceMsg::Measurement(_)
+            | DeviceMsg::MeasurementV2(_)
+            | DeviceMsg::MeasurementV3(_) => Row {
+                kind: "measurement",
+                seq: Some(seq),
+                reading: Reading::of(msg),
+                ..Row::default()
             },
             DeviceMsg::Event(e) => Row::event(seq, e),
             DeviceMsg::Hello(h) => Row {
@@ -351,44 +317,40 @@ fn fixed(v: Option<f64>, decimals: usize) -> String {
     v.map_or(String::new(), |v| format!("{v:.decimals$}"))
 }
 
-/// The fields of a row, in the order of [`HEADER`].
+/// The fields of a row, in the order of [`HEADER`]. The values come from
+/// the row's [`Reading`] or [`EventReading`] (units converted there); this
+/// only chooses the decimals.
 pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 23] {
-    let est = r.estimate.as_ref();
+    let m = r.reading.as_ref();
+    let e = r.event.as_ref();
+    let est = m.and_then(|m| m.estimate.as_ref());
+    let gain = m.and_then(|m| m.gain.as_ref());
+    let uptime = m.map(|m| m.uptime_ms).or(e.map(|e| e.uptime_ms));
     [
         iso_utc(host_unix_ms),
         host_unix_ms.to_string(),
         r.kind.to_string(),
         opt(r.seq),
-        opt(r.uptime_ms),
-        fixed(r.i1_ua, 3),
-        fixed(r.i2_ua, 3),
-        fixed(r.ambient1_ua, 3),
-        fixed(r.ambient2_ua, 3),
-        fixed(r.temperature_c, 2),
-        opt(r.vdda_mv),
-        r.state.map_or(String::new(), |s| format!("{s:?}")),
-        opt(r.alarm.map(u8::from)),
-        opt(r.valid.map(u8::from)),
-        opt(r.flags),
+        opt(uptime.or(r.uptime_ms)),
+        fixed(m.map(|m| m.i1_ua).or(e.map(|e| e.i1_ua)), 3),
+        fixed(m.map(|m| m.i2_ua).or(e.map(|e| e.i2_ua)), 3),
+        fixed(m.map(|m| m.ambient1_ua), 3),
+        fixed(m.map(|m| m.ambient2_ua), 3),
+        fixed(m.map(|m| m.temperature_c).or(e.map(|e| e.temperature_c)), 2),
+        opt(m.map(|m| m.vdda_mv)),
+        m.map_or(String::new(), |m| format!("{:?}", m.state)),
+        opt(m.map(|m| u8::from(m.alarm))),
+        opt(m.map(|m| u8::from(m.valid))),
+        opt(m.map(|m| m.flags)),
         opt(r.frames_lost),
         r.detail.clone(),
-        opt(est.map(|e| um_to_mm(e.thickness_um))),
-        opt(est.map(|e| um_to_mm(e.sigma_um))),
+        fixed(est.map(|e| e.thickness_mm), 3),
+        fixed(est.map(|e| e.thickness_sigma_mm), 3),
         est.map_or(String::new(), |e| e.medium.name().to_string()),
-        opt(est.map(|e| permille_to_p(e.probability_permille))),
-        opt(r.gain.map(|g| format!("{:.4}", g.gain()))),
-        opt(r.gain.map(|g| format!("{:.4}", g.sigma()))),
+        fixed(est.map(|e| e.medium_probability), 3),
+        fixed(gain.map(|g| g.gain), 4),
+        fixed(gain.map(|g| g.gain_sigma), 4),
     ]
-}
-
-/// µm → mm, as the log writes it (three decimals).
-fn um_to_mm(um: u16) -> String {
-    format!("{:.3}", f64::from(um) / 1000.0)
-}
-
-/// ‰ → probability 0–1 (three decimals).
-fn permille_to_p(permille: u16) -> String {
-    format!("{:.3}", f64::from(permille) / 1000.0)
 }
 
 /// The CSV line of a row (with newline), as [`CsvLog::write`] writes it.
@@ -564,6 +526,7 @@ impl LogReader {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use fois_protocol::{DetectorState, IceEstimate, Measurement, flags};
     use std::io::Write;
 
     fn meas() -> Measurement {
@@ -582,7 +545,7 @@ mod tests {
 
     #[test]
     fn row_text_matches_header() {
-        let line = format_row(0, &Row::measurement(42, &meas()));
+        let line = format_row(0, &Row::device(42, &DeviceMsg::Measurement(meas())));
         assert_eq!(
             line,
             "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,\n"
@@ -664,7 +627,8 @@ mod tests {
         let p = dir.path().join("log.csv");
         {
             let mut log = CsvLog::open(&p).unwrap();
-            log.write(&Row::measurement(1, &meas())).unwrap();
+            log.write(&Row::device(1, &DeviceMsg::Measurement(meas())))
+                .unwrap();
             log.close().unwrap();
         }
         // A partial line, as a kill -9 mid-write could leave.
@@ -676,7 +640,8 @@ mod tests {
             .unwrap();
         {
             let mut log = CsvLog::open(&p).unwrap();
-            log.write(&Row::measurement(2, &meas())).unwrap();
+            log.write(&Row::device(2, &DeviceMsg::Measurement(meas())))
+                .unwrap();
             log.close().unwrap();
         }
         let t = LogTable::read(&p).unwrap();

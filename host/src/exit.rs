@@ -3,7 +3,7 @@
 
 use std::fmt;
 
-use crate::link::LinkError;
+use fois_link::LinkError;
 
 /// Success.
 pub const OK: i32 = 0;

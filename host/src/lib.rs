@@ -3,14 +3,15 @@
 //! ## Modules
 //!
 //! - [`cmd`]: one module per command, each owning its arguments and its `run`.
-//! - [`link`]: the serial link (handshake, commands, sequence tracking).
 //! - [`monitor`]: the live session behind `monitor` and `demo`; [`csvlog`] its durable CSV log.
-//! - [`serve`]: a virtual node on a pseudo-terminal.
 //! - [`estimate`]: a log or a simulated curve replayed through the node's ice estimator.
-//! - [`gateway`]: the fleet gateway to an MQTT broker (node readers, publisher,
-//!   disk queue, topics, payloads, Home Assistant discovery).
 //! - [`compare`]: a log against the simulator's band; [`plot`]: every figure.
-//! - [`exit`]: the exit codes; [`text`], [`timefmt`], [`mod@bench`]: helpers.
+//! - [`exit`]: the exit codes; [`mod@bench`]: the decoder benchmark and the
+//!   long-run check.
+//!
+//! The serial link, the message texts, the readings in SI units and the
+//! timestamps are the `fois-link` crate's, shared with the fleet gateway
+//! (`fois-gateway`); [`text`] is its message texts, re-exported.
 
 pub mod bench;
 pub mod cmd;
@@ -18,10 +19,7 @@ pub mod compare;
 pub mod csvlog;
 pub mod estimate;
 pub mod exit;
-pub mod gateway;
-pub mod link;
 pub mod monitor;
 pub mod plot;
-pub mod serve;
-pub mod text;
-pub mod timefmt;
+
+pub use fois_link::text;

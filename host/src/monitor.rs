@@ -13,10 +13,10 @@ use fois_protocol::{
 
 use crate::csvlog::{CsvLog, Row};
 use crate::exit;
-use crate::link::{Incoming, Link, LinkError, SeqEvent, SeqTracker, open_port};
-use crate::text::{
-    ack_text, centi_c_to_c, error_text, estimate_text, event_name, gain_text, hello_text, na_to_ua,
-};
+use fois_link::reading::{EventReading, celsius, ua};
+use fois_link::text::{ack_text, error_text, estimate_text, event_name, gain_text, hello_text};
+use fois_link::{Incoming, Link, LinkError, open_port};
+use fois_protocol::{SeqEvent, SeqTracker};
 
 /// What `monitor` does.
 #[derive(Debug, Clone)]
@@ -179,11 +179,11 @@ pub fn status_lines(m: Option<&Measurement>, s: &MonitorSummary) -> [String; 3] 
     [
         format!(
             "I1 {:8.3} µA  I2 {:8.3} µA  ambient {:.2}/{:.2} µA  {:6.2} °C",
-            na_to_ua(m.i1_na.into()),
-            na_to_ua(m.i2_na.into()),
-            na_to_ua(m.ambient1_na.into()),
-            na_to_ua(m.ambient2_na.into()),
-            centi_c_to_c(m.temperature_centi_c),
+            ua(m.i1_na.into()),
+            ua(m.i2_na.into()),
+            ua(m.ambient1_na.into()),
+            ua(m.ambient2_na.into()),
+            celsius(m.temperature_centi_c),
         ),
         format!(
             "state {state:3}  alarm {alarm:10}  est {}{}",
@@ -284,13 +284,14 @@ impl Session<'_> {
                         if e.kind == fois_protocol::EventKind::IceOnset {
                             self.sum.ice_onsets += 1;
                         }
+                        let r = EventReading::new(e);
                         self.view.say(&format!(
                             "* event {} at uptime {:.1} s: I1 {:.3} µA, rise {:.3} µA, {:.2} °C",
                             event_name(&e.kind),
                             e.uptime_ms as f64 / 1000.0,
-                            na_to_ua(e.i1_na.into()),
-                            na_to_ua(e.rise1_na.into()),
-                            centi_c_to_c(e.temperature_centi_c)
+                            r.i1_ua,
+                            r.rise1_ua,
+                            r.temperature_c
                         ));
                     }
                     DeviceMsg::Ack(a) => self.view.say(&format!("  ack {}", ack_text(a))),

@@ -239,7 +239,7 @@ fn logger_killed_with_sigkill_keeps_all_but_the_last_second() {
     let node = NodeProc::start(&["--speed", "10", "--dry-s", "1000"]);
     let mut mon = spawn_monitor(&node.path, &log, &[], false);
     std::thread::sleep(Duration::from_millis(2500));
-    let killed_at = fois_host::timefmt::unix_ms_now();
+    let killed_at = fois_link::timefmt::unix_ms_now();
     mon.kill().unwrap(); // SIGKILL: no flush, no destructor
     mon.wait().unwrap();
     let t = LogTable::read(&log).unwrap();

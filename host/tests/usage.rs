@@ -96,57 +96,11 @@ fn usage_errors_exit_2() {
 }
 
 #[test]
-fn gateway_flag_errors_exit_2_with_the_reason() {
-    // A valid gateway command line (one node) plus `extra`: clap refuses the
-    // flag before the node's port or any file is opened.
-    let gw = |extra: &[&'static str]| cat(&["gateway", "--node", "/dev/does-not-exist"], extra);
-    let cases: Vec<(Vec<&str>, &str)> = vec![
-        (
-            vec!["gateway", "--node", "/dev/x=a/b"],
-            "not usable in topics",
-        ),
-        (vec!["gateway", "--node", "/dev/x="], "not usable in topics"),
-        (
-            vec!["gateway", "--node", "=tower-3"],
-            "give PATH or PATH=NAME",
-        ),
-        (gw(&["--name", "farm 7"]), "not usable in topics"),
-        (gw(&["--name", ""]), "not usable in topics"),
-        (gw(&["--broker", "host:notaport"]), "not a port number"),
-        (gw(&["--broker", "host:0"]), "not a port number"),
-        (gw(&["--broker", "host:65536"]), "not a port number"),
-        (gw(&["--broker", ":1883"]), "host is empty"),
-        (gw(&["--measurement-interval-ms=-1"]), "invalid value"),
-        (
-            gw(&["--measurement-interval-ms", "86400001"]),
-            "0..=86400000",
-        ),
-        (
-            gw(&["--offline-measurement-interval-ms", "x"]),
-            "invalid value",
-        ),
-        (gw(&["--queue-max-bytes", "65535"]), "65536.."),
-        (gw(&["--status-interval-s", "0.05"]), "0.1..=86400"),
-        (gw(&["--status-interval-s", "nan"]), "not a finite number"),
-        (gw(&["--duration=-1"]), "must be >= 0"),
-        (gw(&["--client-cert", "gw.pem"]), "--client-key"),
-        (gw(&["--bogus"]), "unexpected argument"),
-    ];
-    for (args, needle) in cases {
-        let (code, err) = foisctl(&args);
-        assert_eq!(code, Some(2), "{args:?}: {err}");
-        assert!(err.contains(needle), "{args:?}: `{needle}` not in {err}");
-        assert!(!err.contains("panicked"), "{args:?}: {err}");
-    }
-}
-
-#[test]
 fn help_is_not_an_error() {
     for args in [
         &["--help"][..],
         &["monitor", "--help"],
         &["sim", "gallery", "--help"],
-        &["gateway", "--help"],
         &["--version"],
     ] {
         let (code, err) = foisctl(args);

@@ -1,4 +1,4 @@
-//! The host's link reader on arbitrary bytes from a serial port: whatever a
+//! The host's link reader (fois-link) on arbitrary bytes from a serial port: whatever a
 //! broken cable, a wrong baud rate or a hostile device sends, `Link::poll`
 //! never panics, counts every frame it hands out or rejects exactly as its
 //! decoder does, and every decoded frame renders as the monitor prints it
@@ -16,9 +16,9 @@
 
 use std::io::{self, Read, Write};
 
-use fois_host::link::{Incoming, Link, LinkError};
+use fois_host::csvlog;
 use fois_host::monitor::{MonitorSummary, status_lines};
-use fois_host::{csvlog, text};
+use fois_link::{Incoming, Link, LinkError, text};
 use fois_protocol::{DeviceFrame, DeviceMsg, encode_to_vec};
 use libfuzzer_sys::fuzz_target;
 

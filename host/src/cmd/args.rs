@@ -1,13 +1,11 @@
 //! Argument types shared by several commands: the serial port, one clap
 //! `ValueEnum` per domain enum of the simulator and the virtual node, and the
-//! parsers (numbers, the gateway's names, broker and nodes) that make clap
-//! refuse out-of-range values (exit code 2) before a command runs.
+//! number parsers that make clap refuse out-of-range values (exit code 2)
+//! before a command runs.
 
 use clap::{Args, ValueEnum};
 use fois_sim::{IceKind, SensorKind};
 use fois_vnode::Cover;
-
-use crate::gateway::config::{BrokerAddr, NodeSpec, is_valid_name};
 
 /// The serial port of a node.
 #[derive(Debug, Clone, Args)]
@@ -153,28 +151,6 @@ pub fn ua_pair(s: &str) -> Result<[f64; 2], String> {
     }
 }
 
-/// A gateway name usable as one MQTT topic level and in Home Assistant ids:
-/// 1 to 64 letters, digits, `-` or `_`.
-pub fn topic_name(s: &str) -> Result<String, String> {
-    if is_valid_name(s) {
-        Ok(s.to_string())
-    } else {
-        Err(format!(
-            "`{s}` is not usable in topics: use 1 to 64 letters, digits, `-` or `_`"
-        ))
-    }
-}
-
-/// An MQTT broker, `HOST[:PORT]` ([`BrokerAddr::parse`]).
-pub fn broker_addr(s: &str) -> Result<BrokerAddr, String> {
-    BrokerAddr::parse(s).map_err(|e| format!("{e:#}"))
-}
-
-/// A gateway node, `PATH[=NAME]` ([`NodeSpec::parse_flag`]).
-pub fn gateway_node(s: &str) -> Result<NodeSpec, String> {
-    NodeSpec::parse_flag(s).map_err(|e| format!("{e:#}"))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -196,10 +172,6 @@ mod tests {
         assert_eq!(ua_pair("3, 1.5"), Ok([3.0, 1.5]));
         for bad in ["-1", "1,2,3", "1,-2", "a"] {
             assert!(ua_pair(bad).is_err(), "{bad}");
-        }
-        assert_eq!(topic_name("farm-7_b"), Ok("farm-7_b".into()));
-        for bad in ["", "a/b", "x+y", "a#", &"n".repeat(65)] {
-            assert!(topic_name(bad).is_err(), "{bad}");
         }
     }
 }

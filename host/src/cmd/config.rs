@@ -6,7 +6,7 @@ use fois_protocol::{AckResult, Command, Config, ConfigError, ConfigV1, FIELDS};
 
 use super::request::{RequestArgs, expect_ack};
 use crate::exit::{self, Exit};
-use crate::link::Reply;
+use fois_link::Reply;
 
 /// `foisctl config`.
 #[derive(Debug, Args)]
@@ -176,7 +176,7 @@ pub fn config_table(c: &Config, fields_version: u16) -> String {
 }
 
 fn get(
-    link: &mut crate::link::Link<Box<dyn serialport::SerialPort>>,
+    link: &mut fois_link::Link<Box<dyn serialport::SerialPort>>,
     t: &RequestArgs,
 ) -> anyhow::Result<NodeConfig> {
     let reply = link.request(Command::GetConfig, t.timeout())?;

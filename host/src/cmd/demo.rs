@@ -10,7 +10,7 @@ use clap::Args;
 
 use super::scene::{DEMO_DEFAULTS, SceneArgs, build_node, describe};
 use crate::monitor::{self, MonitorOptions};
-use crate::serve::{self, Pty, ServeOptions};
+use fois_vnode::pty::{self as serve, Pty, ServeOptions};
 
 /// `foisctl demo`.
 #[derive(Debug, Args)]

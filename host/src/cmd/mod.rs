@@ -9,7 +9,6 @@ pub mod compare;
 pub mod config;
 pub mod demo;
 pub mod estimate;
-pub mod gateway;
 pub mod monitor;
 pub mod plot;
 pub mod request;
@@ -88,11 +87,6 @@ pub enum Cmd {
     BenchDecode(bench_decode::BenchDecodeArgs),
     /// Ray-trace simulator of the sensor (thesis chapters 3 and 5).
     Sim(sim::SimArgs),
-    /// Fleet gateway: read many nodes at once and publish them to an MQTT
-    /// broker (state, measurements, events, availability, Home Assistant
-    /// discovery), with a bounded on-disk queue while the broker is away.
-    #[command(after_help = exit::TABLE)]
-    Gateway(gateway::GatewayArgs),
 }
 
 /// Set by Ctrl-C: the long-running commands stop cleanly.
@@ -133,10 +127,6 @@ impl Cli {
             Cmd::Estimate(a) => estimate::run(a),
             Cmd::BenchDecode(a) => bench_decode::run(a),
             Cmd::Sim(a) => sim::run(a),
-            Cmd::Gateway(a) => {
-                install_ctrlc();
-                gateway::run(a, &STOP)
-            }
         }
     }
 }

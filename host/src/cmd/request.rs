@@ -9,8 +9,8 @@ use fois_protocol::{AckResult, Command, GainTarget};
 
 use super::args::PortArgs;
 use crate::exit::{self, Exit};
-use crate::link::{Link, Reply, open_port};
-use crate::text::ack_text;
+use fois_link::text::ack_text;
+use fois_link::{Link, Reply, open_port};
 
 /// The port and how long to wait for each answer.
 #[derive(Debug, Clone, Args)]
@@ -53,7 +53,7 @@ pub fn expect_ack(reply: Reply) -> anyhow::Result<AckResult> {
             exit::REFUSED,
             format!(
                 "the node refused the command: {}",
-                crate::text::error_text(&e)
+                fois_link::text::error_text(&e)
             ),
         )
         .into()),

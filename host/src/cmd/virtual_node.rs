@@ -8,7 +8,7 @@ use anyhow::Context;
 use clap::Args;
 
 use super::scene::{SceneArgs, VIRTUAL_NODE_DEFAULTS, build_node_with_state, describe};
-use crate::serve::{self, Pty, ServeOptions};
+use fois_vnode::pty::{self as serve, Pty, ServeOptions};
 
 /// `foisctl virtual-node`.
 #[derive(Debug, Args)]

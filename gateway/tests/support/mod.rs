@@ -1,7 +1,8 @@
 //! Helpers of the gateway tests and the load benchmark: a real Mosquitto
 //! broker on a free loopback port, an MQTT subscriber that records every
-//! message, `foisctl virtual-node` and `foisctl gateway` child processes, and
-//! the seq bookkeeping that says whether every frame arrived.
+//! message, virtual nodes on pseudo-terminals, `fois-gateway` child
+//! processes, test certificates, and the seq bookkeeping that says whether
+//! every frame arrived.
 #![allow(dead_code)]
 
 use std::collections::BTreeMap;
@@ -12,11 +13,13 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-// Also part of the e2e tests: the binary and a virtual node on a pty.
-#[path = "../common/mod.rs"]
-mod common;
+pub mod pki;
+pub mod vnode;
 #[allow(unused_imports)] // the load benchmark serves its nodes itself
-pub use common::{BIN, NodeProc};
+pub use vnode::{NodeProc, Scene};
+
+/// The gateway binary.
+pub const BIN: &str = env!("CARGO_BIN_EXE_fois-gateway");
 
 /// Where Debian puts the broker.
 pub const MOSQUITTO_PATHS: [&str; 3] = [
@@ -36,7 +39,7 @@ pub fn mosquitto_bin() -> PathBuf {
             panic!(
                 "mosquitto is not installed (looked in {MOSQUITTO_PATHS:?}): the gateway tests \
                  need a real broker; install it with `apt-get install mosquitto mosquitto-clients` \
-                 (.ci/run does)"
+                 (`cargo xtask ci` does)"
             )
         })
 }
@@ -357,7 +360,7 @@ impl Drop for Subscriber {
     }
 }
 
-/// A `foisctl gateway`, its stdout and stderr in a file; killed on drop.
+/// A `fois-gateway`, its stdout and stderr in a file; killed on drop.
 pub struct GatewayProc {
     child: Option<Child>,
     /// Its output file.
@@ -365,7 +368,7 @@ pub struct GatewayProc {
 }
 
 impl GatewayProc {
-    /// `foisctl gateway --config CONFIG ARGS...`.
+    /// `fois-gateway --config CONFIG ARGS...`.
     pub fn start(config: &Path, args: &[&str], out: &Path) -> GatewayProc {
         let f = std::fs::OpenOptions::new()
             .create(true)
@@ -373,7 +376,6 @@ impl GatewayProc {
             .open(out)
             .unwrap();
         let child = Command::new(BIN)
-            .arg("gateway")
             .arg("--config")
             .arg(config)
             .args(["--status-interval-s", "1"])

@@ -1,121 +1,43 @@
-//! The JSON payloads the gateway publishes. Units are in the key names
-//! (`i1_ua`, `temperature_c`, `thickness_mm`); every node message carries the
+//! The JSON payloads the gateway publishes. The values are a
+//! [`fois_link::Reading`] (or [`EventReading`]): units are converted there,
+//! once, for this and for `foisctl`'s CSV log; units are in the key names
+//! (`i1_ua`, `temperature_c`, `thickness_mm`). Every node message carries the
 //! node's frame `seq` and `uptime_ms`, so a consumer can drop the duplicates
 //! a gateway crash may cause (the pair is unique per node until it resets).
 
-use fois_protocol::{DetectorState, Event, EventKind, Hello, IceEstimate, Measurement, flags};
+use fois_link::reading::{EstimateReading, EventReading, GainReading, Reading};
+use fois_link::text::{firmware_text, unique_id_hex};
+use fois_link::timefmt::iso_utc;
+use fois_protocol::Hello;
 use serde::Serialize;
 
-use crate::text::{centi_c_to_c, na_to_ua};
-use crate::timefmt::iso_utc;
-
-/// Names of the fault bits set in `bits` (see `fois_protocol::flags`).
-pub fn fault_names(bits: u16) -> Vec<&'static str> {
-    [
-        (flags::NTC_OPEN, "ntc_open"),
-        (flags::NTC_SHORT, "ntc_short"),
-        (flags::CONFIG_DEFAULTED, "config_defaulted"),
-        (flags::VDDA_OUT_OF_RANGE, "vdda_out_of_range"),
-        (flags::STORAGE_FAILED, "storage_failed"),
-        (flags::CLOCK_FALLBACK, "clock_fallback"),
-    ]
-    .into_iter()
-    .filter(|(b, _)| bits & b != 0)
-    .map(|(_, n)| n)
-    .collect()
-}
-
-/// The ice estimate's keys (flattened into measurement and state).
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct EstimateJson {
-    /// Posterior mean thickness, mm.
-    pub thickness_mm: f64,
-    /// Its standard deviation, mm.
-    pub thickness_sigma_mm: f64,
-    /// Most likely medium.
-    pub medium: &'static str,
-    /// Probability of that medium, 0–1.
-    pub medium_probability: f64,
-}
-
-impl From<&IceEstimate> for EstimateJson {
-    fn from(e: &IceEstimate) -> Self {
-        EstimateJson {
-            thickness_mm: f64::from(e.thickness_um) / 1000.0,
-            thickness_sigma_mm: f64::from(e.sigma_um) / 1000.0,
-            medium: e.medium.name(),
-            medium_probability: f64::from(e.probability_permille) / 1000.0,
-        }
-    }
-}
-
-/// `<node>/measurement`.
+/// `<node>/measurement`: the reading's keys, flattened, after the node's
+/// name, the frame's `seq` and the host time.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct MeasurementJson<'a> {
     /// Node name.
     pub node: &'a str,
     /// Frame sequence number.
     pub seq: u32,
-    /// Node time since boot, ms.
-    pub uptime_ms: u64,
     /// Host time of reception, Unix ms.
     pub host_unix_ms: u64,
     /// The same, ISO 8601 UTC.
     pub host_time_utc: String,
-    /// Net photocurrent channel 1, µA.
-    pub i1_ua: f64,
-    /// Net photocurrent channel 2, µA.
-    pub i2_ua: f64,
-    /// Ambient level channel 1, µA.
-    pub ambient1_ua: f64,
-    /// Ambient level channel 2, µA.
-    pub ambient2_ua: f64,
-    /// Air temperature, °C.
-    pub temperature_c: f64,
-    /// Analog supply, mV.
-    pub vdda_mv: u16,
-    /// `dry`, `wet`, `ice`.
-    pub state: &'static str,
-    /// Alarm output on.
-    pub alarm: bool,
-    /// Currents usable (no saturation).
-    pub valid: bool,
-    /// Raw flag bits.
-    pub flags: u16,
-    /// Active faults.
-    pub faults: Vec<&'static str>,
-    /// The node's estimate, when it sends one.
-    #[serde(flatten, skip_serializing_if = "Option::is_none")]
-    pub estimate: Option<EstimateJson>,
+    /// Every value of the frame (`uptime_ms`, `i1_ua`, …, `faults`, the
+    /// estimate's and the gain's keys when the node sent them).
+    #[serde(flatten)]
+    pub reading: &'a Reading,
 }
 
 impl<'a> MeasurementJson<'a> {
-    /// Build from a frame.
-    pub fn new(
-        node: &'a str,
-        seq: u32,
-        m: &Measurement,
-        estimate: Option<&IceEstimate>,
-        host_unix_ms: u64,
-    ) -> Self {
+    /// The message of one frame.
+    pub fn new(node: &'a str, seq: u32, reading: &'a Reading, host_unix_ms: u64) -> Self {
         MeasurementJson {
             node,
             seq,
-            uptime_ms: m.uptime_ms,
             host_unix_ms,
             host_time_utc: iso_utc(host_unix_ms),
-            i1_ua: na_to_ua(m.i1_na.into()),
-            i2_ua: na_to_ua(m.i2_na.into()),
-            ambient1_ua: na_to_ua(m.ambient1_na.into()),
-            ambient2_ua: na_to_ua(m.ambient2_na.into()),
-            temperature_c: centi_c_to_c(m.temperature_centi_c),
-            vdda_mv: m.vdda_mv,
-            state: m.state.name(),
-            alarm: m.flags & flags::ALARM != 0,
-            valid: m.is_valid(),
-            flags: m.flags,
-            faults: fault_names(m.flags & flags::FAULT_MASK),
-            estimate: estimate.map(EstimateJson::from),
+            reading,
         }
     }
 }
@@ -149,42 +71,39 @@ pub struct StateJson {
     pub dark_baseline: bool,
     /// Frames missing from the sequence since the gateway started.
     pub frames_lost: u64,
-    /// The node's estimate, when it sends one.
+    /// The node's ice estimate, when it sends one.
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
-    pub estimate: Option<EstimateJson>,
+    pub estimate: Option<EstimateReading>,
+    /// The node's optical gain estimate, when it sends one.
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub gain: Option<GainReading>,
 }
 
 impl StateJson {
-    /// Build from a frame.
-    pub fn new(
-        node: &str,
-        seq: u32,
-        m: &Measurement,
-        estimate: Option<&IceEstimate>,
-        frames_lost: u64,
-        host_unix_ms: u64,
-    ) -> Self {
+    /// The state after one frame.
+    pub fn new(node: &str, seq: u32, r: &Reading, frames_lost: u64, host_unix_ms: u64) -> Self {
         StateJson {
             node: node.to_string(),
             seq,
-            uptime_ms: m.uptime_ms,
+            uptime_ms: r.uptime_ms,
             host_unix_ms,
             host_time_utc: iso_utc(host_unix_ms),
-            state: m.state.name(),
-            ice: m.state == DetectorState::Ice,
-            alarm: m.flags & flags::ALARM != 0,
-            alarm_acked: m.flags & flags::ALARM_ACKED != 0,
-            valid: m.is_valid(),
-            faults: fault_names(m.flags & flags::FAULT_MASK),
-            dark_baseline: m.flags & flags::NO_BASELINE == 0,
+            state: r.state.name(),
+            ice: r.ice(),
+            alarm: r.alarm,
+            alarm_acked: r.alarm_acked,
+            valid: r.valid,
+            faults: r.faults.clone(),
+            dark_baseline: r.dark_baseline,
             frames_lost,
-            estimate: estimate.map(EstimateJson::from),
+            estimate: r.estimate,
+            gain: r.gain,
         }
     }
 
     /// True when `other` differs in something that must go out at once
     /// (state, alarm, acknowledgement, validity, faults, baseline, medium,
-    /// presence of an estimate).
+    /// presence of an estimate or a gain).
     pub fn differs_discretely(&self, other: &StateJson) -> bool {
         self.state != other.state
             || self.alarm != other.alarm
@@ -193,6 +112,7 @@ impl StateJson {
             || self.faults != other.faults
             || self.dark_baseline != other.dark_baseline
             || self.estimate.map(|e| e.medium) != other.estimate.map(|e| e.medium)
+            || self.gain.is_some() != other.gain.is_some()
     }
 
     /// True when the thickness moved by at least `mm`.
@@ -211,53 +131,28 @@ pub struct EventJson<'a> {
     pub node: &'a str,
     /// `node`: the node sent it.
     pub source: &'static str,
-    /// `ice_onset`, `ice_cleared`, `wet_onset`, `wet_cleared`,
-    /// `fault_raised`, `fault_cleared`.
-    pub kind: &'static str,
     /// Frame sequence number.
     pub seq: u32,
-    /// Node time, ms.
-    pub uptime_ms: u64,
     /// Host time of reception, Unix ms.
     pub host_unix_ms: u64,
     /// Host time, ISO 8601 UTC.
     pub host_time_utc: String,
-    /// Net current channel 1 of the frame that caused it, µA.
-    pub i1_ua: f64,
-    /// Net current channel 2, µA.
-    pub i2_ua: f64,
-    /// Channel-1 rise over the dark baseline, µA.
-    pub rise1_ua: f64,
-    /// Air temperature, °C.
-    pub temperature_c: f64,
-    /// Consecutive frames that met the condition.
-    pub frames: u16,
-    /// Fault events: the faults raised or cleared.
-    #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub faults: Vec<&'static str>,
+    /// `kind`, `uptime_ms`, the currents, `temperature_c`, `frames`, the
+    /// faults of a fault event.
+    #[serde(flatten)]
+    pub event: &'a EventReading,
 }
 
 impl<'a> EventJson<'a> {
-    /// Build from a frame.
-    pub fn new(node: &'a str, seq: u32, e: &Event, host_unix_ms: u64) -> Self {
-        let faults = match e.kind {
-            EventKind::FaultRaised(b) | EventKind::FaultCleared(b) => fault_names(b),
-            _ => Vec::new(),
-        };
+    /// The message of one event frame.
+    pub fn new(node: &'a str, seq: u32, event: &'a EventReading, host_unix_ms: u64) -> Self {
         EventJson {
             node,
             source: "node",
-            kind: e.kind.name(),
             seq,
-            uptime_ms: e.uptime_ms,
             host_unix_ms,
             host_time_utc: iso_utc(host_unix_ms),
-            i1_ua: na_to_ua(e.i1_na.into()),
-            i2_ua: na_to_ua(e.i2_na.into()),
-            rise1_ua: na_to_ua(e.rise1_na.into()),
-            temperature_c: centi_c_to_c(e.temperature_centi_c),
-            frames: e.frames,
-            faults,
+            event,
         }
     }
 }
@@ -321,20 +216,14 @@ pub struct InfoJson<'a> {
     pub reset_reason: String,
 }
 
-/// The unique id as lower-case hex.
-pub fn unique_id_hex(h: &Hello) -> String {
-    h.unique_id.iter().map(|b| format!("{b:02x}")).collect()
-}
-
 impl<'a> InfoJson<'a> {
     /// Build from a hello.
     pub fn new(node: &'a str, port: &'a str, h: &Hello) -> Self {
-        let [a, b, c] = h.firmware_version;
         InfoJson {
             node,
             port,
             board: h.board_name().to_string(),
-            firmware: format!("{a}.{b}.{c}"),
+            firmware: firmware_text(h),
             protocol: h.protocol_version,
             unique_id: unique_id_hex(h),
             reset_reason: format!("{:?}", h.reset_reason),
@@ -372,8 +261,8 @@ pub struct StatusJson {
     pub queue_records: u64,
     /// Bytes of the queue on disk.
     pub queue_bytes: u64,
-    /// Records dropped because the queue hit its bound (oldest first), since
-    /// the queue was created.
+    /// Records the queue lost, ever (its bound, a full or vanished disk;
+    /// oldest measurements first, events never while memory lasts).
     pub queue_dropped: u64,
     /// Gateway uptime, s.
     pub uptime_s: u64,
@@ -384,7 +273,9 @@ pub struct StatusJson {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fois_protocol::Medium;
+    use fois_protocol::{
+        DetectorState, Event, EventKind, GainEstimate, IceEstimate, Measurement, Medium, flags,
+    };
 
     fn meas() -> Measurement {
         Measurement {
@@ -401,16 +292,22 @@ mod tests {
     }
 
     #[test]
-    fn measurement_keys_carry_units_and_values() {
+    fn measurement_keys_carry_units_values_and_the_gain() {
         let est = IceEstimate {
             thickness_um: 1_250,
             sigma_um: 80,
             medium: Medium::Rime,
             probability_permille: 930,
         };
+        let mut m = meas();
+        m.flags |= flags::GAIN_OUT_OF_BAND;
+        let gain = GainEstimate {
+            gain_ppm: 820_000,
+            sigma_ppm: 40_000,
+        };
+        let r = Reading::new(&m, Some(&est), Some(&gain));
         let v: serde_json::Value =
-            serde_json::to_value(MeasurementJson::new("n1", 7, &meas(), Some(&est), 1_000))
-                .unwrap();
+            serde_json::to_value(MeasurementJson::new("n1", 7, &r, 1_000)).unwrap();
         assert_eq!(v["node"], "n1");
         assert_eq!(v["seq"], 7);
         assert_eq!(v["uptime_ms"], 12_345);
@@ -420,29 +317,49 @@ mod tests {
         assert_eq!(v["temperature_c"], -5.12);
         assert_eq!(v["state"], "ice");
         assert_eq!(v["alarm"], true);
-        assert_eq!(v["faults"], serde_json::json!(["ntc_open"]));
+        assert_eq!(
+            v["faults"],
+            serde_json::json!(["ntc_open", "gain_out_of_band"])
+        );
         assert_eq!(v["thickness_mm"], 1.25);
         assert_eq!(v["thickness_sigma_mm"], 0.08);
         assert_eq!(v["medium"], "rime");
         assert_eq!(v["medium_probability"], 0.93);
+        assert_eq!(v["gain"], 0.82);
+        assert_eq!(v["gain_sigma"], 0.04);
         assert_eq!(v["host_time_utc"], "1970-01-01T00:00:01.000Z");
-        // No estimate: no thickness keys at all (not null).
-        let v = serde_json::to_value(MeasurementJson::new("n1", 7, &meas(), None, 0)).unwrap();
-        assert!(v.get("thickness_mm").is_none(), "{v}");
+        // No estimate, no gain: no such keys at all (not null).
+        let r = Reading::new(&meas(), None, None);
+        let v = serde_json::to_value(MeasurementJson::new("n1", 7, &r, 0)).unwrap();
+        assert!(
+            v.get("thickness_mm").is_none() && v.get("gain").is_none(),
+            "{v}"
+        );
     }
 
     #[test]
-    fn state_says_ice_acked_and_detects_changes() {
-        let s = StateJson::new("n1", 1, &meas(), None, 3, 0);
+    fn state_says_ice_acked_gain_and_detects_changes() {
+        let gain = GainEstimate {
+            gain_ppm: 1_000_000,
+            sigma_ppm: 50_000,
+        };
+        let s = StateJson::new("n1", 1, &Reading::new(&meas(), None, Some(&gain)), 3, 0);
         let v = serde_json::to_value(&s).unwrap();
         assert_eq!(v["ice"], true);
         assert_eq!(v["alarm_acked"], true);
         assert_eq!(v["frames_lost"], 3);
+        assert_eq!(v["gain"], 1.0);
+        assert_eq!(v["gain_sigma"], 0.05);
         let mut m = meas();
         m.uptime_ms += 100;
-        assert!(!s.differs_discretely(&StateJson::new("n1", 2, &m, None, 3, 5)));
+        let same = StateJson::new("n1", 2, &Reading::new(&m, None, Some(&gain)), 3, 5);
+        assert!(!s.differs_discretely(&same));
         m.flags &= !flags::ALARM_ACKED;
-        assert!(s.differs_discretely(&StateJson::new("n1", 3, &m, None, 3, 5)));
+        let unacked = StateJson::new("n1", 3, &Reading::new(&m, None, Some(&gain)), 3, 5);
+        assert!(s.differs_discretely(&unacked));
+        m.flags |= flags::ALARM_ACKED | flags::GAIN_OUT_OF_BAND;
+        let out_of_band = StateJson::new("n1", 4, &Reading::new(&m, None, Some(&gain)), 3, 5);
+        assert!(s.differs_discretely(&out_of_band), "a new fault");
     }
 
     #[test]
@@ -456,9 +373,12 @@ mod tests {
             temperature_centi_c: 0,
             frames: 1,
         };
-        let v = serde_json::to_value(EventJson::new("n", 9, &e, 0)).unwrap();
+        let r = EventReading::new(&e);
+        let v = serde_json::to_value(EventJson::new("n", 9, &r, 0)).unwrap();
         assert_eq!(v["kind"], "fault_raised");
         assert_eq!(v["source"], "node");
+        assert_eq!(v["seq"], 9);
+        assert_eq!(v["uptime_ms"], 5);
         assert_eq!(
             v["faults"],
             serde_json::json!(["ntc_short", "clock_fallback"])

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use fois_protocol::{
     Ack, AckResult, Command, DecodeStats, DeviceFrame, DeviceMsg, ErrorReply, FrameDecoder,
-    FrameError, Hello, HostFrame, PROTOCOL_VERSION, encode_to_vec,
+    FrameError, Hello, HostFrame, PROTOCOL_VERSION, SeqEvent, SeqTracker, encode_to_vec,
 };
 
 /// Errors of the link.
@@ -39,8 +39,8 @@ pub enum LinkError {
     },
     /// The node speaks another protocol version.
     #[error(
-        "the node speaks protocol version {node}, this foisctl reads versions {oldest} to {host}: \
-         update foisctl or the firmware so both match ({hello})"
+        "the node speaks protocol version {node}, this program reads versions {oldest} to {host}: \
+         update it or the firmware so both match ({hello})"
     )]
     Incompatible {
         /// The node's version.
@@ -52,64 +52,6 @@ pub enum LinkError {
         /// The node's hello, as text.
         hello: String,
     },
-}
-
-/// What one frame's sequence number says.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum SeqEvent {
-    /// The first frame seen.
-    First,
-    /// The next frame, as expected.
-    InOrder,
-    /// This many frames were lost before this one.
-    Gap(u64),
-    /// The same number again (ignored).
-    Duplicate,
-    /// The number went backwards: the node restarted.
-    Restart,
-}
-
-/// Counts lost frames from sequence numbers (wrapping u32).
-#[derive(Debug, Clone, Default)]
-pub struct SeqTracker {
-    last: Option<u32>,
-    /// Frames lost so far.
-    pub lost: u64,
-    /// Node restarts seen.
-    pub restarts: u64,
-}
-
-impl SeqTracker {
-    /// Record one frame's sequence number.
-    pub fn observe(&mut self, seq: u32) -> SeqEvent {
-        let ev = match self.last {
-            None => SeqEvent::First,
-            Some(last) => {
-                let d = seq.wrapping_sub(last);
-                if d == 1 {
-                    SeqEvent::InOrder
-                } else if d == 0 {
-                    SeqEvent::Duplicate
-                } else if d < 1 << 31 {
-                    SeqEvent::Gap(u64::from(d - 1))
-                } else {
-                    SeqEvent::Restart
-                }
-            }
-        };
-        match ev {
-            SeqEvent::Gap(n) => self.lost += n,
-            SeqEvent::Restart => self.restarts += 1,
-            _ => {}
-        }
-        self.last = Some(seq);
-        ev
-    }
-
-    /// The last sequence number seen.
-    pub fn last(&self) -> Option<u32> {
-        self.last
-    }
 }
 
 /// Something that came over the link.
@@ -365,7 +307,7 @@ impl<P: Read + Write> Link<P> {
     }
 }
 
-/// Whether this foisctl reads the node's protocol version: every version
+/// Whether this host reads the node's protocol version: every version
 /// from `OLDEST_READABLE_VERSION` (1) to `PROTOCOL_VERSION` (a fleet is never
 /// upgraded at once; a version-1 node streams `Measurement` without an
 /// estimate, which the monitor and the log show as empty).
@@ -394,20 +336,6 @@ pub enum Reply {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn seq_tracker_counts_gaps_wraps_and_restarts() {
-        let mut t = SeqTracker::default();
-        assert_eq!(t.observe(10), SeqEvent::First);
-        assert_eq!(t.observe(11), SeqEvent::InOrder);
-        assert_eq!(t.observe(15), SeqEvent::Gap(3));
-        assert_eq!(t.observe(15), SeqEvent::Duplicate);
-        assert_eq!(t.observe(2), SeqEvent::Restart);
-        assert_eq!(t.observe(u32::MAX - 1).clone(), SeqEvent::Restart);
-        assert_eq!(t.observe(0), SeqEvent::Gap(1));
-        assert_eq!(t.lost, 4);
-        assert_eq!(t.restarts, 2);
-    }
 
     /// A fake port: reads come from a script, writes are recorded.
     struct Script {

@@ -1,6 +1,6 @@
 //! The node reader: one thread per node that opens its serial port, does the
-//! handshake (`GetInfo` / `Hello`, as `monitor` does), starts the stream and
-//! hands every decoded frame to the publisher. When the port goes away, or
+//! handshake (`GetInfo` / `Hello`: `fois_link`, as `foisctl monitor` does),
+//! starts the stream and hands every decoded frame to the gateway. When the port goes away, or
 //! the node stays silent for the silence timeout, it says so and reconnects
 //! on its own, every [`RETRY_INTERVAL`]. A node that resets in place (the
 //! port stays, a `Hello` arrives while streaming) is told to stream again.
@@ -14,13 +14,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, TryRecvError};
 use std::time::{Duration, Instant};
 
-use fois_protocol::{Command, DeviceFrame, DeviceMsg, Hello};
+use fois_link::text::{ack_text, error_text};
+use fois_link::timefmt::unix_ms_now;
+use fois_link::{Incoming, Link, LinkError, open_port};
+use fois_protocol::{Command, DeviceFrame, DeviceMsg, Hello, SeqEvent, SeqTracker};
 
-use crate::link::{Incoming, Link, LinkError, SeqEvent, SeqTracker, open_port};
-use crate::text::{ack_text, error_text};
-use crate::timefmt::unix_ms_now;
-
-use super::config::NodeSpec;
+use crate::config::NodeSpec;
 
 /// Wait between reconnection attempts.
 pub const RETRY_INTERVAL: Duration = Duration::from_millis(500);

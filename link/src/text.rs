@@ -1,20 +1,12 @@
 //! One-line texts of protocol messages (a node's identity, answers, errors,
 //! event kinds), as the monitor prints them, the log stores them and the
-//! gateway publishes them; the wire's units in the text's (µA, °C).
+//! gateway logs them; the wire's units converted by [`crate::reading`].
 
 use fois_protocol::{
     Ack, AckResult, ErrorReply, EventKind, GainEstimate, Hello, IceEstimate, Medium,
 };
 
-/// nA → µA.
-pub fn na_to_ua(na: i64) -> f64 {
-    na as f64 / 1000.0
-}
-
-/// 0.01 °C (the wire's temperature unit) → °C.
-pub fn centi_c_to_c(centi_c: i16) -> f64 {
-    f64::from(centi_c) / 100.0
-}
+use crate::reading::{fraction, mm, ua};
 
 /// Short name of an event kind (`IceOnset`, `FaultRaised(0x0004)`).
 pub fn event_name(kind: &EventKind) -> String {
@@ -25,13 +17,24 @@ pub fn event_name(kind: &EventKind) -> String {
     }
 }
 
+/// The node's 96-bit unique id as lower-case hex (24 characters).
+pub fn unique_id_hex(h: &Hello) -> String {
+    h.unique_id.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The firmware version as `major.minor.patch`.
+pub fn firmware_text(h: &Hello) -> String {
+    let [a, b, c] = h.firmware_version;
+    format!("{a}.{b}.{c}")
+}
+
 /// One line describing a node.
 pub fn hello_text(h: &Hello) -> String {
-    let [a, b, c] = h.firmware_version;
-    let id: String = h.unique_id.iter().map(|b| format!("{b:02x}")).collect();
+    let id = unique_id_hex(h);
     format!(
-        "board={} firmware={a}.{b}.{c} protocol={} id={id} reset={:?}",
+        "board={} firmware={} protocol={} id={id} reset={:?}",
         h.board_name(),
+        firmware_text(h),
         h.protocol_version,
         h.reset_reason
     )
@@ -48,8 +51,8 @@ pub fn ack_text(a: &Ack) -> String {
         AckResult::Stopped => "Stopped".into(),
         AckResult::DarkCalibrated(b) => format!(
             "DarkCalibrated i1_ua={:.3} i2_ua={:.3}",
-            na_to_ua(b.i1_na.into()),
-            na_to_ua(b.i2_na.into())
+            ua(b.i1_na.into()),
+            ua(b.i2_na.into())
         ),
         AckResult::AlarmAcknowledged => "AlarmAcknowledged".into(),
         AckResult::Resetting => "Resetting".into(),
@@ -75,14 +78,14 @@ pub fn error_text(e: &ErrorReply) -> String {
 
 /// The optical gain as the monitor shows it: `gain 1.150 ± 0.060`.
 pub fn gain_text(g: &GainEstimate) -> String {
-    format!("gain {:.3} ± {:.3}", g.gain(), g.sigma())
+    let g = crate::reading::GainReading::from(g);
+    format!("gain {:.3} ± {:.3}", g.gain, g.gain_sigma)
 }
 
 /// The estimate as the monitor shows it: `ICE rime 2.3 ± 0.3 mm (p 0.97)`,
 /// `WATER 0.4 ± 0.2 mm (p 0.99)`, `DRY (p 0.99)`.
 pub fn estimate_text(e: &IceEstimate) -> String {
-    let p = f64::from(e.probability_permille) / 1000.0;
-    let mm = |um: u16| f64::from(um) / 1000.0;
+    let p = fraction(e.probability_permille);
     let what = match e.medium {
         Medium::Dry => return format!("DRY (p {p:.2})"),
         Medium::Water => "WATER".to_string(),

@@ -17,8 +17,9 @@
 use fois_protocol::Hello;
 use serde_json::{Value, json};
 
-use super::payload::unique_id_hex;
-use super::topics::Topics;
+use fois_link::text::{firmware_text, unique_id_hex};
+
+use crate::topics::Topics;
 
 /// The `node_id` of a node's discovery topics (also its device identifier).
 pub fn node_id(gateway: &str, node: &str) -> String {
@@ -32,7 +33,7 @@ pub fn gateway_id(gateway: &str) -> String {
 
 fn origin() -> Value {
     json!({
-        "name": "foisctl gateway",
+        "name": "fois-gateway",
         "sw_version": env!("CARGO_PKG_VERSION"),
     })
 }
@@ -52,7 +53,7 @@ pub fn gateway_config(ha_prefix: &str, topics: &Topics, gateway: &str) -> (Strin
             "identifiers": [id],
             "name": format!("FOIS gateway {gateway}"),
             "manufacturer": "FOIS",
-            "model": "foisctl gateway",
+            "model": "fois-gateway",
             "sw_version": env!("CARGO_PKG_VERSION"),
         },
         "origin": origin(),
@@ -74,13 +75,12 @@ pub fn node_configs(
     with_thickness: bool,
 ) -> Vec<(String, Vec<u8>)> {
     let id = node_id(gateway, node);
-    let [a, b, c] = hello.firmware_version;
     let device = json!({
         "identifiers": [id],
         "name": format!("FOIS {node}"),
         "manufacturer": "FOIS",
         "model": hello.board_name(),
-        "sw_version": format!("{a}.{b}.{c}"),
+        "sw_version": firmware_text(hello),
         "serial_number": unique_id_hex(hello),
         "via_device": gateway_id(gateway),
     });

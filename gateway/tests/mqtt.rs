@@ -1,7 +1,8 @@
-//! `foisctl gateway` against a real Mosquitto broker: virtual nodes on
-//! pseudo-terminals → gateway (a child process) → broker (started by each
-//! test on its own free loopback port) → a subscriber that counts every
-//! measurement and event by the node's sequence number.
+//! `fois-gateway` against a real Mosquitto broker: virtual nodes on
+//! pseudo-terminals (served by threads of the test) → gateway (a child
+//! process) → broker (started by each test on its own free loopback port)
+//! → a subscriber that counts every measurement and event by the node's
+//! sequence number.
 //!
 //! A record is "sent by the node" when its seq lies between the first and
 //! the last seq the subscriber saw; the only seqs allowed to be missing in
@@ -10,12 +11,13 @@
 // A test crate: unwrap and expect are assertions here (helpers included).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-mod gateway_support;
+mod support;
 
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use gateway_support::*;
+use fois_vnode::Cover;
+use support::*;
 
 /// Handshake answers per connection that are not published.
 const ACKS_PER_CONNECTION: usize = 3;
@@ -48,33 +50,9 @@ fn three_nodes_every_record_arrives_once_with_discovery_and_state() {
         SubOptions::default(),
     );
     // Rime that trips the alarm after ~1.4 s, a wet face at +5 °C, a dry one.
-    let iced = NodeProc::start(&[
-        "--speed",
-        "10",
-        "--dry-s",
-        "3",
-        "--ice",
-        "rime",
-        "--rate-mm-per-h",
-        "20",
-        "--seed",
-        "1",
-    ]);
-    let wet = NodeProc::start(&[
-        "--speed",
-        "10",
-        "--dry-s",
-        "3",
-        "--ice",
-        "water",
-        "--rate-mm-per-h",
-        "20",
-        "--temp-c",
-        "5",
-        "--seed",
-        "2",
-    ]);
-    let dry = NodeProc::start(&["--speed", "10", "--dry-s", "1000", "--seed", "3"]);
+    let iced = NodeProc::start(Scene::film(Cover::Rime, 20.0, -5.0, 3.0, 10.0, 1));
+    let wet = NodeProc::start(Scene::film(Cover::Water, 20.0, 5.0, 3.0, 10.0, 2));
+    let dry = NodeProc::start(Scene::dry(10.0, 3));
     let cfg = gateway_config(
         dir.path(),
         "gw",
@@ -272,8 +250,8 @@ fn broker_stopped_for_30_s_and_restarted_nothing_is_lost() {
             ..SubOptions::default()
         },
     );
-    let a = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--seed", "4"]);
-    let b = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--seed", "5"]);
+    let a = NodeProc::start(Scene::dry(5.0, 4));
+    let b = NodeProc::start(Scene::dry(5.0, 5));
     let cfg = gateway_config(
         dir.path(),
         "gw",
@@ -338,7 +316,7 @@ fn broker_stopped_for_30_s_and_restarted_nothing_is_lost() {
         // (to it from the gateway, or from it to the subscriber) may arrive
         // twice, with the same seq; never more than one window of it.
         assert!(
-            r.duplicates() <= fois_host::gateway::publisher::WINDOW,
+            r.duplicates() <= fois_gateway::inflight::WINDOW,
             "{name}: {} duplicates",
             r.duplicates()
         );
@@ -354,8 +332,8 @@ fn gateway_killed_with_sigkill_and_restarted_loses_at_most_1_s() {
     let sub = Subscriber::start(broker.port, "t-kill", &["fois/#"], SubOptions::default());
     // 50 frames/s per node.
     let speed = 5.0;
-    let a = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--seed", "6"]);
-    let b = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--seed", "7"]);
+    let a = NodeProc::start(Scene::dry(5.0, 6));
+    let b = NodeProc::start(Scene::dry(5.0, 7));
     let cfg = gateway_config(
         dir.path(),
         "gw",
@@ -373,7 +351,7 @@ fn gateway_killed_with_sigkill_and_restarted_loses_at_most_1_s() {
             std::thread::sleep(Duration::from_millis(20));
         }
         std::thread::sleep(Duration::from_millis(1500 + 170 * round as u64));
-        kills.push(fois_host::timefmt::unix_ms_now());
+        kills.push(fois_link::timefmt::unix_ms_now());
         gw.kill9();
         std::thread::sleep(Duration::from_millis(300));
     }
@@ -417,8 +395,8 @@ fn unplugged_node_is_offline_within_5_s_and_back_online_when_it_returns() {
     let sub = Subscriber::start(broker.port, "t-unplug", &["fois/#"], SubOptions::default());
     let link = dir.path().join("node-a");
     let ls = link.to_str().unwrap();
-    let mut a = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--link", ls]);
-    let b = NodeProc::start(&["--speed", "5", "--dry-s", "1000"]);
+    let mut a = NodeProc::start_linked(Scene::dry(5.0, 1), &link);
+    let b = NodeProc::start(Scene::dry(5.0, 1));
     let cfg = gateway_config(
         dir.path(),
         "gw",
@@ -464,7 +442,7 @@ fn unplugged_node_is_offline_within_5_s_and_back_online_when_it_returns() {
         "b went offline while a was unplugged"
     );
     // Plugged back: online again, with a link_lost and a second link_up.
-    let _a2 = NodeProc::start(&["--speed", "5", "--dry-s", "1000", "--link", ls]);
+    let _a2 = NodeProc::start_linked(Scene::dry(5.0, 1), &link);
     sub.wait_for("a back online", Duration::from_secs(10), |m| {
         m.iter()
             .rfind(|m| m.topic == "fois/gw/a/availability")
@@ -486,16 +464,7 @@ fn unplugged_node_is_offline_within_5_s_and_back_online_when_it_returns() {
 
 /// A node with its alarm on (rime at 30 mm/h from 2 s, speed 10).
 fn iced_node() -> NodeProc {
-    NodeProc::start(&[
-        "--speed",
-        "10",
-        "--dry-s",
-        "2",
-        "--ice",
-        "rime",
-        "--rate-mm-per-h",
-        "30",
-    ])
+    NodeProc::start(Scene::film(Cover::Rime, 30.0, -5.0, 2.0, 10.0, 1))
 }
 
 fn wait_alarm(sub: &Subscriber) {
@@ -543,7 +512,7 @@ fn mqtt_commands_are_refused_when_disabled_and_carried_out_only_on_their_topic()
         "on",
         broker.port,
         &nodes,
-        "[commands]\nenabled = true\ntopic = \"ops/gw/{node}/do\"\n",
+        "[commands]\nenabled = true\ntopic = \"ops/gw/{node}/do\"\nmin_interval_ms = 1000\n",
     );
     let mut gw = GatewayProc::start(&on, &[], &dir.path().join("on.out"));
     gw.wait_output("node n1 on", Duration::from_secs(10));
@@ -563,20 +532,31 @@ fn mqtt_commands_are_refused_when_disabled_and_carried_out_only_on_their_topic()
     assert_eq!(r.len(), 1);
     assert_eq!(r[0].json()["ok"], false);
     assert!(r[0].json()["detail"].as_str().unwrap().contains("retained"));
-    // Clearing the retained message (an empty payload) is no command.
-    sub.publish("ops/gw/n1/do", "", true);
+    // The gateway deleted the retained command: a new subscriber gets none.
+    let late = Subscriber::start(broker.port, "t-late", &["ops/#"], SubOptions::default());
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(late.on("ops/gw/n1/do").is_empty(), "still retained");
+    drop(late);
 
     sub.publish("ops/gw/n1/do", "ack", false);
     sub.wait_for("acknowledged", Duration::from_secs(5), acked_in);
-    // Calibrating on ice is refused by the node itself (an iced face is no
-    // dark reference); unknown words by the gateway.
+    // At most one command per second per node (min_interval_ms): a
+    // calibration right after the ack is refused by the gateway ...
+    sub.publish("ops/gw/n1/do", "{\"command\": \"calibrate-dark\"}", false);
+    sub.wait_for("the rate limit", Duration::from_secs(5), |m| {
+        m.iter()
+            .any(|m| m.topic == "fois/gw/n1/command/result" && m.text().contains("rate limit"))
+    });
+    // ... and a second later by the node itself (an iced face is no dark
+    // reference); unknown words by the gateway.
+    std::thread::sleep(Duration::from_millis(1100));
     sub.publish("ops/gw/n1/do", "{\"command\": \"calibrate-dark\"}", false);
     sub.publish("ops/gw/n1/do", "reboot", false);
-    sub.wait_for("3 more results", Duration::from_secs(8), |m| {
+    sub.wait_for("4 more results", Duration::from_secs(8), |m| {
         m.iter()
             .filter(|m| m.topic == "fois/gw/n1/command/result")
             .count()
-            >= 4
+            >= 5
     });
     let results: Vec<serde_json::Value> = sub
         .on("fois/gw/n1/command/result")
@@ -644,7 +624,7 @@ fn password_auth_works_and_the_password_is_never_printed() {
             ..SubOptions::default()
         },
     );
-    let node = NodeProc::start(&["--speed", "5", "--dry-s", "1000"]);
+    let node = NodeProc::start(Scene::dry(5.0, 1));
     let nodes = [(node.path.as_str(), "n1")];
     // A wrong password: refused, said clearly, the password not shown.
     let bad = write(
@@ -690,7 +670,7 @@ fn password_auth_works_and_the_password_is_never_printed() {
     assert!(out.contains("connected to the broker"), "{out}");
     // Nowhere: run log, --print-config, --help.
     let printed = std::process::Command::new(BIN)
-        .args(["gateway", "--config"])
+        .args(["--config"])
         .arg(&good)
         .arg("--print-config")
         .output()
@@ -699,7 +679,7 @@ fn password_auth_works_and_the_password_is_never_printed() {
         + &String::from_utf8_lossy(&printed.stderr);
     assert!(printed.contains("Secret(***)"), "{printed}");
     let help = std::process::Command::new(BIN)
-        .args(["gateway", "--help"])
+        .args(["--help"])
         .output()
         .unwrap();
     for text in [
@@ -711,78 +691,10 @@ fn password_auth_works_and_the_password_is_never_printed() {
     }
 }
 
-/// A CA, a server certificate for 127.0.0.1 and a client certificate, made
-/// with the openssl command line.
-fn make_pki(dir: &Path) {
-    let run = |args: &[&str]| {
-        let out = std::process::Command::new("openssl")
-            .args(args)
-            .current_dir(dir)
-            .output()
-            .expect("openssl (apt-get install openssl) makes the test certificates");
-        assert!(
-            out.status.success(),
-            "openssl {args:?}: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-    };
-    run(&[
-        "req",
-        "-x509",
-        "-newkey",
-        "rsa:2048",
-        "-nodes",
-        "-keyout",
-        "ca.key",
-        "-out",
-        "ca.pem",
-        "-days",
-        "2",
-        "-subj",
-        "/CN=fois-test-ca",
-    ]);
-    std::fs::write(
-        dir.join("san.ext"),
-        "subjectAltName=IP:127.0.0.1,DNS:localhost\n",
-    )
-    .unwrap();
-    for who in ["server", "client"] {
-        run(&[
-            "req",
-            "-newkey",
-            "rsa:2048",
-            "-nodes",
-            "-keyout",
-            &format!("{who}.key"),
-            "-out",
-            &format!("{who}.csr"),
-            "-subj",
-            &format!("/CN={who}"),
-        ]);
-        run(&[
-            "x509",
-            "-req",
-            "-in",
-            &format!("{who}.csr"),
-            "-CA",
-            "ca.pem",
-            "-CAkey",
-            "ca.key",
-            "-CAcreateserial",
-            "-out",
-            &format!("{who}.pem"),
-            "-days",
-            "2",
-            "-extfile",
-            "san.ext",
-        ]);
-    }
-}
-
 #[test]
 fn tls_with_a_client_certificate() {
     let dir = tempfile::tempdir().unwrap();
-    make_pki(dir.path());
+    pki::make_pki(dir.path());
     let tls_port = free_port();
     let d = dir.path().display();
     // A plain listener for the test's subscriber, a mutual-TLS one for the gateway.
@@ -795,7 +707,7 @@ fn tls_with_a_client_certificate() {
         ),
     );
     let sub = Subscriber::start(broker.port, "t-tls", &["fois/#"], SubOptions::default());
-    let node = NodeProc::start(&["--speed", "5", "--dry-s", "1000"]);
+    let node = NodeProc::start(Scene::dry(5.0, 1));
     let nodes = [(node.path.as_str(), "n1")];
     let base = gateway_toml(tls_port, &dir.path().join("q"), &nodes, "");
     let with_tls = |tls: &str| {
@@ -955,37 +867,4 @@ fn a_node_with_an_ice_estimate_gets_a_thickness_entity() {
     let r = NodeRecords::of(&sub.messages(), "est");
     assert!(r.holes().len() <= ACKS_PER_CONNECTION, "{:?}", r.holes());
     assert_eq!(r.duplicates(), 0);
-}
-
-#[test]
-fn bad_configs_are_refused_with_exit_2_and_the_reason() {
-    // Bad flags (node, broker, ranges) are clap's: tests/usage.rs. These are
-    // the config file's.
-    let dir = tempfile::tempdir().unwrap();
-    let node = "[[node]]\nport = \"/dev/x\"\n";
-    let missing = dir.path().join("nope.toml");
-    let bad_key = write(
-        dir.path(),
-        "bad.toml",
-        &format!("[broker]\nprot = 1883\n{node}"),
-    );
-    let bad_name = write(dir.path(), "name.toml", &format!("{node}name = \"a/b\"\n"));
-    let cases: [(Option<&Path>, &str); 4] = [
-        (None, "no nodes"),
-        (Some(&missing), "cannot read the config"),
-        (Some(&bad_key), "unknown field `prot`"),
-        (Some(&bad_name), "not usable in topics"),
-    ];
-    for (config, needle) in cases {
-        let mut cmd = std::process::Command::new(BIN);
-        cmd.arg("gateway");
-        if let Some(c) = config {
-            cmd.arg("--config").arg(c);
-        }
-        let out = cmd.output().unwrap();
-        let err = String::from_utf8_lossy(&out.stderr);
-        assert_eq!(out.status.code(), Some(2), "{config:?}: {err}");
-        assert!(err.contains(needle), "{config:?}: `{needle}` not in {err}");
-        assert!(!err.contains("panicked"), "{err}");
-    }
 }

@@ -1,16 +1,16 @@
-//! Load figure of `foisctl gateway`: how many nodes at 10 Hz one gateway
+//! Load figure of `fois-gateway`: how many nodes at 10 Hz one gateway
 //! carries with no loss, its CPU (% of one core) and memory.
 //!
 //! ```sh
-//! cargo bench -p fois-host --bench gateway_load                    # 50, 100, 200, 400 nodes, 20 s each
-//! FOIS_GW_BENCH_NODES=200,600 FOIS_GW_BENCH_SECONDS=30 cargo bench -p fois-host --bench gateway_load
+//! cargo bench -p fois-gateway --bench load                    # 50, 100, 200, 400 nodes, 20 s each
+//! FOIS_GW_BENCH_NODES=200,600 FOIS_GW_BENCH_SECONDS=30 cargo bench -p fois-gateway --bench load
 //! ```
 //!
 //! For each fleet size N: a real Mosquitto broker on a free loopback port;
 //! N virtual nodes (the firmware's own `Node` on simulated hardware, one
 //! shared ray-traced environment, real time, 10 frames/s each) served on N
 //! pseudo-terminals by one feeder thread of this process; the real
-//! `foisctl gateway` binary as a child process reading the N ptys and
+//! `fois-gateway` binary as a child process reading the N ptys and
 //! publishing every measurement (`measurement_interval_ms = 0`, QoS 1
 //! through its disk queue); an MQTT subscriber (QoS 1) in this process.
 //! After all nodes are online, a measuring window: every measurement frame
@@ -21,8 +21,8 @@
 // The gateway tests' helpers: test code, where a failed setup panics with
 // its reason (unwrap and expect are assertions there).
 #[allow(clippy::unwrap_used, clippy::expect_used)]
-#[path = "../tests/gateway_support/mod.rs"]
-mod gateway_support;
+#[path = "../tests/support/mod.rs"]
+mod support;
 
 use std::collections::HashSet;
 use std::io::{Read, Write};
@@ -33,8 +33,8 @@ use std::time::{Duration, Instant};
 use anyhow::Context;
 use fois_protocol::{DeviceFrame, DeviceMsg, FrameDecoder, MAX_FRAME};
 use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
-use gateway_support::*;
 use serialport::SerialPort;
+use support::*;
 
 struct Fed {
     node: VirtualNode,

@@ -1,0 +1,188 @@
+//! The config file as written: every key optional, unknown keys refused
+//! (a misspelt key is an error, not a silent default), and the command
+//! line's [`Overrides`]. [`FileConfig::resolve`] turns both into a checked
+//! [`GatewayConfig`](super::GatewayConfig).
+
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::{BrokerAddr, NodeSpec, Secret};
+
+/// The file as written (every field optional; unknown keys refused).
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FileConfig {
+    /// Gateway name: a topic level and part of every Home Assistant id.
+    pub name: Option<String>,
+    /// First topic level [default: fois].
+    pub topic_prefix: Option<String>,
+    /// The broker.
+    #[serde(default)]
+    pub broker: BrokerFile,
+    /// What is published how often.
+    #[serde(default)]
+    pub publish: PublishFile,
+    /// The on-disk store-and-forward queue.
+    #[serde(default)]
+    pub queue: QueueFile,
+    /// Home Assistant MQTT discovery.
+    #[serde(default)]
+    pub homeassistant: HomeAssistantFile,
+    /// Commands from MQTT to the nodes.
+    #[serde(default)]
+    pub commands: CommandsFile,
+    /// The nodes, one `[[node]]` table each.
+    #[serde(default, rename = "node")]
+    pub nodes: Vec<NodeFile>,
+}
+
+/// `[broker]`.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BrokerFile {
+    /// Host name or address [default: 127.0.0.1].
+    pub host: Option<String>,
+    /// TCP port [default: 1883, 8883 with TLS].
+    pub port: Option<u16>,
+    /// MQTT client id [default: fois-gateway-<name>].
+    pub client_id: Option<String>,
+    /// User name.
+    pub username: Option<String>,
+    /// Password (prefer `password_file`).
+    pub password: Option<Secret>,
+    /// A file whose first line is the password.
+    pub password_file: Option<PathBuf>,
+    /// MQTT keep-alive, s [default: 5]: the broker publishes the gateway's
+    /// last will about 1.5 × this after the gateway dies.
+    pub keep_alive_s: Option<u64>,
+    /// `[broker.tls]`: connect with TLS.
+    pub tls: Option<TlsFile>,
+}
+
+/// `[broker.tls]`.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TlsFile {
+    /// PEM file of the CA(s) that signed the broker's certificate.
+    pub ca_file: Option<PathBuf>,
+    /// PEM client certificate (mutual TLS), with `client_key_file`.
+    pub client_cert_file: Option<PathBuf>,
+    /// PEM private key of the client certificate.
+    pub client_key_file: Option<PathBuf>,
+}
+
+/// `[publish]`.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PublishFile {
+    /// At most one measurement per node per this many ms of node time while
+    /// the broker is connected; 0 = every frame [default: 1000].
+    pub measurement_interval_ms: Option<u64>,
+    /// The same while the broker is unreachable (what goes to the disk
+    /// queue) [default: 10000].
+    pub offline_measurement_interval_ms: Option<u64>,
+    /// A retained state message is re-published when only the thickness
+    /// moved, at most this often, ms [default: 5000]; a change of detector
+    /// state, alarm, acknowledgement, faults or medium goes out at once.
+    pub state_interval_ms: Option<u64>,
+    /// A node that sends nothing for this long is declared offline and
+    /// reconnected, ms [default: 8000, the protocol's reply timeout: a
+    /// healthy node can be silent ~6–7 s while it erases flash and calibrates].
+    pub silence_timeout_ms: Option<u64>,
+}
+
+/// `[queue]`.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct QueueFile {
+    /// Directory of the queue's segment files [default:
+    /// $XDG_STATE_HOME/fois/gateway-<name>, else ~/.local/state/...].
+    pub dir: Option<PathBuf>,
+    /// Upper bound of the queue on disk, bytes; the oldest records are
+    /// dropped first (and counted) [default: 268435456 = 256 MiB].
+    pub max_bytes: Option<u64>,
+}
+
+/// `[homeassistant]`.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct HomeAssistantFile {
+    /// Publish discovery configs [default: true].
+    pub enabled: Option<bool>,
+    /// Discovery prefix [default: homeassistant].
+    pub prefix: Option<String>,
+}
+
+/// `[commands]`.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommandsFile {
+    /// Accept `ack` and `calibrate-dark` from MQTT [default: false].
+    pub enabled: Option<bool>,
+    /// The topic per node, `{node}` standing for the node's name [default:
+    /// <prefix>/<gateway>/{node}/command].
+    pub topic: Option<String>,
+    /// A node takes at most one command per this many ms; commands in
+    /// between are refused (and answered so) [default: 5000].
+    pub min_interval_ms: Option<u64>,
+}
+
+/// One `[[node]]`.
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NodeFile {
+    /// Serial port (or pty, or a stable symlink to one).
+    pub port: String,
+    /// Node name in topics [default: the node's unique id, hex].
+    pub name: Option<String>,
+    /// Baud rate [default: 115200].
+    pub baud: Option<u32>,
+}
+
+/// Values from the command line that override the file.
+#[derive(Debug, Default, Clone)]
+pub struct Overrides {
+    /// Gateway name.
+    pub name: Option<String>,
+    /// The broker's host and port.
+    pub broker: Option<BrokerAddr>,
+    /// User name.
+    pub username: Option<String>,
+    /// Password file.
+    pub password_file: Option<PathBuf>,
+    /// CA file (turns TLS on).
+    pub ca_file: Option<PathBuf>,
+    /// Client certificate.
+    pub client_cert_file: Option<PathBuf>,
+    /// Client key.
+    pub client_key_file: Option<PathBuf>,
+    /// Extra nodes (`--node PATH[=NAME]`), after the file's.
+    pub nodes: Vec<NodeSpec>,
+    /// Measurement interval, ms.
+    pub measurement_interval_ms: Option<u64>,
+    /// Offline measurement interval, ms.
+    pub offline_measurement_interval_ms: Option<u64>,
+    /// Queue directory.
+    pub queue_dir: Option<PathBuf>,
+    /// Queue bound.
+    pub queue_max_bytes: Option<u64>,
+    /// Switch Home Assistant discovery off.
+    pub no_homeassistant: bool,
+}
+
+impl FileConfig {
+    /// Read and parse a config file.
+    pub fn load(path: &Path) -> anyhow::Result<FileConfig> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| anyhow::anyhow!("cannot read the config {}: {e}", path.display()))?;
+        Self::parse(&text).map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))
+    }
+
+    /// Parse config text.
+    pub fn parse(text: &str) -> anyhow::Result<FileConfig> {
+        // The toml error does not echo the password: it quotes only the
+        // offending key's line number and column.
+        toml::from_str(text).map_err(|e| anyhow::anyhow!("{}", e.message()))
+    }
+}

@@ -1,0 +1,348 @@
+//! The runtime wiring: one current-thread tokio runtime; a task drives
+//! rumqttc's event loop and forwards its events; one thread per node reads
+//! its serial port ([`crate::reader`]); the loop here feeds all of it to the
+//! state machine ([`crate::machine::Gateway`]) and carries out the actions
+//! it returns with the `AsyncClient`.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use rumqttc::{AsyncClient, ConnectionError, Event, EventLoop, Incoming, Outgoing};
+use tokio::sync::mpsc;
+use tracing::{info, warn};
+
+use crate::config::GatewayConfig;
+use crate::machine::{Action, Gateway, GatewaySummary, RECONNECT_DELAY};
+use crate::mqtt::{describe, mqtt_options};
+use crate::queue::{Queue, QueueLimits};
+use crate::reader::{NodeCommand, NodeMsg, ReaderTimings, spawn_serial_reader};
+use crate::snapshot::Fleet;
+use crate::topics::Topics;
+
+/// The housekeeping period (queue flush, state, status, stop).
+pub const TICK: Duration = Duration::from_millis(100);
+/// After a stop, the broker has this long for the last acknowledgements.
+pub const LAST_ACKS: Duration = Duration::from_secs(3);
+
+/// What the broker task reports.
+#[derive(Debug)]
+enum BrokerEvent {
+    /// An MQTT event.
+    Mqtt(Event),
+    /// The connection failed or was lost.
+    Down(String),
+}
+
+/// Drive the event loop; after a failure wait for `resume` (the gateway
+/// has stopped sending), discard the client's own replay buffer (the queue
+/// sends again what was not acknowledged), wait [`RECONNECT_DELAY`],
+/// reconnect.
+async fn broker_task(
+    mut el: EventLoop,
+    tx: mpsc::UnboundedSender<BrokerEvent>,
+    mut resume: mpsc::UnboundedReceiver<()>,
+) {
+    loop {
+        match el.poll().await {
+            Ok(ev) => {
+                if tx.send(BrokerEvent::Mqtt(ev)).is_err() {
+                    return;
+                }
+            }
+            Err(ConnectionError::RequestsDone) => return,
+            Err(e) => {
+                if tx.send(BrokerEvent::Down(describe(&e))).is_err() {
+                    return;
+                }
+                if resume.recv().await.is_none() {
+                    return;
+                }
+                el.clean();
+                el.pending.clear();
+                tokio::time::sleep(RECONNECT_DELAY).await;
+            }
+        }
+    }
+}
+
+/// How a run ends.
+#[derive(Debug, Clone, Copy)]
+pub struct RunLimits<'a> {
+    /// Set by Ctrl-C / SIGTERM.
+    pub stop: &'a AtomicBool,
+    /// Stop after this long (None: until `stop`).
+    pub duration: Option<Duration>,
+    /// Log a status line this often.
+    pub status_every: Duration,
+}
+
+/// A command for a node from a front end other than MQTT; its answer is
+/// published on `<node>/command/result` and logged like an MQTT command's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrontEndCommand {
+    /// The node's index in the config.
+    pub node: usize,
+    /// The command.
+    pub command: NodeCommand,
+}
+
+/// The gateway before it runs: its config, the shared snapshots, the
+/// command channel for other front ends.
+pub struct Service {
+    cfg: GatewayConfig,
+    fleet_tx: tokio::sync::watch::Sender<Option<Fleet>>,
+    commands_tx: mpsc::UnboundedSender<FrontEndCommand>,
+    commands_rx: mpsc::UnboundedReceiver<FrontEndCommand>,
+}
+
+impl Service {
+    /// A gateway of this config.
+    pub fn new(cfg: GatewayConfig) -> Service {
+        let (commands_tx, commands_rx) = mpsc::unbounded_channel();
+        Service {
+            cfg,
+            fleet_tx: tokio::sync::watch::Sender::new(None),
+            commands_tx,
+            commands_rx,
+        }
+    }
+
+    /// Where every node's latest state appears once the gateway runs (a
+    /// watch that holds the [`Fleet`] from the start of [`Service::run`]).
+    pub fn fleet(&self) -> tokio::sync::watch::Receiver<Option<Fleet>> {
+        self.fleet_tx.subscribe()
+    }
+
+    /// A sender of commands to nodes (they go through the same checks as
+    /// MQTT's: online, rate limit).
+    pub fn commands(&self) -> mpsc::UnboundedSender<FrontEndCommand> {
+        self.commands_tx.clone()
+    }
+
+    /// Run until `limits.stop` or `limits.duration`; the totals.
+    pub fn run(self, limits: RunLimits<'_>) -> anyhow::Result<GatewaySummary> {
+        let rt = tokio::runtime::Builder::new_current_thread()
+            .enable_all()
+            .build()
+            .context("cannot start the async runtime")?;
+        rt.block_on(self.run_async(limits))
+    }
+
+    async fn run_async(self, limits: RunLimits<'_>) -> anyhow::Result<GatewaySummary> {
+        let Service {
+            cfg,
+            fleet_tx,
+            commands_rx: mut front_rx,
+            ..
+        } = self;
+        let limits_q = QueueLimits::for_max_bytes(cfg.queue_max_bytes);
+        let (queue, rec) = Queue::open(&cfg.queue_dir, limits_q)?;
+        info!(
+            "gateway {}: {} node(s), broker {}:{}{}, queue {}{}",
+            cfg.name,
+            cfg.nodes.len(),
+            cfg.broker.host,
+            cfg.broker.port,
+            if cfg.broker.tls.is_some() {
+                " (TLS)"
+            } else {
+                ""
+            },
+            cfg.queue_dir.display(),
+            if rec.pending > 0 {
+                format!(" ({} record(s) from the last run to send)", rec.pending)
+            } else {
+                String::new()
+            }
+        );
+        let topics = Topics::new(&cfg.topic_prefix, &cfg.name, cfg.command_topic.as_deref());
+        let opts = mqtt_options(&cfg.broker, &topics)?;
+        let (client, eventloop) = AsyncClient::new(opts, 1 << 16);
+        let (ev_tx, mut ev_rx) = mpsc::unbounded_channel();
+        let (resume_tx, resume_rx) = mpsc::unbounded_channel();
+        let broker = tokio::spawn(broker_task(eventloop, ev_tx, resume_rx));
+
+        let (node_tx, mut node_rx) = mpsc::channel::<NodeMsg>(8192);
+        let readers_stop = Arc::new(AtomicBool::new(false));
+        let timings = ReaderTimings {
+            silence_timeout: cfg.silence_timeout,
+            ..Default::default()
+        };
+        let mut cmd_txs = Vec::new();
+        let mut threads = Vec::new();
+        for (k, spec) in cfg.nodes.iter().enumerate() {
+            let (ctx, crx) = std::sync::mpsc::channel();
+            cmd_txs.push(ctx);
+            threads.push(
+                spawn_serial_reader(
+                    k,
+                    spec.clone(),
+                    node_tx.clone(),
+                    crx,
+                    timings,
+                    readers_stop.clone(),
+                )
+                .context("cannot start a node reader thread")?,
+            );
+        }
+        drop(node_tx);
+
+        let started = Instant::now();
+        let mut gw = Gateway::new(cfg, queue, started);
+        fleet_tx.send_replace(Some(gw.fleet()));
+        let mut io = Io {
+            client,
+            resume: resume_tx,
+            cmd_txs,
+        };
+        let mut tick = tokio::time::interval(TICK);
+        tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let mut stopping: Option<Instant> = None;
+        let mut readers_done = false;
+        loop {
+            tokio::select! {
+                biased;
+                ev = ev_rx.recv() => match ev {
+                    Some(ev) => io.broker_event(&mut gw, ev),
+                    None => break,
+                },
+                m = node_rx.recv(), if !readers_done => match m {
+                    Some(m) => {
+                        gw.on_node(m, Instant::now());
+                        for _ in 0..256 {
+                            match node_rx.try_recv() {
+                                Ok(m) => gw.on_node(m, Instant::now()),
+                                Err(_) => break,
+                            }
+                        }
+                    }
+                    None => readers_done = true,
+                },
+                Some(c) = front_rx.recv() => gw.front_end_command(c.node, c.command, Instant::now()),
+                _ = tick.tick() => {
+                    let now = Instant::now();
+                    gw.tick(now, limits.status_every);
+                    let want_stop = limits.stop.load(Ordering::Relaxed)
+                        || limits.duration.is_some_and(|d| started.elapsed() >= d);
+                    if want_stop && stopping.is_none() {
+                        stopping = Some(now);
+                        readers_stop.store(true, Ordering::Relaxed);
+                    }
+                    if let Some(at) = stopping {
+                        // Drain the readers, then give the broker a moment
+                        // for the last acknowledgements.
+                        let flushed = gw.unacked() == 0 && gw.pending() == 0;
+                        if readers_done && (flushed || !gw.connected() || at.elapsed() >= LAST_ACKS) {
+                            break;
+                        }
+                    }
+                }
+            }
+            gw.pump()?;
+            io.carry_out(&mut gw);
+        }
+        for t in threads {
+            let _ = t.join();
+        }
+        if gw.connected() {
+            gw.goodbye(Instant::now());
+            io.carry_out(&mut gw);
+            let _ = io.client.try_disconnect();
+            // Let the event loop send the goodbye and the DISCONNECT.
+            let wait = tokio::time::sleep(Duration::from_millis(500));
+            tokio::pin!(wait);
+            loop {
+                tokio::select! {
+                    _ = &mut wait => break,
+                    ev = ev_rx.recv() => match ev {
+                        Some(BrokerEvent::Mqtt(Event::Outgoing(Outgoing::Disconnect))) | None => break,
+                        Some(ev) => io.broker_event(&mut gw, ev),
+                    }
+                }
+            }
+        }
+        broker.abort();
+        Ok(gw.finish())
+    }
+}
+
+/// The IO side: the MQTT client, the broker task's resume signal, the
+/// node readers' command channels.
+struct Io {
+    client: AsyncClient,
+    resume: mpsc::UnboundedSender<()>,
+    cmd_txs: Vec<std::sync::mpsc::Sender<NodeCommand>>,
+}
+
+impl Io {
+    fn broker_event(&mut self, gw: &mut Gateway, ev: BrokerEvent) {
+        match ev {
+            BrokerEvent::Down(reason) => {
+                gw.on_disconnected(&reason);
+                // Requests made before the gateway learnt of the loss are
+                // dropped with the client's replay buffer.
+                let _ = self.resume.send(());
+            }
+            BrokerEvent::Mqtt(Event::Incoming(Incoming::ConnAck(_))) => {
+                gw.on_connected(Instant::now())
+            }
+            BrokerEvent::Mqtt(Event::Outgoing(Outgoing::Publish(pkid))) => {
+                gw.on_outgoing_publish(pkid)
+            }
+            BrokerEvent::Mqtt(Event::Outgoing(Outgoing::AwaitAck(pkid))) => {
+                // Cannot happen while WINDOW < INFLIGHT; say so if it does.
+                warn!("internal: packet id {pkid} collided; records may be sent twice");
+                gw.on_outgoing_publish(pkid);
+            }
+            BrokerEvent::Mqtt(Event::Incoming(Incoming::PubAck(p))) => gw.on_puback(p.pkid),
+            BrokerEvent::Mqtt(Event::Incoming(Incoming::Publish(p))) => {
+                gw.on_incoming(&p.topic, &p.payload, p.retain, Instant::now())
+            }
+            BrokerEvent::Mqtt(_) => {}
+        }
+    }
+
+    /// Hand the gateway's actions to the client and the readers. Once the
+    /// client's request channel refuses one, the publishes and
+    /// subscriptions after it go back to the gateway (in order: its packet
+    /// bookkeeping follows the order of requests); commands still go out.
+    fn carry_out(&mut self, gw: &mut Gateway) {
+        let mut unsent = Vec::new();
+        for a in gw.actions() {
+            let sent = match &a {
+                Action::Command { node, command } => {
+                    let delivered = self
+                        .cmd_txs
+                        .get(*node)
+                        .is_some_and(|tx| tx.send(*command).is_ok());
+                    if !delivered {
+                        gw.unsent(std::slice::from_ref(&a));
+                    }
+                    continue;
+                }
+                _ if !unsent.is_empty() => false,
+                Action::Publish {
+                    topic,
+                    payload,
+                    qos,
+                    retain,
+                } => self
+                    .client
+                    .try_publish(topic.clone(), *qos, *retain, payload.clone())
+                    .is_ok(),
+                Action::Subscribe { topic, .. } => self
+                    .client
+                    .try_subscribe(topic.clone(), rumqttc::QoS::AtLeastOnce)
+                    .is_ok(),
+            };
+            if !sent {
+                unsent.push(a);
+            }
+        }
+        if !unsent.is_empty() {
+            gw.unsent(&unsent);
+        }
+    }
+}

@@ -1,0 +1,32 @@
+#![doc = include_str!("../README.md")]
+//!
+//! ## Modules
+//!
+//! | module | what lives there |
+//! | --- | --- |
+//! | [`cli`] | the command line: flags, `--print-config`, `--check-config`, the run and its summary |
+//! | [`config`] | the TOML file, the flags that override it, defaults, checks, [`config::Secret`] |
+//! | [`reader`] | the node reader: one thread per serial port (`fois_link`), handshake, stream, reconnect |
+//! | [`machine`] | the state machine, free of network IO: node reports and broker events in, publish/subscribe/command actions out |
+//! | [`driver`] | the runtime: tokio, rumqttc's event loop, the readers, the machine's actions carried out |
+//! | [`mqtt`] | connection set-up: client options, TLS (rustls, ring), words for connection errors |
+//! | [`inflight`] | packet-id bookkeeping: which record a PUBACK acknowledges |
+//! | [`queue`] | the bounded on-disk store-and-forward queue |
+//! | [`snapshot`] | every node's latest state, shared with other front ends |
+//! | [`topics`], [`payload`] | the topic layout, the JSON payloads |
+//! | [`discovery`] | Home Assistant MQTT discovery configs |
+//! | [`logging`] | `tracing` set-up: levels, `RUST_LOG`, timestamps only on a terminal |
+
+pub mod cli;
+pub mod config;
+pub mod discovery;
+pub mod driver;
+pub mod inflight;
+pub mod logging;
+pub mod machine;
+pub mod mqtt;
+pub mod payload;
+pub mod queue;
+pub mod reader;
+pub mod snapshot;
+pub mod topics;

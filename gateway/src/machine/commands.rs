@@ -1,0 +1,178 @@
+//! Commands from MQTT (`ack`, `calibrate-dark`; a plain word or
+//! `{"command": "ack"}`) on a node's command topic, when commands are
+//! enabled. Refused, with a `<node>/command/result` saying why: a message
+//! larger than any command, a retained message (it would be carried out
+//! again at every reconnection: the gateway also deletes it), an unknown
+//! word, a command for an offline node, and a command sooner than
+//! `[commands] min_interval_ms` after the node's last one (each
+//! `calibrate-dark` is a flash save on the board). An empty message (what
+//! deletes a retained one) is ignored.
+
+use std::time::Instant;
+
+use fois_link::timefmt::unix_ms_now;
+use rumqttc::QoS;
+use tracing::{info, warn};
+
+use super::{Action, Gateway};
+use crate::payload::CommandResultJson;
+use crate::reader::NodeCommand;
+
+/// The longest command message read, bytes: anything longer is skipped
+/// (the longest command, `{"command": "calibrate-dark"}` with blanks, is
+/// far below).
+pub const MAX_COMMAND_BYTES: usize = 256;
+
+impl Gateway {
+    /// `<node>/command/result`: what became of a command from MQTT (QoS 0,
+    /// not retained, not queued: it answers whoever is listening now).
+    pub(super) fn publish_command_result(
+        &mut self,
+        name: &str,
+        command: &str,
+        ok: bool,
+        detail: String,
+        host_unix_ms: u64,
+    ) {
+        let r = CommandResultJson {
+            node: name,
+            command,
+            ok,
+            detail,
+            host_unix_ms,
+        };
+        let payload = serde_json::to_vec(&r).unwrap_or_default();
+        self.publish_now(
+            self.topics.command_result(name),
+            payload,
+            false,
+            QoS::AtMostOnce,
+        );
+    }
+
+    fn refuse_command(&mut self, name: &str, shown: &str, detail: String) {
+        warn!("command `{shown}` for {name} refused: {detail}");
+        self.publish_command_result(name, shown, false, detail, unix_ms_now());
+    }
+
+    /// Delete a retained message on `topic` (an empty retained message).
+    fn clear_retained(&mut self, topic: &str) {
+        self.publish_now(topic.to_string(), Vec::new(), true, QoS::AtLeastOnce);
+    }
+
+    /// A message arrived on a subscribed topic.
+    pub fn on_incoming(&mut self, topic: &str, payload: &[u8], retained: bool, now: Instant) {
+        if self.cfg.command_topic.is_none() {
+            return;
+        }
+        let Some(k) = self.nodes.iter().position(|n| {
+            n.name
+                .as_deref()
+                .and_then(|name| self.topics.command(name))
+                .is_some_and(|t| t == topic)
+        }) else {
+            warn!("ignored a message on {topic}: not a command topic");
+            return;
+        };
+        let name = self.nodes[k].name.clone().unwrap_or_default();
+        if payload.is_empty() {
+            // An empty message deletes a retained one: not a command.
+            return;
+        }
+        if payload.len() > MAX_COMMAND_BYTES {
+            self.refuse_command(
+                &name,
+                "?",
+                format!(
+                    "a {}-byte message was skipped: a command is at most {MAX_COMMAND_BYTES} bytes",
+                    payload.len()
+                ),
+            );
+            if retained {
+                self.clear_retained(topic);
+            }
+            return;
+        }
+        let text = String::from_utf8_lossy(payload).to_string();
+        // `{"command": "ack"}` or plain `ack`.
+        let word = serde_json::from_str::<serde_json::Value>(&text)
+            .ok()
+            .and_then(|v| {
+                v.get("command")
+                    .and_then(|c| c.as_str())
+                    .map(str::to_string)
+            })
+            .unwrap_or_else(|| text.clone());
+        let shown: String = word.trim().chars().take(40).collect();
+        if shown.is_empty() {
+            return;
+        }
+        if retained {
+            self.refuse_command(
+                &name,
+                &shown,
+                "a retained command is never carried out (it would repeat on every \
+                 reconnection); the gateway deleted it"
+                    .into(),
+            );
+            self.clear_retained(topic);
+            return;
+        }
+        let Some(cmd) = NodeCommand::parse(&word) else {
+            self.refuse_command(
+                &name,
+                &shown,
+                "unknown command: use ack or calibrate-dark".into(),
+            );
+            return;
+        };
+        self.request_command(k, &shown, cmd, "MQTT", now);
+    }
+
+    /// A command from another front end (see
+    /// [`crate::driver::FrontEndCommand`]): the same checks as MQTT's.
+    pub fn front_end_command(&mut self, node: usize, cmd: NodeCommand, now: Instant) {
+        if node < self.nodes.len() {
+            self.request_command(node, cmd.name(), cmd, "a front end", now);
+        }
+    }
+
+    /// Hand `cmd` to node `k` unless it is offline or its last command was
+    /// too recent (then answer why).
+    fn request_command(
+        &mut self,
+        k: usize,
+        shown: &str,
+        cmd: NodeCommand,
+        from: &str,
+        now: Instant,
+    ) {
+        let name = self.nodes[k].name.clone().unwrap_or_default();
+        if !self.nodes[k].online {
+            self.refuse_command(&name, shown, "the node is offline".into());
+            return;
+        }
+        let min = self.cfg.command_min_interval;
+        if let Some(last) = self.nodes[k].last_command {
+            let since = now.saturating_duration_since(last);
+            if since < min {
+                self.refuse_command(
+                    &name,
+                    shown,
+                    format!(
+                        "rate limit: one command per {:.1} s per node, the last was {:.1} s ago",
+                        min.as_secs_f64(),
+                        since.as_secs_f64()
+                    ),
+                );
+                return;
+            }
+        }
+        self.nodes[k].last_command = Some(now);
+        info!("command {} for {name} from {from}", cmd.name());
+        self.out.push(Action::Command {
+            node: k,
+            command: cmd,
+        });
+    }
+}

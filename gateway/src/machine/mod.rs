@@ -1,0 +1,720 @@
+//! The gateway's state machine, free of network IO: it takes what happens
+//! (a node reader's report, the broker connecting or going away, a packet
+//! id going out, a PUBACK, a message on a command topic, a tick) and answers
+//! with [`Action`]s (publish, subscribe, hand a command to a node) that the
+//! driver ([`crate::driver`]) carries out with rumqttc — as rumqttc itself
+//! keeps its `MqttState` apart from its `EventLoop`. Its tests need no
+//! broker. Its only IO is the disk queue it owns.
+//!
+//! What it publishes: events and rate-limited measurements are appended to
+//! the queue and published (QoS 1) from it in order ([`Gateway::pump`]); a
+//! record leaves the queue when its PUBACK arrives ([`crate::inflight`]).
+//! Retained messages (availability, info, state, discovery) are not queued:
+//! they are published from memory again after every (re)connection, since a
+//! broker without persistence forgets them. It also keeps every node's
+//! latest state in the shared [`Fleet`] for other front ends.
+
+mod commands;
+#[cfg(test)]
+mod tests;
+
+use std::time::{Duration, Instant};
+
+use fois_link::reading::{EventReading, Reading};
+use fois_link::text::{hello_text, unique_id_hex};
+use fois_link::timefmt::unix_ms_now;
+use fois_protocol::{DeviceMsg, Hello, SeqEvent};
+use rumqttc::QoS;
+use tracing::{error, info, warn};
+
+use crate::config::{GatewayConfig, NodeSpec};
+use crate::discovery;
+use crate::inflight::{InFlight, WINDOW};
+use crate::payload::{EventJson, InfoJson, LinkEventJson, MeasurementJson, StateJson, StatusJson};
+use crate::queue::{Queue, Record};
+use crate::reader::{NodeCommand, NodeMsg, NodeUpdate};
+use crate::snapshot::{Fleet, NodeSnapshot};
+use crate::topics::Topics;
+
+pub use commands::MAX_COMMAND_BYTES;
+
+/// Wait before reconnecting to the broker.
+pub const RECONNECT_DELAY: Duration = Duration::from_secs(1);
+/// A thickness change below this never re-publishes the state.
+pub const THICKNESS_STEP_MM: f64 = 0.01;
+/// A failing disk queue is reported at most this often.
+const QUEUE_ERROR_REPEAT: Duration = Duration::from_secs(60);
+
+/// What the driver is to do.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Action {
+    /// Publish a message.
+    Publish {
+        /// Topic.
+        topic: String,
+        /// Payload.
+        payload: Vec<u8>,
+        /// QoS (records: at least once).
+        qos: QoS,
+        /// Retained.
+        retain: bool,
+    },
+    /// Subscribe (QoS 1) to a node's command topic.
+    Subscribe {
+        /// The topic.
+        topic: String,
+        /// The node it belongs to.
+        node: usize,
+    },
+    /// Hand a command to a node's reader.
+    Command {
+        /// The node.
+        node: usize,
+        /// The command.
+        command: NodeCommand,
+    },
+}
+
+/// Totals at the end of a run.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct GatewaySummary {
+    /// Frames received from all nodes.
+    pub frames: u64,
+    /// Records appended to the queue.
+    pub records_queued: u64,
+    /// Records acknowledged by the broker.
+    pub records_acked: u64,
+    /// Records left in the queue at exit.
+    pub records_pending: u64,
+    /// Records the queue lost, ever (its bound, a full or vanished disk).
+    pub records_dropped: u64,
+    /// Broker connections made.
+    pub broker_connects: u64,
+    /// Frames lost on the serial links.
+    pub frames_lost: u64,
+}
+
+pub(crate) struct NodeSlot {
+    spec: NodeSpec,
+    name: Option<String>,
+    hello: Option<Hello>,
+    online: bool,
+    last_state: Option<StateJson>,
+    published_state: Option<(StateJson, Instant)>,
+    last_meas_uptime: Option<u64>,
+    has_estimate: bool,
+    subscribed: bool,
+    lost: u64,
+    /// When the last command was handed to the node (rate limit).
+    last_command: Option<Instant>,
+}
+
+/// The state machine.
+pub struct Gateway {
+    cfg: GatewayConfig,
+    topics: Topics,
+    nodes: Vec<NodeSlot>,
+    queue: Queue,
+    fleet: Fleet,
+    connected: bool,
+    down_said: Option<String>,
+    flight: InFlight,
+    send_cursor: u64,
+    started: Instant,
+    last_status: Instant,
+    queue_error_said: Option<Instant>,
+    sum: GatewaySummary,
+    out: Vec<Action>,
+}
+
+impl Gateway {
+    /// A gateway over an opened queue, not connected yet.
+    pub fn new(cfg: GatewayConfig, queue: Queue, now: Instant) -> Gateway {
+        let topics = Topics::new(&cfg.topic_prefix, &cfg.name, cfg.command_topic.as_deref());
+        let nodes: Vec<NodeSlot> = cfg
+            .nodes
+            .iter()
+            .cloned()
+            .map(|spec| NodeSlot {
+                name: spec.name.clone(),
+                spec,
+                hello: None,
+                online: false,
+                last_state: None,
+                published_state: None,
+                last_meas_uptime: None,
+                has_estimate: false,
+                subscribed: false,
+                lost: 0,
+                last_command: None,
+            })
+            .collect();
+        let fleet = Fleet::new(
+            nodes
+                .iter()
+                .enumerate()
+                .map(|(k, n)| NodeSnapshot::new(k, n.name.clone(), n.spec.port.clone()))
+                .collect(),
+        );
+        let send_cursor = queue.acked();
+        Gateway {
+            cfg,
+            topics,
+            nodes,
+            queue,
+            fleet,
+            connected: false,
+            down_said: None,
+            flight: InFlight::default(),
+            send_cursor,
+            started: now,
+            last_status: now,
+            queue_error_said: None,
+            sum: GatewaySummary::default(),
+            out: Vec::new(),
+        }
+    }
+
+    /// The actions decided since the last call, in order.
+    pub fn actions(&mut self) -> Vec<Action> {
+        std::mem::take(&mut self.out)
+    }
+
+    /// The shared per-node snapshots.
+    pub fn fleet(&self) -> Fleet {
+        self.fleet.clone()
+    }
+
+    /// The topics.
+    pub fn topics(&self) -> &Topics {
+        &self.topics
+    }
+
+    /// The config.
+    pub fn config(&self) -> &GatewayConfig {
+        &self.cfg
+    }
+
+    /// True while connected to the broker.
+    pub fn connected(&self) -> bool {
+        self.connected
+    }
+
+    /// Records sent and not yet acknowledged.
+    pub fn unacked(&self) -> usize {
+        self.flight.unacked()
+    }
+
+    /// Records in the queue.
+    pub fn pending(&self) -> u64 {
+        self.queue.pending()
+    }
+
+    /// The totals so far.
+    pub fn summary(&self) -> &GatewaySummary {
+        &self.sum
+    }
+
+    /// Publish now (while connected): not queued, not a record.
+    fn publish_now(&mut self, topic: String, payload: Vec<u8>, retain: bool, qos: QoS) {
+        if !self.connected {
+            return;
+        }
+        self.flight.requested(None);
+        self.out.push(Action::Publish {
+            topic,
+            payload,
+            qos,
+            retain,
+        });
+    }
+
+    fn queue_record(&mut self, topic: String, payload: Vec<u8>) {
+        let rec = Record { topic, payload };
+        match self.queue.push(rec) {
+            Ok(_) => self.sum.records_queued += 1,
+            Err(e) => self.queue_failed(&format!("{e:#}")),
+        }
+    }
+
+    fn queue_failed(&mut self, e: &str) {
+        if self
+            .queue_error_said
+            .is_none_or(|t| t.elapsed() >= QUEUE_ERROR_REPEAT)
+        {
+            self.queue_error_said = Some(Instant::now());
+            error!(
+                "the disk queue in {} fails: {e}; {} record(s) lost so far",
+                self.cfg.queue_dir.display(),
+                self.queue.dropped()
+            );
+        }
+    }
+
+    /// Send queued records while connected and the window allows.
+    pub fn pump(&mut self) -> anyhow::Result<()> {
+        while self.connected && self.flight.unacked() < WINDOW {
+            let Some((i, rec)) = self.queue.get(self.send_cursor)? else {
+                break;
+            };
+            self.flight.requested(Some(i));
+            self.send_cursor = i + 1;
+            self.out.push(Action::Publish {
+                topic: rec.topic,
+                payload: rec.payload,
+                qos: QoS::AtLeastOnce,
+                retain: false,
+            });
+        }
+        Ok(())
+    }
+
+    /// The driver could not hand `actions` (the tail of what
+    /// [`Gateway::actions`] returned, in order) to the client: take them
+    /// back, so records are sent again and subscriptions are made again.
+    pub fn unsent(&mut self, actions: &[Action]) {
+        for a in actions.iter().rev() {
+            match a {
+                Action::Publish { .. } => {
+                    if let Some(i) = self.flight.unrequest_last() {
+                        self.send_cursor = self.send_cursor.min(i);
+                    }
+                }
+                Action::Subscribe { node, .. } => {
+                    if let Some(n) = self.nodes.get_mut(*node) {
+                        n.subscribed = false;
+                    }
+                }
+                Action::Command { node, command } => {
+                    let name = self.node_name(*node).unwrap_or_default().to_string();
+                    self.publish_command_result(
+                        &name,
+                        command.name(),
+                        false,
+                        "the node's reader has stopped".into(),
+                        unix_ms_now(),
+                    );
+                }
+            }
+        }
+    }
+
+    fn node_name(&self, k: usize) -> Option<&str> {
+        self.nodes.get(k).and_then(|n| n.name.as_deref())
+    }
+
+    /// Availability, info, discovery, state and the command subscription
+    /// of node `k` (retained: again after every reconnection).
+    fn announce_node(&mut self, k: usize) {
+        let Some(slot) = self.nodes.get(k) else {
+            return;
+        };
+        let Some(name) = slot.name.clone() else {
+            return;
+        };
+        let online = slot.online;
+        let port = slot.spec.port.clone();
+        let hello = slot.hello.clone();
+        let with_thickness = slot.has_estimate;
+        let state = slot.last_state.clone();
+        self.publish_now(
+            self.topics.availability(&name),
+            if online { "online" } else { "offline" }.into(),
+            true,
+            QoS::AtMostOnce,
+        );
+        if let Some(h) = &hello {
+            let info = serde_json::to_vec(&InfoJson::new(&name, &port, h)).unwrap_or_default();
+            self.publish_now(self.topics.info(&name), info, true, QoS::AtMostOnce);
+            if let Some(prefix) = self.cfg.homeassistant_prefix.clone() {
+                for (t, p) in discovery::node_configs(
+                    &prefix,
+                    &self.topics,
+                    &self.cfg.name,
+                    &name,
+                    h,
+                    with_thickness,
+                ) {
+                    self.publish_now(t, p, true, QoS::AtMostOnce);
+                }
+            }
+        }
+        if let Some(s) = state {
+            self.publish_state(k, s);
+        }
+        if let Some(topic) = self.topics.command(&name)
+            && self.connected
+            && !self.nodes[k].subscribed
+        {
+            self.nodes[k].subscribed = true;
+            self.out.push(Action::Subscribe { topic, node: k });
+        }
+    }
+
+    fn publish_state(&mut self, k: usize, s: StateJson) {
+        let payload = serde_json::to_vec(&s).unwrap_or_default();
+        let topic = self.topics.state(&s.node);
+        self.publish_now(topic, payload, true, QoS::AtMostOnce);
+        if self.connected {
+            self.nodes[k].published_state = Some((s, Instant::now()));
+        }
+    }
+
+    fn publish_status(&mut self, now: Instant) {
+        let s = StatusJson {
+            gateway: self.cfg.name.clone(),
+            nodes: self.nodes.len(),
+            nodes_online: self.nodes.iter().filter(|n| n.online).count(),
+            records_acked: self.sum.records_acked,
+            queue_records: self.queue.pending(),
+            queue_bytes: self.queue.bytes(),
+            queue_dropped: self.queue.dropped(),
+            uptime_s: now.saturating_duration_since(self.started).as_secs(),
+            host_unix_ms: unix_ms_now(),
+        };
+        let payload = serde_json::to_vec(&s).unwrap_or_default();
+        self.publish_now(self.topics.gateway_status(), payload, true, QoS::AtMostOnce);
+    }
+
+    /// The broker accepted the connection (CONNACK): announce everything,
+    /// send the queue from its acknowledged offset.
+    pub fn on_connected(&mut self, now: Instant) {
+        self.connected = true;
+        self.down_said = None;
+        self.sum.broker_connects += 1;
+        self.flight.clear();
+        self.send_cursor = self.queue.acked();
+        let b = &self.cfg.broker;
+        info!(
+            "connected to the broker {}:{}{}{}",
+            b.host,
+            b.port,
+            if b.tls.is_some() { " (TLS)" } else { "" },
+            match self.queue.pending() {
+                0 => String::new(),
+                n => format!("; sending {n} queued record(s)"),
+            }
+        );
+        self.publish_now(
+            self.topics.gateway_availability(),
+            b"online".to_vec(),
+            true,
+            QoS::AtLeastOnce,
+        );
+        if let Some(prefix) = self.cfg.homeassistant_prefix.clone() {
+            let (t, p) = discovery::gateway_config(&prefix, &self.topics, &self.cfg.name);
+            self.publish_now(t, p, true, QoS::AtMostOnce);
+        }
+        for k in 0..self.nodes.len() {
+            self.announce_node(k);
+        }
+        self.publish_status(now);
+    }
+
+    /// The connection failed or was lost: forget what is in flight (it is
+    /// sent again from the queue after the reconnect).
+    pub fn on_disconnected(&mut self, reason: &str) {
+        if self.connected || self.down_said.as_deref() != Some(reason) {
+            let b = &self.cfg.broker;
+            warn!(
+                "broker {}:{} {}: {reason}; {} record(s) wait in the disk queue, retrying every {} s",
+                b.host,
+                b.port,
+                if self.connected {
+                    "lost"
+                } else {
+                    "unreachable"
+                },
+                self.queue.pending(),
+                RECONNECT_DELAY.as_secs()
+            );
+        }
+        self.down_said = Some(reason.to_string());
+        self.connected = false;
+        self.flight.clear();
+        self.send_cursor = self.queue.acked();
+        for n in &mut self.nodes {
+            n.subscribed = false;
+        }
+    }
+
+    /// The event loop sent a publish with this packet id (0 for QoS 0).
+    pub fn on_outgoing_publish(&mut self, pkid: u16) {
+        self.flight.outgoing(pkid);
+    }
+
+    /// A PUBACK arrived.
+    pub fn on_puback(&mut self, pkid: u16) {
+        if let Some(upto) = self.flight.acked(pkid) {
+            let before = self.queue.acked();
+            self.queue.ack_through(upto);
+            self.sum.records_acked += self.queue.acked().saturating_sub(before);
+        }
+    }
+
+    fn resolve_name(&mut self, k: usize, h: &Hello) {
+        if self.nodes[k].name.is_some() {
+            return;
+        }
+        let mut name = unique_id_hex(h);
+        if self
+            .nodes
+            .iter()
+            .any(|n| n.name.as_deref() == Some(name.as_str()))
+        {
+            // Two nodes with one id (virtual nodes share theirs): keep the
+            // config position, stable across restarts.
+            name = format!("{name}-{k}");
+        }
+        info!(
+            "node on {} has no name in the config: named {name} after its unique id",
+            self.nodes[k].spec.port
+        );
+        self.nodes[k].name = Some(name.clone());
+        self.fleet.update(k, |n| n.name = Some(name));
+    }
+
+    fn link_event(
+        &mut self,
+        k: usize,
+        kind: &'static str,
+        detail: String,
+        seq: Option<u32>,
+        frames_lost: Option<u64>,
+        t_ms: u64,
+    ) {
+        let Some(name) = self.node_name(k).map(str::to_string) else {
+            return;
+        };
+        let mut e = LinkEventJson::new(&name, kind, detail, t_ms);
+        e.seq = seq;
+        e.frames_lost = frames_lost;
+        let payload = serde_json::to_vec(&e).unwrap_or_default();
+        self.queue_record(self.topics.event(&name), payload);
+    }
+
+    /// A report of a node reader.
+    pub fn on_node(&mut self, m: NodeMsg, now: Instant) {
+        let k = m.node;
+        if k >= self.nodes.len() {
+            return;
+        }
+        let t = m.host_unix_ms;
+        match m.update {
+            NodeUpdate::Up(h) => {
+                self.resolve_name(k, &h);
+                let name = self.node_name(k).unwrap_or_default().to_string();
+                let port = self.nodes[k].spec.port.clone();
+                info!("node {name} on {port}: connected ({})", hello_text(&h));
+                self.nodes[k].hello = Some(h.clone());
+                self.nodes[k].online = true;
+                self.fleet.update(k, |n| {
+                    n.hello = Some(h.clone());
+                    n.link_up = true;
+                });
+                self.link_event(
+                    k,
+                    "link_up",
+                    format!("port={port} {}", hello_text(&h)),
+                    None,
+                    None,
+                    t,
+                );
+                self.announce_node(k);
+            }
+            NodeUpdate::Down(reason) => {
+                let name = self.node_name(k).unwrap_or_default().to_string();
+                warn!(
+                    "node {name} on {}: link lost ({reason}); reconnecting",
+                    self.nodes[k].spec.port
+                );
+                self.nodes[k].online = false;
+                self.fleet.update(k, |n| n.link_up = false);
+                self.link_event(k, "link_lost", reason, None, None, t);
+                if !name.is_empty() {
+                    self.publish_now(
+                        self.topics.availability(&name),
+                        b"offline".to_vec(),
+                        true,
+                        QoS::AtMostOnce,
+                    );
+                }
+            }
+            NodeUpdate::Unreachable(reason) => {
+                warn!(
+                    "node on {}: cannot connect ({reason}); retrying",
+                    self.nodes[k].spec.port
+                );
+            }
+            NodeUpdate::Rejected => {}
+            NodeUpdate::CommandResult {
+                command,
+                ok,
+                detail,
+            } => {
+                let name = self.node_name(k).unwrap_or_default().to_string();
+                info!(
+                    "command {} for {name}: {} ({detail})",
+                    command.name(),
+                    if ok { "done" } else { "failed" }
+                );
+                self.publish_command_result(&name, command.name(), ok, detail, t);
+            }
+            NodeUpdate::Frame(f, ev) => self.on_frame(k, f, ev, t, now),
+        }
+    }
+
+    fn on_frame(
+        &mut self,
+        k: usize,
+        f: fois_protocol::DeviceFrame,
+        ev: SeqEvent,
+        t: u64,
+        now: Instant,
+    ) {
+        self.sum.frames += 1;
+        match ev {
+            SeqEvent::Gap(n) => {
+                self.nodes[k].lost += n;
+                self.sum.frames_lost += n;
+                let lost = self.nodes[k].lost;
+                self.fleet.update(k, |s| s.frames_lost = lost);
+                self.link_event(
+                    k,
+                    "frames_lost",
+                    format!("{n} frame(s) missing before seq {}", f.seq),
+                    Some(f.seq),
+                    Some(n),
+                    t,
+                );
+            }
+            SeqEvent::Restart => {
+                self.nodes[k].last_meas_uptime = None;
+                let detail = match &f.msg {
+                    DeviceMsg::Hello(h) => format!("reset reason {:?}", h.reset_reason),
+                    _ => "sequence number went back".into(),
+                };
+                let name = self.node_name(k).unwrap_or_default().to_string();
+                warn!("node {name} restarted ({detail}) at seq {}", f.seq);
+                self.link_event(k, "node_restart", detail, Some(f.seq), None, t);
+                if let DeviceMsg::Hello(h) = &f.msg {
+                    self.nodes[k].hello = Some(h.clone());
+                    self.announce_node(k);
+                }
+            }
+            SeqEvent::First | SeqEvent::InOrder | SeqEvent::Duplicate => {}
+        }
+        let Some(name) = self.node_name(k).map(str::to_string) else {
+            return;
+        };
+        if let Some(reading) = Reading::of(&f.msg) {
+            self.on_reading(k, &name, f.seq, reading, t, now);
+        } else if let DeviceMsg::Event(e) = &f.msg {
+            let r = EventReading::new(e);
+            let payload =
+                serde_json::to_vec(&EventJson::new(&name, f.seq, &r, t)).unwrap_or_default();
+            self.queue_record(self.topics.event(&name), payload);
+        }
+    }
+
+    fn on_reading(&mut self, k: usize, name: &str, seq: u32, r: Reading, t: u64, now: Instant) {
+        let lost = self.nodes[k].lost;
+        let state = StateJson::new(name, seq, &r, lost, t);
+        if r.estimate.is_some() && !self.nodes[k].has_estimate {
+            self.nodes[k].has_estimate = true;
+            self.announce_node(k);
+        }
+        let due = match &self.nodes[k].published_state {
+            None => true,
+            Some((p, at)) => {
+                p.differs_discretely(&state)
+                    || (state.thickness_moved(p, THICKNESS_STEP_MM)
+                        && now.saturating_duration_since(*at)
+                            >= Duration::from_millis(self.cfg.state_interval_ms))
+            }
+        };
+        self.nodes[k].last_state = Some(state.clone());
+        if due {
+            self.publish_state(k, state);
+        }
+        let interval = if self.connected {
+            self.cfg.measurement_interval_ms
+        } else {
+            self.cfg.offline_measurement_interval_ms
+        };
+        let take = match self.nodes[k].last_meas_uptime {
+            None => true,
+            Some(last) => r.uptime_ms < last || r.uptime_ms - last >= interval,
+        };
+        if take {
+            self.nodes[k].last_meas_uptime = Some(r.uptime_ms);
+            let payload =
+                serde_json::to_vec(&MeasurementJson::new(name, seq, &r, t)).unwrap_or_default();
+            self.queue_record(self.topics.measurement(name), payload);
+        }
+        self.fleet.update(k, |s| {
+            s.reading = Some(r);
+            s.seq = Some(seq);
+            s.received = Some(now);
+            s.received_unix_ms = Some(t);
+        });
+    }
+
+    /// Housekeeping: flush the queue, publish the status when due.
+    pub fn tick(&mut self, now: Instant, status_every: Duration) {
+        if let Err(e) = self.queue.tick() {
+            self.queue_failed(&format!("{e:#}"));
+        }
+        if now.saturating_duration_since(self.last_status) >= status_every {
+            self.last_status = now;
+            self.publish_status(now);
+            let online = self.nodes.iter().filter(|n| n.online).count();
+            info!(
+                "status: {online}/{} node(s) online, {} frame(s) received, {} record(s) acknowledged, {} queued, {} lost by the queue; broker {}",
+                self.nodes.len(),
+                self.sum.frames,
+                self.sum.records_acked,
+                self.queue.pending(),
+                self.queue.dropped(),
+                if self.connected {
+                    "connected"
+                } else {
+                    "unreachable"
+                }
+            );
+        }
+    }
+
+    /// Clean exit: nodes and gateway offline (retained).
+    pub fn goodbye(&mut self, now: Instant) {
+        for k in 0..self.nodes.len() {
+            if let Some(name) = self.node_name(k).map(str::to_string) {
+                self.publish_now(
+                    self.topics.availability(&name),
+                    b"offline".to_vec(),
+                    true,
+                    QoS::AtMostOnce,
+                );
+            }
+        }
+        self.publish_status(now);
+        self.publish_now(
+            self.topics.gateway_availability(),
+            b"offline".to_vec(),
+            true,
+            QoS::AtLeastOnce,
+        );
+    }
+
+    /// Close the queue; the totals (also when closing fails: the error is
+    /// logged, the totals say what happened).
+    pub fn finish(self) -> GatewaySummary {
+        let mut sum = self.sum;
+        sum.records_pending = self.queue.pending();
+        sum.records_dropped = self.queue.dropped();
+        if let Err(e) = self.queue.close() {
+            error!("the disk queue could not be closed cleanly: {e:#}");
+        }
+        sum
+    }
+}

@@ -1,0 +1,324 @@
+//! The state machine without a broker: node reports and broker events in,
+//! the actions it answers with checked one by one.
+
+use std::time::{Duration, Instant};
+
+use fois_protocol::{
+    DetectorState, DeviceFrame, DeviceMsg, GainEstimate, Hello, Measurement, MeasurementV3,
+    PROTOCOL_VERSION, ResetReason, SeqEvent, flags,
+};
+use rumqttc::QoS;
+
+use super::{Action, Gateway};
+use crate::config::{FileConfig, Overrides};
+use crate::queue::{Queue, QueueLimits};
+use crate::reader::{NodeCommand, NodeMsg, NodeUpdate};
+
+fn gateway(dir: &std::path::Path, extra: &str) -> Gateway {
+    let text = format!(
+        "name = \"gw\"\n[queue]\ndir = \"{}\"\n{extra}\n[[node]]\nport = \"/dev/a\"\nname = \"a\"\n",
+        dir.display()
+    );
+    let cfg = FileConfig::parse(&text)
+        .unwrap()
+        .resolve(&Overrides::default())
+        .unwrap();
+    let (queue, _) = Queue::open(dir, QueueLimits::for_max_bytes(1 << 20)).unwrap();
+    Gateway::new(cfg, queue, Instant::now())
+}
+
+fn hello() -> Hello {
+    Hello {
+        protocol_version: PROTOCOL_VERSION,
+        firmware_version: [1, 2, 3],
+        board: Hello::board_from_str("nucleo-f446re"),
+        unique_id: [0xab; 12],
+        reset_reason: ResetReason::PowerOn,
+    }
+}
+
+fn up() -> NodeMsg {
+    NodeMsg {
+        node: 0,
+        host_unix_ms: 1_000,
+        update: NodeUpdate::Up(hello()),
+    }
+}
+
+fn frame(seq: u32, uptime_ms: u64, gain: Option<GainEstimate>, flags: u16) -> NodeMsg {
+    NodeMsg {
+        node: 0,
+        host_unix_ms: 2_000,
+        update: NodeUpdate::Frame(
+            DeviceFrame {
+                seq,
+                msg: DeviceMsg::MeasurementV3(MeasurementV3 {
+                    measurement: Measurement {
+                        uptime_ms,
+                        i1_na: 30_000,
+                        i2_na: 9_000,
+                        ambient1_na: 0,
+                        ambient2_na: 0,
+                        temperature_centi_c: -500,
+                        vdda_mv: 3300,
+                        flags,
+                        state: DetectorState::Ice,
+                    },
+                    estimate: None,
+                    gain,
+                }),
+            },
+            if seq == 0 {
+                SeqEvent::First
+            } else {
+                SeqEvent::InOrder
+            },
+        ),
+    }
+}
+
+fn topics(actions: &[Action]) -> Vec<String> {
+    actions
+        .iter()
+        .map(|a| match a {
+            Action::Publish { topic, .. } => topic.clone(),
+            Action::Subscribe { topic, .. } => format!("SUBSCRIBE {topic}"),
+            Action::Command { command, .. } => format!("COMMAND {}", command.name()),
+        })
+        .collect()
+}
+
+fn payload_of(actions: &[Action], topic: &str) -> Option<serde_json::Value> {
+    actions.iter().rev().find_map(|a| match a {
+        Action::Publish {
+            topic: t, payload, ..
+        } if t == topic => serde_json::from_slice(payload).ok(),
+        _ => None,
+    })
+}
+
+#[test]
+fn nothing_goes_out_before_the_broker_and_everything_after_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut gw = gateway(dir.path(), "");
+    let t0 = Instant::now();
+    gw.on_node(up(), t0);
+    gw.on_node(frame(1, 100, None, flags::ALARM), t0);
+    gw.pump().unwrap();
+    assert!(gw.actions().is_empty(), "not connected: nothing to send");
+    assert_eq!(
+        gw.pending(),
+        2,
+        "link_up and the measurement wait in the queue"
+    );
+    // The snapshot has the node's latest measurement already.
+    let snap = gw.fleet().node(0).unwrap();
+    assert!(snap.link_up);
+    assert_eq!(snap.seq, Some(1));
+    assert_eq!(snap.reading.as_ref().map(|r| r.i1_ua), Some(30.0));
+
+    gw.on_connected(t0);
+    gw.pump().unwrap();
+    let a = gw.actions();
+    let t = topics(&a);
+    assert_eq!(t[0], "fois/gw/availability");
+    assert!(t.contains(&"homeassistant/binary_sensor/fois_gw/connectivity/config".into()));
+    assert!(t.contains(&"fois/gw/a/availability".into()));
+    assert!(t.contains(&"fois/gw/a/state".into()));
+    assert!(t.contains(&"fois/gw/status".into()));
+    // The two records last, in order, at least once.
+    let records: Vec<&Action> = a
+        .iter()
+        .filter(|a| {
+            matches!(
+                a,
+                Action::Publish {
+                    qos: QoS::AtLeastOnce,
+                    retain: false,
+                    ..
+                }
+            )
+        })
+        .collect();
+    assert_eq!(records.len(), 2);
+    assert_eq!(
+        topics(&a[a.len() - 2..]),
+        vec!["fois/gw/a/event", "fois/gw/a/measurement"]
+    );
+    // The event loop numbers every publish in order; QoS 0 ones get 0.
+    let mut next = 1;
+    for x in &a {
+        if let Action::Publish { qos, .. } = x {
+            let pkid = match qos {
+                QoS::AtMostOnce => 0,
+                _ => {
+                    next += 1;
+                    next - 1
+                }
+            };
+            gw.on_outgoing_publish(pkid);
+        }
+    }
+    assert_eq!(gw.unacked(), 2);
+    gw.on_puback(1); // the gateway's own availability (QoS 1, not a record)
+    gw.on_puback(2);
+    gw.on_puback(3);
+    assert_eq!(gw.pending(), 0, "both records acknowledged");
+    assert_eq!(gw.summary().records_acked, 2);
+}
+
+#[test]
+fn the_gain_and_its_fault_reach_state_and_measurement() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut gw = gateway(dir.path(), "");
+    let t0 = Instant::now();
+    gw.on_connected(t0);
+    gw.on_node(up(), t0);
+    let gain = GainEstimate {
+        gain_ppm: 640_000,
+        sigma_ppm: 30_000,
+    };
+    gw.on_node(frame(1, 100, Some(gain), flags::GAIN_OUT_OF_BAND), t0);
+    gw.pump().unwrap();
+    let a = gw.actions();
+    let state = payload_of(&a, "fois/gw/a/state").unwrap();
+    assert_eq!(state["gain"], 0.64);
+    assert_eq!(state["gain_sigma"], 0.03);
+    assert_eq!(state["faults"], serde_json::json!(["gain_out_of_band"]));
+    let m = payload_of(&a, "fois/gw/a/measurement").unwrap();
+    assert_eq!(m["gain"], 0.64);
+    assert_eq!(m["faults"], serde_json::json!(["gain_out_of_band"]));
+    let snap = gw.fleet().node(0).unwrap();
+    assert!(snap.reading.unwrap().gain_out_of_band());
+}
+
+fn command_results(actions: &[Action]) -> Vec<(bool, String)> {
+    actions
+        .iter()
+        .filter_map(|a| match a {
+            Action::Publish { topic, payload, .. } if topic == "fois/gw/a/command/result" => {
+                let v: serde_json::Value = serde_json::from_slice(payload).ok()?;
+                Some((
+                    v["ok"].as_bool().unwrap_or(true),
+                    v["detail"].as_str().unwrap_or("").to_string(),
+                ))
+            }
+            _ => None,
+        })
+        .collect()
+}
+
+#[test]
+fn commands_are_rate_limited_per_node() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut gw = gateway(
+        dir.path(),
+        "[commands]\nenabled = true\nmin_interval_ms = 5000",
+    );
+    let t0 = Instant::now();
+    gw.on_connected(t0);
+    gw.on_node(up(), t0);
+    let subscribed = gw.actions();
+    assert!(topics(&subscribed).contains(&"SUBSCRIBE fois/gw/a/command".into()));
+    // 20 dark calibrations in a row (each a flash save on a board).
+    for k in 0..20 {
+        gw.on_incoming(
+            "fois/gw/a/command",
+            b"calibrate-dark",
+            false,
+            t0 + Duration::from_millis(50 * k),
+        );
+    }
+    let a = gw.actions();
+    let sent: Vec<&Action> = a
+        .iter()
+        .filter(|a| matches!(a, Action::Command { .. }))
+        .collect();
+    assert_eq!(
+        sent,
+        vec![&Action::Command {
+            node: 0,
+            command: NodeCommand::CalibrateDark
+        }]
+    );
+    let refused = command_results(&a);
+    assert_eq!(refused.len(), 19);
+    assert!(
+        refused
+            .iter()
+            .all(|(ok, d)| !ok && d.contains("rate limit")),
+        "{refused:?}"
+    );
+    // After the interval, the next one goes through.
+    gw.on_incoming(
+        "fois/gw/a/command",
+        b"ack",
+        false,
+        t0 + Duration::from_secs(6),
+    );
+    assert_eq!(topics(&gw.actions()), vec!["COMMAND ack".to_string()]);
+}
+
+#[test]
+fn retained_and_oversized_commands_are_refused_and_deleted_never_fatal() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut gw = gateway(dir.path(), "[commands]\nenabled = true");
+    let t0 = Instant::now();
+    gw.on_connected(t0);
+    gw.on_node(up(), t0);
+    let _ = gw.actions();
+    gw.on_incoming("fois/gw/a/command", b"ack", true, t0);
+    let a = gw.actions();
+    assert!(!a.iter().any(|a| matches!(a, Action::Command { .. })));
+    let r = command_results(&a);
+    assert!(r.len() == 1 && r[0].1.contains("retained"), "{r:?}");
+    // The retained message is deleted: an empty retained publish.
+    assert!(a.contains(&Action::Publish {
+        topic: "fois/gw/a/command".into(),
+        payload: vec![],
+        qos: QoS::AtLeastOnce,
+        retain: true
+    }));
+    // 70 KiB, retained: skipped, said, deleted; the gateway carries on.
+    let big = vec![b'x'; 70 * 1024];
+    gw.on_incoming("fois/gw/a/command", &big, true, t0);
+    let a = gw.actions();
+    let r = command_results(&a);
+    assert!(
+        r.len() == 1 && r[0].1.contains("71680-byte message was skipped"),
+        "{r:?}"
+    );
+    assert!(gw.connected());
+    // An empty message (what deleting a retained one delivers) is nothing.
+    gw.on_incoming("fois/gw/a/command", b"", false, t0);
+    assert!(gw.actions().is_empty());
+}
+
+#[test]
+fn requests_the_client_refused_are_sent_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut gw = gateway(dir.path(), "[homeassistant]\nenabled = false");
+    let t0 = Instant::now();
+    gw.on_connected(t0);
+    gw.on_node(up(), t0);
+    for k in 1..=3 {
+        gw.on_node(frame(k, u64::from(k) * 1000, None, 0), t0);
+    }
+    gw.pump().unwrap();
+    let a = gw.actions();
+    let n = a.len();
+    // The client's request channel took all but the last two records.
+    gw.unsent(&a[n - 2..]);
+    assert_eq!(
+        gw.unacked(),
+        2,
+        "link_up and the first measurement in flight"
+    );
+    gw.pump().unwrap();
+    let again = gw.actions();
+    assert_eq!(
+        topics(&again),
+        topics(&a[n - 2..]),
+        "the same two, in order"
+    );
+}

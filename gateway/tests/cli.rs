@@ -1,0 +1,167 @@
+//! `fois-gateway`'s command line without a broker: every kind of bad flag
+//! or config exits 2 with the reason before anything is opened;
+//! `--check-config` says what is wrong (or OK) and opens no port;
+//! `--help` and `--version` exit 0.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+mod support;
+
+use std::path::Path;
+use std::process::Command;
+
+use support::BIN;
+
+fn gateway(args: &[&str]) -> (Option<i32>, String, String) {
+    let out = Command::new(BIN).args(args).output().unwrap();
+    (
+        out.status.code(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
+fn write(dir: &Path, name: &str, text: &str) -> String {
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p.display().to_string()
+}
+
+#[test]
+fn bad_flags_exit_2_with_the_reason() {
+    // A valid command line (one node) plus `extra`: clap refuses the flag
+    // before the node's port or any file is opened.
+    let gw = |extra: &[&'static str]| [&["--node", "/dev/does-not-exist"][..], extra].concat();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["--node", "/dev/x=a/b"], "not usable in topics"),
+        (vec!["--node", "/dev/x="], "not usable in topics"),
+        (vec!["--node", "=tower-3"], "give PATH or PATH=NAME"),
+        (gw(&["--name", "farm 7"]), "not usable in topics"),
+        (gw(&["--name", ""]), "not usable in topics"),
+        (gw(&["--broker", "host:notaport"]), "not a port number"),
+        (gw(&["--broker", "host:0"]), "not a port number"),
+        (gw(&["--broker", "host:65536"]), "not a port number"),
+        (gw(&["--broker", ":1883"]), "host is empty"),
+        (gw(&["--measurement-interval-ms=-1"]), "invalid value"),
+        (
+            gw(&["--measurement-interval-ms", "86400001"]),
+            "0..=86400000",
+        ),
+        (
+            gw(&["--offline-measurement-interval-ms", "x"]),
+            "invalid value",
+        ),
+        (gw(&["--queue-max-bytes", "65535"]), "65536.."),
+        (gw(&["--status-interval-s", "0.05"]), "0.1..=86400"),
+        (gw(&["--status-interval-s", "nan"]), "not a finite number"),
+        (gw(&["--duration=-1"]), "must be >= 0"),
+        (gw(&["--client-cert", "gw.pem"]), "--client-key"),
+        (gw(&["--log-time", "sometimes"]), "invalid value"),
+        (
+            gw(&["--check-config", "--print-config"]),
+            "cannot be used with",
+        ),
+        (gw(&["--bogus"]), "unexpected argument"),
+    ];
+    for (args, needle) in cases {
+        let (code, _, err) = gateway(&args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(err.contains(needle), "{args:?}: `{needle}` not in {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn bad_configs_exit_2_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let node = "[[node]]\nport = \"/dev/x\"\n";
+    let missing = dir.path().join("nope.toml").display().to_string();
+    let bad_key = write(
+        dir.path(),
+        "bad.toml",
+        &format!("[broker]\nprot = 1883\n{node}"),
+    );
+    let bad_name = write(dir.path(), "name.toml", &format!("{node}name = \"a/b\"\n"));
+    let sys = write(
+        dir.path(),
+        "sys.toml",
+        &format!("topic_prefix = \"$SYS/fois\"\n{node}"),
+    );
+    let cases: [(Option<&str>, &str); 5] = [
+        (None, "no nodes"),
+        (Some(&missing), "cannot read the config"),
+        (Some(&bad_key), "unknown field `prot`"),
+        (Some(&bad_name), "not usable in topics"),
+        (Some(&sys), "starts with `$`"),
+    ];
+    for (config, needle) in cases {
+        for check in [false, true] {
+            let mut args = vec![];
+            if let Some(c) = config {
+                args.extend(["--config", c]);
+            }
+            if check {
+                args.push("--check-config");
+            }
+            let (code, _, err) = gateway(&args);
+            assert_eq!(code, Some(2), "{args:?}: {err}");
+            assert!(err.contains(needle), "{args:?}: `{needle}` not in {err}");
+            assert!(!err.contains("panicked"), "{err}");
+        }
+    }
+}
+
+#[test]
+fn check_config_validates_certificates_and_opens_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    support::pki::make_pki(dir.path());
+    let d = dir.path().display();
+    // The ports do not exist: --check-config never opens them.
+    let nodes = "[[node]]\nport = \"/dev/does-not-exist-1\"\nname = \"a\"\n\
+                 [[node]]\nport = \"/dev/does-not-exist-2\"\n";
+    let good = write(
+        dir.path(),
+        "good.toml",
+        &format!(
+            "name = \"farm-7\"\n[broker]\nhost = \"broker.example\"\n[broker.tls]\n\
+             ca_file = \"{d}/ca.pem\"\nclient_cert_file = \"{d}/client.pem\"\n\
+             client_key_file = \"{d}/client.key\"\n[queue]\ndir = \"{d}/q\"\n{nodes}"
+        ),
+    );
+    let (code, out, err) = gateway(&["--config", &good, "--check-config"]);
+    assert_eq!(code, Some(0), "{out}{err}");
+    assert!(
+        out.contains("config OK: gateway farm-7, 2 node(s), broker broker.example:8883 (TLS)"),
+        "{out}"
+    );
+    assert!(!dir.path().join("q").exists(), "the queue was not created");
+    // The server's key with the client's certificate: they do not match.
+    let mismatched = write(
+        dir.path(),
+        "mismatch.toml",
+        &std::fs::read_to_string(&good)
+            .unwrap()
+            .replace("client.key", "server.key"),
+    );
+    let (code, _, err) = gateway(&["--config", &mismatched, "--check-config"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("do not match"), "{err}");
+    // A CA file that is not PEM.
+    std::fs::write(dir.path().join("ca.pem"), "not a certificate").unwrap();
+    let (code, _, err) = gateway(&["--config", &good, "--check-config"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("holds no certificate"), "{err}");
+}
+
+#[test]
+fn help_and_version_are_not_errors() {
+    for args in [&["--help"][..], &["--version"]] {
+        let (code, out, err) = gateway(args);
+        assert_eq!(code, Some(0), "{args:?}: {err}");
+        assert!(out.contains("fois-gateway"), "{out}");
+    }
+    let (_, help, _) = gateway(&["--help"]);
+    for needle in ["--check-config", "RUST_LOG", "Exit codes", "--log-time"] {
+        assert!(help.contains(needle), "`{needle}` not in --help:\n{help}");
+    }
+}

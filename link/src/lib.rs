@@ -1,0 +1,17 @@
+#![doc = include_str!("../README.md")]
+//!
+//! ## Modules
+//!
+//! - [`link`]: the serial link (open, handshake, commands, frames with their
+//!   sequence events).
+//! - [`reading`]: a measurement or event in µA, °C, mm, with fault names.
+//! - [`text`]: one-line texts of protocol messages.
+//! - [`timefmt`]: host timestamps (Unix ms, ISO 8601 UTC).
+
+pub mod link;
+pub mod reading;
+pub mod text;
+pub mod timefmt;
+
+pub use link::{Incoming, Link, LinkError, Reply, open_port};
+pub use reading::{EstimateReading, EventReading, GainReading, Reading};
