@@ -1,10 +1,15 @@
 //! `cargo xtask`: the project's task runner.
 //!
-//! - `cargo xtask ci`   — every check the README promises, in order: format,
-//!   clippy (host crates, and the firmware on its thumb target), the whole
-//!   test suite, the firmware's release cross-build with its size budget, and
-//!   the firmware logic on an emulated Cortex-M4F (when qemu-system-arm is
-//!   installed).
+//! - `cargo xtask ci`   — every check the README promises, in order: the
+//!   system tools the tests need (installed if missing, before anything is
+//!   compiled: [`tools`]), format, the crate rules of ARCHITECTURE.md
+//!   ([`crates`]), clippy (host crates, and the firmware on its thumb
+//!   target), the whole test suite, the firmware's release cross-build with
+//!   its size budget, the firmware logic on an emulated Cortex-M4F, the
+//!   fuzz crates' build, and the gateway's Debian package ([`package`]).
+//! - `cargo xtask tools` — only the system tools.
+//! - `cargo xtask crates` — only the crate rules.
+//! - `cargo xtask deb` — build the gateway's Debian package and check it.
 //! - `cargo xtask size` — cross-build the firmware and check its size budget.
 //! - `cargo xtask qemu` — run the firmware logic under qemu-system-arm.
 //! - `cargo xtask fuzz [--runs N] [--target NAME]` — every cargo-fuzz target
@@ -16,6 +21,10 @@ use std::process::Command;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+
+mod crates;
+mod package;
+mod tools;
 
 /// Flash budget of the firmware image (the project's goal for a small MCU).
 const FLASH_BUDGET_BYTES: u64 = 128 * 1024;
@@ -42,6 +51,9 @@ fn main() -> Result<()> {
     std::env::set_current_dir(&root)?;
     match task.as_str() {
         "ci" => ci(),
+        "tools" => tools::ensure(),
+        "crates" => crates::check(&root),
+        "deb" => package::build().and_then(|deb| package::check(&deb)),
         "size" => firmware_size().map(|_| ()),
         "qemu" => qemu(true),
         "fuzz" => fuzz(&std::env::args().skip(2).collect::<Vec<_>>()),
@@ -49,7 +61,11 @@ fn main() -> Result<()> {
             eprintln!(
                 "usage: cargo xtask <task>\n\n\
                  tasks:\n  \
-                 ci     format, clippy (host + thumb), tests, firmware size budget, QEMU run\n  \
+                 ci     system tools, format, crate rules, clippy (host + thumb), tests, firmware size\n         \
+                 budget, QEMU run, fuzz crates build, the gateway's Debian package\n  \
+                 tools  install the system tools the tests need (mosquitto, qemu-system-arm, systemd)\n  \
+                 crates check the crate rules of ARCHITECTURE.md on the dependency graph\n  \
+                 deb    build the gateway's Debian package and check its files, config and unit\n  \
                  size   cross-build the firmware (release) and check flash <= 128 KiB, RAM <= 32 KiB\n  \
                  qemu   run the firmware logic tests on qemu-system-arm (mps2-an386)\n  \
                  fuzz   [--runs N] [--target NAME] run every fuzz target (or one) N times (default 10^7; installs nightly + cargo-fuzz)"
@@ -71,7 +87,7 @@ fn project_root() -> PathBuf {
 }
 
 /// Run a command, echoing it, failing on a non-zero exit.
-fn run(program: &str, args: &[&str]) -> Result<()> {
+pub(crate) fn run(program: &str, args: &[&str]) -> Result<()> {
     eprintln!("\n$ {program} {}", args.join(" "));
     let status = Command::new(program)
         .args(args)
@@ -102,7 +118,10 @@ fn ci() -> Result<()> {
         Ok(())
     };
 
-    step("tools", &mut || {
+    // Before anything is compiled: a missing broker must not cost minutes
+    // of building first.
+    step("system tools", &mut tools::ensure)?;
+    step("cargo tools", &mut || {
         // The firmware links through flip-link (stack overflow protection).
         if !have("flip-link") {
             run("cargo", &["install", "flip-link", "--locked"])?;
@@ -112,6 +131,8 @@ fn ci() -> Result<()> {
     step("format", &mut || {
         run("cargo", &["fmt", "--all", "--", "--check"])
     })?;
+    let root = project_root();
+    step("crate rules", &mut || crates::check(&root))?;
     step("clippy (host)", &mut || {
         run(
             "cargo",
@@ -134,7 +155,7 @@ fn ci() -> Result<()> {
         size = Some(firmware_size()?);
         Ok(())
     })?;
-    step("firmware on emulated Cortex-M4F", &mut || qemu(false))?;
+    step("firmware on emulated Cortex-M4F", &mut || qemu(true))?;
     step("fuzz targets build", &mut || {
         // The fuzz crates are their own workspaces (cargo-fuzz runs them on
         // nightly); libfuzzer-sys builds on the pinned toolchain, so CI
@@ -144,6 +165,10 @@ fn ci() -> Result<()> {
             run("cargo", &["check", "--manifest-path", &manifest, "--bins"])?;
         }
         Ok(())
+    })?;
+    step("gateway Debian package", &mut || {
+        let deb = package::build()?;
+        package::check(&deb)
     })?;
 
     eprintln!("\n=== summary ===");
@@ -338,7 +363,7 @@ fn fuzz(args: &[String]) -> Result<()> {
 }
 
 /// Run the firmware's hardware-free logic on qemu-system-arm (mps2-an386).
-/// In CI it is skipped, with a message, when QEMU is not installed.
+/// `cargo xtask ci` installs QEMU first ([`tools`]); without it this fails.
 fn qemu(required: bool) -> Result<()> {
     let script = Path::new("firmware/qemu-test/run.sh");
     if !script.exists() {
