@@ -165,3 +165,110 @@ fn help_and_version_are_not_errors() {
         assert!(help.contains(needle), "`{needle}` not in --help:\n{help}");
     }
 }
+
+/// `fois-gateway` with one node that does not exist and a broker at
+/// `broker`, for `secs`; (exit code, stdout + stderr).
+fn short_run(
+    dir: &Path,
+    broker: &str,
+    secs: &str,
+    extra: &[&str],
+    env: &[(&str, &str)],
+) -> (Option<i32>, String) {
+    let q = dir.join("q").display().to_string();
+    let mut cmd = Command::new(BIN);
+    cmd.args([
+        "--node",
+        "/dev/does-not-exist=a",
+        "--broker",
+        broker,
+        "--queue-dir",
+        &q,
+        "--duration",
+        secs,
+    ])
+    .args(extra)
+    .env_remove("RUST_LOG");
+    for (k, v) in env {
+        cmd.env(k, v);
+    }
+    let out = cmd.output().unwrap();
+    let mut text = String::from_utf8_lossy(&out.stdout).into_owned();
+    text.push_str(&String::from_utf8_lossy(&out.stderr));
+    (out.status.code(), text)
+}
+
+/// A loopback port nothing listens on.
+fn closed_port() -> u16 {
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    l.local_addr().unwrap().port()
+}
+
+#[test]
+fn a_run_that_never_reaches_the_broker_fails_with_its_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let broker = format!("127.0.0.1:{}", closed_port());
+    let (code, out) = short_run(dir.path(), &broker, "1.5", &[], &[]);
+    assert_eq!(code, Some(1), "{out}");
+    assert!(
+        out.contains("the broker was never reached in 1.5 s"),
+        "{out}"
+    );
+    assert!(
+        out.contains("0 broker connection(s)"),
+        "the summary:\n{out}"
+    );
+    assert!(out.contains("Connection refused"), "{out}");
+}
+
+#[test]
+fn log_lines_have_levels_no_timestamps_off_a_terminal_and_follow_rust_log() {
+    let dir = tempfile::tempdir().unwrap();
+    let broker = format!("127.0.0.1:{}", closed_port());
+    // stdout is a pipe here: no timestamps (journald stamps lines itself).
+    let (_, out) = short_run(dir.path(), &broker, "0.5", &[], &[]);
+    let line = out
+        .lines()
+        .find(|l| l.contains("node on /dev/does-not-exist: cannot connect"))
+        .unwrap_or_else(|| panic!("{out}"));
+    assert!(line.trim_start().starts_with("WARN"), "{line}");
+    let gw = out
+        .lines()
+        .find(|l| l.contains("gateway vm") || l.contains(": 1 node(s)"))
+        .unwrap();
+    assert!(gw.trim_start().starts_with("INFO"), "{gw}");
+    // Asked for: an RFC 3339 timestamp first.
+    let (_, out) = short_run(dir.path(), &broker, "0.5", &["--log-time", "always"], &[]);
+    let first = out.lines().next().unwrap();
+    assert!(
+        first.len() > 20 && first.as_bytes()[4] == b'-' && first.contains('T'),
+        "{first}"
+    );
+    // RUST_LOG=error: neither INFO nor WARN lines.
+    let (_, out) = short_run(dir.path(), &broker, "0.5", &[], &[("RUST_LOG", "error")]);
+    assert!(!out.contains(" INFO ") && !out.contains("WARN"), "{out}");
+    assert!(
+        out.contains("0 broker connection(s)"),
+        "the summary stays:\n{out}"
+    );
+}
+
+#[test]
+fn a_server_that_is_not_an_mqtt_broker_is_named_as_such() {
+    // A TCP server that answers every connection with a PUBACK packet.
+    let l = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = l.local_addr().unwrap().port();
+    std::thread::spawn(move || {
+        for s in l.incoming() {
+            let Ok(mut s) = s else { return };
+            let _ = std::io::Write::write_all(&mut s, &[0x40, 0x02, 0x00, 0x01]);
+            std::thread::sleep(std::time::Duration::from_millis(200));
+        }
+    });
+    let dir = tempfile::tempdir().unwrap();
+    let (code, out) = short_run(dir.path(), &format!("127.0.0.1:{port}"), "1.5", &[], &[]);
+    assert_eq!(code, Some(1), "{out}");
+    assert!(out.contains("did not answer as an MQTT broker"), "{out}");
+    assert!(out.contains("PUBACK instead of CONNACK"), "{out}");
+    assert!(!out.contains("Expected ConnAck"), "{out}");
+}
