@@ -1,6 +1,6 @@
-//! The runner: a [`Scenario`] → the host's virtual hardware and the
+//! The runner: a [`Scenario`] → the virtual hardware (`fois_vnode`) and the
 //! firmware's own `Node` in virtual time → the bytes of its UART → the
-//! host's [`FrameDecoder`] → an [`Outcome`] made only of decoded frames,
+//! protocol's [`FrameDecoder`] → an [`Outcome`] made only of decoded frames,
 //! with the environment's [`Truth`] beside each event.
 
 use std::sync::Arc;

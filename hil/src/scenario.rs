@@ -1,10 +1,10 @@
 //! The scenario file format (TOML, one file per case) and its translation
 //! into a [`Timeline`] of the virtual hardware.
 //!
-//! The timeline keys (`sensor`, `seed`, `[[segment]]`) are the host's
-//! scenario format (`fois_vnode::scenario`, also read by
-//! `foisctl virtual-node --scenario`): the segment tables are the host's own
-//! `SegmentSpec`, checked by its `timeline`; this module adds the name, class, config, overlays, commands,
+//! The timeline keys (`sensor`, `seed`, `[[segment]]`) are the virtual
+//! node's scenario format (`fois_vnode::scenario`, also read by
+//! `foisctl virtual-node --scenario`): the segment tables are the vnode
+//! crate's own `SegmentSpec`, checked by its `timeline`; this module adds the name, class, config, overlays, commands,
 //! sweep, lossy link and expectations.
 //!
 //! Every table is `deny_unknown_fields`: a misspelt key is an error naming
@@ -98,7 +98,8 @@ pub struct ScenarioFile {
     /// recorded beside the truth every frame; see [`crate::accuracy`]).
     #[serde(default)]
     pub accuracy: bool,
-    /// The timeline: the host's `[[segment]]` tables, checked by the host.
+    /// The timeline: `fois_vnode::scenario`'s `[[segment]]` tables, checked
+    /// there.
     #[serde(default, rename = "segment")]
     pub segments: Vec<SegmentSpec>,
     /// Temporary changes laid over the segments (sun steps, noise bursts).
@@ -555,7 +556,8 @@ fn validate_expect(e: &Expect) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The timeline part of the file, checked and built by the host's scenario code.
+/// The timeline part of the file, checked and built by the virtual node's
+/// scenario code (`fois_vnode::scenario`).
 fn host_scenario(f: &ScenarioFile) -> anyhow::Result<fois_vnode::Scenario> {
     Ok(fois_vnode::Scenario {
         timeline: scenario::timeline(f.segments.clone())

@@ -38,7 +38,7 @@ pub const BAUD_RATE: u32 = 115_200;
 
 /// How long a host waits for the `Ack` or `Error` of a command, ms. The
 /// node answers every command within its worst case (`fois_firmware::
-/// reply_time::WORST_REPLY_MS`, 5.95 s: the command lands just as the node
+/// reply_time::WORST_REPLY_MS`, 5.955 s: the command lands just as the node
 /// starts its longest frame and a save that erases a flash sector, and it
 /// is a dark calibration of four longest frames), which the firmware
 /// checks at compile time to stay below this with 2 s to spare for the

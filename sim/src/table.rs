@@ -27,7 +27,7 @@ use crate::montecarlo::{DEFAULT_FIT_HALF_WIDTH_MM, crlb, monte_carlo};
 
 /// Version of the table's content and format. Bump it whenever the spec, the simulator's
 /// physics, its random streams or the packing changes, so a node's estimate can be traced
-/// to its table. 2: the rime bubbles from counter-based streams (issue 13).
+/// to its table. 2: the rime bubbles from counter-based streams.
 pub const TABLE_VERSION: u16 = 2;
 
 /// The command that rewrites the checked-in table (quoted in its header;

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Statistical equivalence of two builds of the tracer (issue 13: the rime random-stream layout).
+"""Statistical equivalence of two builds of the tracer (the rime random-stream layout).
 
 Runs `foisctl sim montecarlo` and `foisctl sim crlb` for rime ice with K independent seeds per
 build (different seeds for the two builds), and compares, per thickness, the batch means of

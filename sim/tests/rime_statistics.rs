@@ -1,7 +1,7 @@
 //! The rime Monte Carlo against reference statistics recorded with the earlier random-stream
-//! layout (issue 13).
+//! layout.
 //!
-//! Until issue 13 the bubbles of a ray were drawn layer by layer from a PCG stream; now they
+//! Before the counter-based streams the bubbles of a ray were drawn layer by layer from a PCG stream; now they
 //! are walked gap by gap from a counter-based stream (`bubbles.rs`). The golden values of
 //! `golden.rs` hold the new layout bit for bit; this test holds the *statistics* to the old
 //! one: the mean and variance of (I1, I2) over accretions at six thicknesses, recorded from
