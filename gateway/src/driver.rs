@@ -240,7 +240,7 @@ impl Service {
                     }
                 }
             }
-            gw.pump()?;
+            gw.pump();
             io.carry_out(&mut gw);
         }
         for t in threads {

@@ -42,8 +42,6 @@ pub use commands::MAX_COMMAND_BYTES;
 pub const RECONNECT_DELAY: Duration = Duration::from_secs(1);
 /// A thickness change below this never re-publishes the state.
 pub const THICKNESS_STEP_MM: f64 = 0.01;
-/// A failing disk queue is reported at most this often.
-const QUEUE_ERROR_REPEAT: Duration = Duration::from_secs(60);
 
 /// What the driver is to do.
 #[derive(Debug, Clone, PartialEq)]
@@ -122,7 +120,6 @@ pub struct Gateway {
     send_cursor: u64,
     started: Instant,
     last_status: Instant,
-    queue_error_said: Option<Instant>,
     sum: GatewaySummary,
     out: Vec<Action>,
 }
@@ -169,7 +166,6 @@ impl Gateway {
             send_cursor,
             started: now,
             last_status: now,
-            queue_error_said: None,
             sum: GatewaySummary::default(),
             out: Vec::new(),
         }
@@ -230,31 +226,14 @@ impl Gateway {
     }
 
     fn queue_record(&mut self, topic: String, payload: Vec<u8>) {
-        let rec = Record { topic, payload };
-        match self.queue.push(rec) {
-            Ok(_) => self.sum.records_queued += 1,
-            Err(e) => self.queue_failed(&format!("{e:#}")),
-        }
-    }
-
-    fn queue_failed(&mut self, e: &str) {
-        if self
-            .queue_error_said
-            .is_none_or(|t| t.elapsed() >= QUEUE_ERROR_REPEAT)
-        {
-            self.queue_error_said = Some(Instant::now());
-            error!(
-                "the disk queue in {} fails: {e}; {} record(s) lost so far",
-                self.cfg.queue_dir.display(),
-                self.queue.dropped()
-            );
-        }
+        self.queue.push(Record { topic, payload });
+        self.sum.records_queued += 1;
     }
 
     /// Send queued records while connected and the window allows.
-    pub fn pump(&mut self) -> anyhow::Result<()> {
+    pub fn pump(&mut self) {
         while self.connected && self.flight.unacked() < WINDOW {
-            let Some((i, rec)) = self.queue.get(self.send_cursor)? else {
+            let Some((i, rec)) = self.queue.get(self.send_cursor) else {
                 break;
             };
             self.flight.requested(Some(i));
@@ -266,7 +245,6 @@ impl Gateway {
                 retain: false,
             });
         }
-        Ok(())
     }
 
     /// The driver could not hand `actions` (the tail of what
@@ -662,20 +640,22 @@ impl Gateway {
 
     /// Housekeeping: flush the queue, publish the status when due.
     pub fn tick(&mut self, now: Instant, status_every: Duration) {
-        if let Err(e) = self.queue.tick() {
-            self.queue_failed(&format!("{e:#}"));
-        }
+        self.queue.tick();
         if now.saturating_duration_since(self.last_status) >= status_every {
             self.last_status = now;
             self.publish_status(now);
             let online = self.nodes.iter().filter(|n| n.online).count();
             info!(
-                "status: {online}/{} node(s) online, {} frame(s) received, {} record(s) acknowledged, {} queued, {} lost by the queue; broker {}",
+                "status: {online}/{} node(s) online, {} frame(s) received, {} record(s) acknowledged, {} queued, {} lost by the queue{}; broker {}",
                 self.nodes.len(),
                 self.sum.frames,
                 self.sum.records_acked,
                 self.queue.pending(),
                 self.queue.dropped(),
+                match self.queue.failing() {
+                    Some(why) => format!(" (disk failing: {why})"),
+                    None => String::new(),
+                },
                 if self.connected {
                     "connected"
                 } else {
