@@ -14,11 +14,13 @@ use crate::config::{
     BrokerAddr, FileConfig, GatewayConfig, MAX_INTERVAL_MS, MIN_QUEUE_MAX_BYTES, NodeSpec,
     Overrides, is_valid_name,
 };
-use crate::driver::{RunLimits, Service};
+use crate::driver::{NameConflict, RunLimits, Service};
 use crate::logging::LogTime;
 
 /// Exit code of a bad command line or config.
 pub const EXIT_USAGE: i32 = 2;
+/// Exit code when another gateway of the same name runs (it started first).
+pub const EXIT_NAME_CONFLICT: i32 = 3;
 
 const AFTER_HELP: &str = "\
 Logs go to stdout with levels (error, warn, info, debug); RUST_LOG filters them
@@ -27,7 +29,8 @@ gateway cleanly: nodes and gateway marked offline, the last records acknowledged
 
 Exit codes: 0 stopped as asked; 1 a failure while running (the queue directory
 cannot be opened or is used by another gateway, the broker was never reached
-within --duration); 2 a bad command line or config (nothing was opened).";
+within --duration); 2 a bad command line or config (nothing was opened); 3
+another gateway of the same name runs and started first (this one stopped).";
 
 /// A bad command line or config: exit code [`EXIT_USAGE`].
 #[derive(Debug)]
@@ -262,7 +265,13 @@ pub fn run(args: GatewayArgs, stop: &'static AtomicBool) -> anyhow::Result<()> {
         duration: args.duration.map(Duration::from_secs_f64),
         status_every: Duration::from_secs_f64(args.status_interval_s),
     };
-    let sum = Service::new(cfg).run(limits)?;
+    let (sum, conflict) = match Service::new(cfg).run(limits) {
+        Ok(sum) => (sum, None),
+        Err(e) => match e.downcast::<NameConflict>() {
+            Ok(c) => (c.summary.clone(), Some(c)),
+            Err(e) => return Err(e),
+        },
+    };
     let line = format!(
         "gateway: {} frame(s) received, {} lost on the serial links, {} record(s) queued, {} acknowledged by the broker, {} left in the queue, {} lost by the queue, {} broker connection(s)",
         sum.frames,
@@ -275,6 +284,9 @@ pub fn run(args: GatewayArgs, stop: &'static AtomicBool) -> anyhow::Result<()> {
     );
     info!("{line}");
     println!("{line}");
+    if let Some(c) = conflict {
+        return Err(c.into());
+    }
     if args.duration.is_some() && sum.broker_connects == 0 {
         anyhow::bail!(
             "the broker was never reached in {} s: nothing was published ({} record(s) wait in \

@@ -67,6 +67,24 @@ async fn broker_task(
     }
 }
 
+/// The run stopped because another gateway of the same name runs (exit
+/// code 3); the totals so far.
+#[derive(Debug)]
+pub struct NameConflict {
+    /// Why (who the other one is).
+    pub why: String,
+    /// The totals at the stop.
+    pub summary: GatewaySummary,
+}
+
+impl std::fmt::Display for NameConflict {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.why)
+    }
+}
+
+impl std::error::Error for NameConflict {}
+
 /// How a run ends.
 #[derive(Debug, Clone, Copy)]
 pub struct RunLimits<'a> {
@@ -242,9 +260,23 @@ impl Service {
             }
             gw.pump();
             io.carry_out(&mut gw);
+            if gw.conflict().is_some() {
+                readers_stop.store(true, Ordering::Relaxed);
+                break;
+            }
         }
         for t in threads {
             let _ = t.join();
+        }
+        let conflict = gw.conflict().map(str::to_string);
+        if let Some(why) = conflict {
+            // No goodbye: the other gateway's nodes are not ours to mark
+            // offline. A clean DISCONNECT: no last will either.
+            let _ = io.client.try_disconnect();
+            tokio::time::sleep(Duration::from_millis(200)).await;
+            broker.abort();
+            let sum = gw.finish();
+            return Err(NameConflict { why, summary: sum }.into());
         }
         if gw.connected() {
             gw.goodbye(Instant::now());

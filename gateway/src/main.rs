@@ -5,7 +5,8 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::Parser;
-use fois_gateway::cli::{self, EXIT_USAGE, GatewayArgs, UsageError};
+use fois_gateway::cli::{self, EXIT_NAME_CONFLICT, EXIT_USAGE, GatewayArgs, UsageError};
+use fois_gateway::driver::NameConflict;
 
 /// Set by Ctrl-C or SIGTERM: the gateway stops cleanly.
 static STOP: AtomicBool = AtomicBool::new(false);
@@ -23,6 +24,8 @@ fn main() {
         eprintln!("fois-gateway: error: {e:#}");
         let code = if e.downcast_ref::<UsageError>().is_some() {
             EXIT_USAGE
+        } else if e.downcast_ref::<NameConflict>().is_some() {
+            EXIT_NAME_CONFLICT
         } else {
             1
         };

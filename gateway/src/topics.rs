@@ -4,6 +4,7 @@
 //! | --- | --- | --- | --- |
 //! | `<prefix>/<gw>/availability` | yes | 1 | `online` / `offline` (the gateway's last will) |
 //! | `<prefix>/<gw>/status` | yes | 0 | gateway counters (JSON) |
+//! | `<prefix>/<gw>/owner` | yes | 1 | which running gateway has the name (JSON; see `machine::owner`) |
 //! | `<prefix>/<gw>/<node>/availability` | yes | 0 | `online` / `offline` (port lost, node silent) |
 //! | `<prefix>/<gw>/<node>/info` | yes | 0 | board, firmware, protocol, unique id, port (JSON) |
 //! | `<prefix>/<gw>/<node>/state` | yes | 0 | detector state, alarm, faults, ice estimate (JSON) |
@@ -41,6 +42,11 @@ impl Topics {
     /// The gateway's counters.
     pub fn gateway_status(&self) -> String {
         format!("{}/status", self.base)
+    }
+
+    /// Who runs under this gateway's name (its name claim).
+    pub fn owner(&self) -> String {
+        format!("{}/owner", self.base)
     }
 
     /// A node's availability.
@@ -90,6 +96,7 @@ mod tests {
         let t = Topics::new("fois", "gw1", Some("ops/{node}/do"));
         assert_eq!(t.gateway_availability(), "fois/gw1/availability");
         assert_eq!(t.gateway_status(), "fois/gw1/status");
+        assert_eq!(t.owner(), "fois/gw1/owner");
         assert_eq!(t.availability("n1"), "fois/gw1/n1/availability");
         assert_eq!(t.state("n1"), "fois/gw1/n1/state");
         assert_eq!(t.measurement("n1"), "fois/gw1/n1/measurement");

@@ -868,3 +868,64 @@ fn a_node_with_an_ice_estimate_gets_a_thickness_entity() {
     assert!(r.holes().len() <= ACKS_PER_CONNECTION, "{:?}", r.holes());
     assert_eq!(r.duplicates(), 0);
 }
+
+#[test]
+fn a_second_gateway_of_the_same_name_stops_and_the_first_keeps_its_fleet() {
+    let dir = tempfile::tempdir().unwrap();
+    let broker = Broker::start(dir.path(), "");
+    let sub = Subscriber::start(broker.port, "t-twice", &["fois/#"], SubOptions::default());
+    let n1 = NodeProc::start(Scene::dry(5.0, 1));
+    let n2 = NodeProc::start(Scene::dry(5.0, 2));
+    // One name (so one client id, the default), each its own queue: two
+    // sites configured alike by mistake.
+    let a_cfg = write(
+        dir.path(),
+        "a.toml",
+        &gateway_toml(broker.port, &dir.path().join("qa"), &[(&n1.path, "n1")], ""),
+    );
+    let b_cfg = write(
+        dir.path(),
+        "b.toml",
+        &gateway_toml(broker.port, &dir.path().join("qb"), &[(&n2.path, "n1")], ""),
+    );
+    let mut a = GatewayProc::start(&a_cfg, &[], &dir.path().join("a.out"));
+    a.wait_output("node n1 on", Duration::from_secs(10));
+    std::thread::sleep(Duration::from_secs(1));
+    let mut b = GatewayProc::start(&b_cfg, &[], &dir.path().join("b.out"));
+    let t0 = Instant::now();
+    assert_eq!(b.wait_exit(Duration::from_secs(30)), 3, "{}", b.output());
+    println!(
+        "the second gateway stopped {:.1} s after its start",
+        t0.elapsed().as_secs_f64()
+    );
+    assert!(
+        b.output()
+            .contains("another gateway named gw runs since before this one"),
+        "{}",
+        b.output()
+    );
+    assert!(
+        a.output().contains("a second gateway named gw started"),
+        "{}",
+        a.output()
+    );
+    // The first one goes on: after its republication its node and itself
+    // are online and its measurements flow.
+    let stopped = Instant::now();
+    std::thread::sleep(Duration::from_secs(5));
+    let msgs = sub.messages();
+    let last = |topic: &str| {
+        msgs.iter()
+            .rfind(|m| m.topic == topic)
+            .map(|m| m.text())
+            .unwrap_or_default()
+    };
+    assert_eq!(last("fois/gw/availability"), "online");
+    assert_eq!(last("fois/gw/n1/availability"), "online");
+    let fresh = msgs
+        .iter()
+        .filter(|m| m.topic == "fois/gw/n1/measurement" && m.at > stopped)
+        .count();
+    assert!(fresh > 10, "{fresh} measurements after the second stopped");
+    assert_eq!(a.interrupt(), 0, "{}", a.output());
+}

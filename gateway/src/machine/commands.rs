@@ -62,6 +62,10 @@ impl Gateway {
 
     /// A message arrived on a subscribed topic.
     pub fn on_incoming(&mut self, topic: &str, payload: &[u8], retained: bool, now: Instant) {
+        if topic == self.topics.owner() {
+            self.on_claim(payload, now);
+            return;
+        }
         if self.cfg.command_topic.is_none() {
             return;
         }

@@ -15,6 +15,7 @@
 //! latest state in the shared [`Fleet`] for other front ends.
 
 mod commands;
+pub mod owner;
 #[cfg(test)]
 mod tests;
 
@@ -57,12 +58,12 @@ pub enum Action {
         /// Retained.
         retain: bool,
     },
-    /// Subscribe (QoS 1) to a node's command topic.
+    /// Subscribe (QoS 1) to a node's command topic or the owner topic.
     Subscribe {
         /// The topic.
         topic: String,
-        /// The node it belongs to.
-        node: usize,
+        /// The node whose command topic it is (`None`: the owner topic).
+        node: Option<usize>,
     },
     /// Hand a command to a node's reader.
     Command {
@@ -122,6 +123,9 @@ pub struct Gateway {
     last_status: Instant,
     sum: GatewaySummary,
     out: Vec<Action>,
+    instance: owner::Instance,
+    conflict: Option<String>,
+    reannounce_at: Option<Instant>,
 }
 
 impl Gateway {
@@ -168,7 +172,15 @@ impl Gateway {
             last_status: now,
             sum: GatewaySummary::default(),
             out: Vec::new(),
+            instance: owner::Instance::this_process(),
+            conflict: None,
+            reannounce_at: None,
         }
+    }
+
+    /// Who this gateway says it is in its name claim (tests set their own).
+    pub fn set_instance(&mut self, instance: owner::Instance) {
+        self.instance = instance;
     }
 
     /// The actions decided since the last call, in order.
@@ -259,7 +271,7 @@ impl Gateway {
                     }
                 }
                 Action::Subscribe { node, .. } => {
-                    if let Some(n) = self.nodes.get_mut(*node) {
+                    if let Some(n) = node.and_then(|k| self.nodes.get_mut(k)) {
                         n.subscribed = false;
                     }
                 }
@@ -325,7 +337,10 @@ impl Gateway {
             && !self.nodes[k].subscribed
         {
             self.nodes[k].subscribed = true;
-            self.out.push(Action::Subscribe { topic, node: k });
+            self.out.push(Action::Subscribe {
+                topic,
+                node: Some(k),
+            });
         }
     }
 
@@ -373,6 +388,12 @@ impl Gateway {
                 n => format!("; sending {n} queued record(s)"),
             }
         );
+        self.claim_name();
+        self.announce_all(now);
+    }
+
+    /// Every retained message: availability, discovery, each node's.
+    fn announce_all(&mut self, now: Instant) {
         self.publish_now(
             self.topics.gateway_availability(),
             b"online".to_vec(),
@@ -638,9 +659,14 @@ impl Gateway {
         });
     }
 
-    /// Housekeeping: flush the queue, publish the status when due.
+    /// Housekeeping: flush the queue, publish the status when due, publish
+    /// the retained messages again after a name conflict.
     pub fn tick(&mut self, now: Instant, status_every: Duration) {
         self.queue.tick();
+        if self.reannounce_at.is_some_and(|at| now >= at) {
+            self.reannounce_at = None;
+            self.announce_all(now);
+        }
         if now.saturating_duration_since(self.last_status) >= status_every {
             self.last_status = now;
             self.publish_status(now);

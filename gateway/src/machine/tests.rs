@@ -121,7 +121,15 @@ fn nothing_goes_out_before_the_broker_and_everything_after_it() {
     gw.pump();
     let a = gw.actions();
     let t = topics(&a);
-    assert_eq!(t[0], "fois/gw/availability");
+    // The name claim first (subscribe, then claim), then the announcements.
+    assert_eq!(
+        t[..3],
+        [
+            "SUBSCRIBE fois/gw/owner",
+            "fois/gw/owner",
+            "fois/gw/availability"
+        ]
+    );
     assert!(t.contains(&"homeassistant/binary_sensor/fois_gw/connectivity/config".into()));
     assert!(t.contains(&"fois/gw/a/availability".into()));
     assert!(t.contains(&"fois/gw/a/state".into()));
@@ -160,9 +168,13 @@ fn nothing_goes_out_before_the_broker_and_everything_after_it() {
         }
     }
     assert_eq!(gw.unacked(), 2);
-    gw.on_puback(1); // the gateway's own availability (QoS 1, not a record)
+    // The name claim and the gateway's availability are QoS 1 too (1, 2),
+    // not records.
+    gw.on_puback(1);
     gw.on_puback(2);
+    assert_eq!(gw.pending(), 2);
     gw.on_puback(3);
+    gw.on_puback(4);
     assert_eq!(gw.pending(), 0, "both records acknowledged");
     assert_eq!(gw.summary().records_acked, 2);
 }
@@ -321,4 +333,86 @@ fn requests_the_client_refused_are_sent_again() {
         topics(&a[n - 2..]),
         "the same two, in order"
     );
+}
+
+fn claim(instance: &str, started_unix_ms: u64, claimed_unix_ms: u64) -> Vec<u8> {
+    use super::owner::{Claim, Instance};
+    serde_json::to_vec(&Claim {
+        gateway: "gw".into(),
+        by: Instance {
+            instance: instance.into(),
+            host: "site-pc".into(),
+            pid: 77,
+            started_unix_ms,
+        },
+        claimed_unix_ms,
+    })
+    .unwrap()
+}
+
+fn me(started_unix_ms: u64) -> super::owner::Instance {
+    super::owner::Instance {
+        instance: "me".into(),
+        host: "here".into(),
+        pid: 1,
+        started_unix_ms,
+    }
+}
+
+#[test]
+fn the_younger_of_two_gateways_with_one_name_stops() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut gw = gateway(dir.path(), "");
+    gw.set_instance(me(1_000));
+    let t0 = Instant::now();
+    gw.on_connected(t0);
+    let claimed = payload_of(&gw.actions(), "fois/gw/owner").unwrap();
+    assert_eq!(claimed["instance"], "me");
+    assert_eq!(claimed["started_unix_ms"], 1_000);
+    // A gateway that died before this one started left its claim: no
+    // conflict (a restart after a crash).
+    gw.on_incoming("fois/gw/owner", &claim("dead", 10, 500), true, t0);
+    // Our own claim coming back: nothing.
+    gw.on_incoming(
+        "fois/gw/owner",
+        &claimed.to_string().into_bytes(),
+        false,
+        t0,
+    );
+    assert_eq!(gw.conflict(), None);
+    assert!(gw.actions().is_empty());
+    // An older gateway claims the name after this one started: this one,
+    // the younger, must stop.
+    gw.on_incoming("fois/gw/owner", &claim("old", 900, 1_500), true, t0);
+    let why = gw.conflict().unwrap();
+    assert!(why.contains("another gateway named gw"), "{why}");
+    assert!(why.contains("host site-pc, pid 77"), "{why}");
+}
+
+#[test]
+fn the_older_of_two_gateways_claims_again_and_publishes_everything_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut gw = gateway(dir.path(), "");
+    gw.set_instance(me(1_000));
+    let t0 = Instant::now();
+    gw.on_connected(t0);
+    gw.on_node(up(), t0);
+    let _ = gw.actions();
+    gw.on_incoming("fois/gw/owner", &claim("young", 2_000, 2_001), false, t0);
+    assert_eq!(gw.conflict(), None, "the older one keeps running");
+    let a = gw.actions();
+    assert_eq!(topics(&a), vec!["fois/gw/owner"], "it claims again");
+    assert_eq!(payload_of(&a, "fois/gw/owner").unwrap()["instance"], "me");
+    gw.tick(t0 + Duration::from_secs(1), Duration::from_secs(3600));
+    assert!(gw.actions().is_empty());
+    // When the younger one has stopped: every retained message again.
+    gw.tick(t0 + Duration::from_secs(3), Duration::from_secs(3600));
+    let t = topics(&gw.actions());
+    for topic in [
+        "fois/gw/availability",
+        "fois/gw/a/availability",
+        "fois/gw/a/info",
+    ] {
+        assert!(t.contains(&topic.to_string()), "{topic} not in {t:?}");
+    }
 }

@@ -421,6 +421,26 @@ impl GatewayProc {
         }
     }
 
+    /// Wait until it exits by itself; its exit code (panics after `timeout`).
+    pub fn wait_exit(&mut self, timeout: Duration) -> i32 {
+        let Some(c) = self.child.as_mut() else {
+            return -1;
+        };
+        let t0 = Instant::now();
+        loop {
+            if let Ok(Some(st)) = c.try_wait() {
+                self.child = None;
+                return st.code().unwrap_or(-1);
+            }
+            assert!(
+                t0.elapsed() < timeout,
+                "the gateway did not exit within {timeout:?}:\n{}",
+                self.output()
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
     /// SIGKILL.
     pub fn kill9(&mut self) {
         if let Some(mut c) = self.child.take() {
