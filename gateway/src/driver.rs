@@ -329,6 +329,12 @@ impl Io {
                 gw.on_outgoing_publish(pkid);
             }
             BrokerEvent::Mqtt(Event::Incoming(Incoming::PubAck(p))) => gw.on_puback(p.pkid),
+            BrokerEvent::Mqtt(Event::Outgoing(Outgoing::Subscribe(pkid))) => {
+                gw.on_outgoing_subscribe(pkid)
+            }
+            BrokerEvent::Mqtt(Event::Incoming(Incoming::SubAck(s))) => {
+                gw.on_suback(s.pkid, Instant::now())
+            }
             BrokerEvent::Mqtt(Event::Incoming(Incoming::Publish(p))) => {
                 gw.on_incoming(&p.topic, &p.payload, p.retain, Instant::now())
             }

@@ -537,6 +537,18 @@ fn mqtt_commands_are_refused_when_disabled_and_carried_out_only_on_their_topic()
     std::thread::sleep(Duration::from_millis(500));
     assert!(late.on("ops/gw/n1/do").is_empty(), "still retained");
     drop(late);
+    // A retained `ack` published while the gateway is connected reaches it
+    // with the retain flag clear; its check (a second subscription) brings
+    // the retained copy: refused and deleted, never carried out.
+    sub.publish("ops/gw/n1/do", "ack", true);
+    sub.wait_for("the second retained refusal", Duration::from_secs(5), |m| {
+        m.iter()
+            .filter(|m| m.topic == "fois/gw/n1/command/result" && m.text().contains("retained"))
+            .count()
+            >= 2
+    });
+    std::thread::sleep(Duration::from_millis(1500));
+    assert!(!acked(&sub), "a retained ack was carried out");
 
     sub.publish("ops/gw/n1/do", "ack", false);
     sub.wait_for("acknowledged", Duration::from_secs(5), acked_in);
@@ -556,7 +568,7 @@ fn mqtt_commands_are_refused_when_disabled_and_carried_out_only_on_their_topic()
         m.iter()
             .filter(|m| m.topic == "fois/gw/n1/command/result")
             .count()
-            >= 5
+            >= 6
     });
     let results: Vec<serde_json::Value> = sub
         .on("fois/gw/n1/command/result")

@@ -7,8 +7,18 @@
 //! `[commands] min_interval_ms` after the node's last one (each
 //! `calibrate-dark` is a flash save on the board). An empty message (what
 //! deletes a retained one) is ignored.
+//!
+//! **Retained while connected.** A broker hands a message to a client that
+//! is already subscribed with the retain flag cleared, even when it was
+//! published retained (MQTT 3.1.1, §3.3.1.3): the flag alone cannot tell.
+//! So before a command is carried out the gateway subscribes to its topic
+//! again: the broker then sends the topic's retained message, if there is
+//! one, flagged retained, right after its SUBACK. A command is carried out
+//! only when [`RETAINED_GRACE`] after that SUBACK no retained copy of it
+//! came; a copy means it was retained: refused and deleted. This costs a
+//! command one round trip and the grace.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use fois_link::timefmt::unix_ms_now;
 use rumqttc::QoS;
@@ -22,6 +32,23 @@ use crate::reader::NodeCommand;
 /// (the longest command, `{"command": "calibrate-dark"}` with blanks, is
 /// far below).
 pub const MAX_COMMAND_BYTES: usize = 256;
+
+/// After the SUBACK of the checking subscription, a retained copy has this
+/// long to arrive (it follows the SUBACK on the same connection at once).
+pub const RETAINED_GRACE: Duration = Duration::from_millis(200);
+
+/// A command whose SUBACK does not come within this is refused.
+pub const CHECK_TIMEOUT: Duration = Duration::from_secs(10);
+
+/// A command from MQTT being checked for a retained copy.
+#[derive(Debug, Clone)]
+pub(super) struct Check {
+    command: NodeCommand,
+    shown: String,
+    payload: Vec<u8>,
+    started: Instant,
+    subacked: Option<Instant>,
+}
 
 impl Gateway {
     /// `<node>/command/result`: what became of a command from MQTT (QoS 0,
@@ -112,6 +139,15 @@ impl Gateway {
             return;
         }
         if retained {
+            // The copy a check's subscription brought: that command was
+            // retained too, it is refused once, here.
+            if self.nodes[k]
+                .check
+                .as_ref()
+                .is_some_and(|c| c.payload == payload)
+            {
+                self.nodes[k].check = None;
+            }
             self.refuse_command(
                 &name,
                 &shown,
@@ -130,7 +166,76 @@ impl Gateway {
             );
             return;
         };
-        self.request_command(k, &shown, cmd, "MQTT", now);
+        if self.nodes[k].check.is_some() {
+            self.refuse_command(
+                &name,
+                &shown,
+                "the node's previous command is still being checked".into(),
+            );
+            return;
+        }
+        self.nodes[k].check = Some(Check {
+            command: cmd,
+            shown,
+            payload: payload.to_vec(),
+            started: now,
+            subacked: None,
+        });
+        self.subscribe(topic.to_string(), Some(k));
+    }
+
+    /// The checking subscription of node `k` was confirmed.
+    pub(super) fn check_subscribed(&mut self, k: usize, now: Instant) {
+        if let Some(c) = self.nodes.get_mut(k).and_then(|n| n.check.as_mut())
+            && c.subacked.is_none()
+        {
+            c.subacked = Some(now);
+        }
+    }
+
+    /// Carry out the commands no retained copy came for; refuse those
+    /// whose check got no SUBACK.
+    pub(super) fn finish_checks(&mut self, now: Instant) {
+        for k in 0..self.nodes.len() {
+            let Some(c) = &self.nodes[k].check else {
+                continue;
+            };
+            let passed = c.subacked.is_some_and(|t| now >= t + RETAINED_GRACE);
+            let late = now >= c.started + CHECK_TIMEOUT;
+            if !passed && !late {
+                continue;
+            }
+            let Some(c) = self.nodes[k].check.take() else {
+                continue;
+            };
+            if passed {
+                self.request_command(k, &c.shown, c.command, "MQTT", now);
+            } else {
+                let name = self.nodes[k].name.clone().unwrap_or_default();
+                self.refuse_command(
+                    &name,
+                    &c.shown,
+                    format!(
+                        "the broker did not confirm the check for a retained copy within {} s",
+                        CHECK_TIMEOUT.as_secs()
+                    ),
+                );
+            }
+        }
+    }
+
+    /// The connection is gone: commands being checked cannot be checked.
+    pub(super) fn drop_checks(&mut self) {
+        for n in &mut self.nodes {
+            if let Some(c) = n.check.take() {
+                warn!(
+                    "command `{}` for {} dropped: the broker connection was lost before it \
+                     could be checked",
+                    c.shown,
+                    n.name.as_deref().unwrap_or("?")
+                );
+            }
+        }
     }
 
     /// A command from another front end (see

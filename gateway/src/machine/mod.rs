@@ -19,6 +19,7 @@ pub mod owner;
 #[cfg(test)]
 mod tests;
 
+use std::collections::{HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
 use fois_link::reading::{EventReading, Reading};
@@ -106,6 +107,8 @@ pub(crate) struct NodeSlot {
     lost: u64,
     /// When the last command was handed to the node (rate limit).
     last_command: Option<Instant>,
+    /// A command from MQTT waiting to be known as not retained.
+    check: Option<commands::Check>,
 }
 
 /// The state machine.
@@ -126,6 +129,10 @@ pub struct Gateway {
     instance: owner::Instance,
     conflict: Option<String>,
     reannounce_at: Option<Instant>,
+    /// Subscriptions handed to the client, in order (`Outgoing::Subscribe`
+    /// gives their packet ids in the same order), and by packet id.
+    sub_fifo: VecDeque<Option<usize>>,
+    sub_pkids: HashMap<u16, Option<usize>>,
 }
 
 impl Gateway {
@@ -148,6 +155,7 @@ impl Gateway {
                 subscribed: false,
                 lost: 0,
                 last_command: None,
+                check: None,
             })
             .collect();
         let fleet = Fleet::new(
@@ -175,6 +183,8 @@ impl Gateway {
             instance: owner::Instance::this_process(),
             conflict: None,
             reannounce_at: None,
+            sub_fifo: VecDeque::new(),
+            sub_pkids: HashMap::new(),
         }
     }
 
@@ -271,6 +281,7 @@ impl Gateway {
                     }
                 }
                 Action::Subscribe { node, .. } => {
+                    self.sub_fifo.pop_back();
                     if let Some(n) = node.and_then(|k| self.nodes.get_mut(k)) {
                         n.subscribed = false;
                     }
@@ -337,10 +348,28 @@ impl Gateway {
             && !self.nodes[k].subscribed
         {
             self.nodes[k].subscribed = true;
-            self.out.push(Action::Subscribe {
-                topic,
-                node: Some(k),
-            });
+            self.subscribe(topic, Some(k));
+        }
+    }
+
+    /// Subscribe (QoS 1) to `topic`, a command topic of node `node` or the
+    /// owner topic (`None`).
+    fn subscribe(&mut self, topic: String, node: Option<usize>) {
+        self.sub_fifo.push_back(node);
+        self.out.push(Action::Subscribe { topic, node });
+    }
+
+    /// The event loop sent a SUBSCRIBE with this packet id.
+    pub fn on_outgoing_subscribe(&mut self, pkid: u16) {
+        if let Some(node) = self.sub_fifo.pop_front() {
+            self.sub_pkids.insert(pkid, node);
+        }
+    }
+
+    /// The broker confirmed a subscription.
+    pub fn on_suback(&mut self, pkid: u16, now: Instant) {
+        if let Some(Some(k)) = self.sub_pkids.remove(&pkid) {
+            self.check_subscribed(k, now);
         }
     }
 
@@ -435,6 +464,9 @@ impl Gateway {
         for n in &mut self.nodes {
             n.subscribed = false;
         }
+        self.sub_fifo.clear();
+        self.sub_pkids.clear();
+        self.drop_checks();
     }
 
     /// The event loop sent a publish with this packet id (0 for QoS 0).
@@ -663,6 +695,7 @@ impl Gateway {
     /// the retained messages again after a name conflict.
     pub fn tick(&mut self, now: Instant, status_every: Duration) {
         self.queue.tick();
+        self.finish_checks(now);
         if self.reannounce_at.is_some_and(|at| now >= at) {
             self.reannounce_at = None;
             self.announce_all(now);

@@ -23,7 +23,7 @@ use rumqttc::QoS;
 use serde::{Deserialize, Serialize};
 use tracing::{error, warn};
 
-use super::{Action, Gateway};
+use super::Gateway;
 
 /// After seeing a younger gateway of its name, the older one publishes its
 /// retained messages again this long later (when the younger has stopped).
@@ -78,10 +78,7 @@ impl Gateway {
     /// Claim the name: subscribe to the owner topic, then publish the claim
     /// (our own echo is recognised by its instance id).
     pub(super) fn claim_name(&mut self) {
-        self.out.push(Action::Subscribe {
-            topic: self.topics.owner(),
-            node: None,
-        });
+        self.subscribe(self.topics.owner(), None);
         self.publish_claim();
     }
 

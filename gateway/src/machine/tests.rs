@@ -220,6 +220,41 @@ fn command_results(actions: &[Action]) -> Vec<(bool, String)> {
         .collect()
 }
 
+/// The event loop sends the actions' subscriptions (packet ids from 1000).
+fn sent(gw: &mut Gateway, actions: Vec<Action>) -> Vec<Action> {
+    let mut pkid = 1000;
+    for a in &actions {
+        if matches!(a, Action::Subscribe { .. }) {
+            gw.on_outgoing_subscribe(pkid);
+            pkid += 1;
+        }
+    }
+    actions
+}
+
+/// A command message on node a's topic, as the broker hands it to a
+/// subscribed client (retain flag clear), then the check: the checking
+/// subscription goes out (packet id `pkid`), its SUBACK comes at `t`, no
+/// retained copy follows; the actions up to `t` + 250 ms.
+fn live_command(gw: &mut Gateway, payload: &[u8], t: Instant, pkid: u16) -> Vec<Action> {
+    gw.on_incoming("fois/gw/a/command", payload, false, t);
+    let mut a = gw.actions();
+    if a.iter().any(|x| matches!(x, Action::Subscribe { .. })) {
+        gw.on_outgoing_subscribe(pkid);
+        gw.on_suback(pkid, t);
+    }
+    gw.tick(t + Duration::from_millis(100), Duration::from_secs(3600));
+    assert!(
+        !gw.actions()
+            .iter()
+            .any(|x| matches!(x, Action::Command { .. })),
+        "not before the grace has passed"
+    );
+    gw.tick(t + Duration::from_millis(250), Duration::from_secs(3600));
+    a.extend(gw.actions());
+    a
+}
+
 #[test]
 fn commands_are_rate_limited_per_node() {
     let dir = tempfile::tempdir().unwrap();
@@ -230,19 +265,16 @@ fn commands_are_rate_limited_per_node() {
     let t0 = Instant::now();
     gw.on_connected(t0);
     gw.on_node(up(), t0);
-    let subscribed = gw.actions();
+    let a = gw.actions();
+    let subscribed = sent(&mut gw, a);
     assert!(topics(&subscribed).contains(&"SUBSCRIBE fois/gw/a/command".into()));
     // 20 dark calibrations in a row (each a flash save on a board).
-    for k in 0..20 {
-        gw.on_incoming(
-            "fois/gw/a/command",
-            b"calibrate-dark",
-            false,
-            t0 + Duration::from_millis(50 * k),
-        );
+    let mut all = Vec::new();
+    for k in 0..20u16 {
+        let t = t0 + Duration::from_millis(200 * u64::from(k));
+        all.extend(live_command(&mut gw, b"calibrate-dark", t, 100 + k));
     }
-    let a = gw.actions();
-    let sent: Vec<&Action> = a
+    let sent: Vec<&Action> = all
         .iter()
         .filter(|a| matches!(a, Action::Command { .. }))
         .collect();
@@ -253,7 +285,7 @@ fn commands_are_rate_limited_per_node() {
             command: NodeCommand::CalibrateDark
         }]
     );
-    let refused = command_results(&a);
+    let refused = command_results(&all);
     assert_eq!(refused.len(), 19);
     assert!(
         refused
@@ -262,48 +294,54 @@ fn commands_are_rate_limited_per_node() {
         "{refused:?}"
     );
     // After the interval, the next one goes through.
-    gw.on_incoming(
-        "fois/gw/a/command",
-        b"ack",
-        false,
-        t0 + Duration::from_secs(6),
+    let a = live_command(&mut gw, b"ack", t0 + Duration::from_secs(12), 200);
+    assert!(
+        topics(&a).contains(&"COMMAND ack".to_string()),
+        "{:?}",
+        topics(&a)
     );
-    assert_eq!(topics(&gw.actions()), vec!["COMMAND ack".to_string()]);
 }
 
 #[test]
-fn retained_and_oversized_commands_are_refused_and_deleted_never_fatal() {
+fn a_command_published_retained_while_connected_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let mut gw = gateway(dir.path(), "[commands]\nenabled = true");
     let t0 = Instant::now();
     gw.on_connected(t0);
     gw.on_node(up(), t0);
-    let _ = gw.actions();
-    gw.on_incoming("fois/gw/a/command", b"ack", true, t0);
     let a = gw.actions();
-    assert!(!a.iter().any(|a| matches!(a, Action::Command { .. })));
+    sent(&mut gw, a);
+    // Delivered live (flag clear) although published retained: the check
+    // subscribes again ...
+    gw.on_incoming("fois/gw/a/command", b"ack", false, t0);
+    assert_eq!(topics(&gw.actions()), vec!["SUBSCRIBE fois/gw/a/command"]);
+    gw.on_outgoing_subscribe(9);
+    gw.on_suback(9, t0);
+    // ... and the broker sends the retained copy, flagged, after the SUBACK.
+    gw.on_incoming("fois/gw/a/command", b"ack", true, t0);
+    gw.tick(t0 + Duration::from_secs(1), Duration::from_secs(3600));
+    let a = gw.actions();
+    assert!(
+        !a.iter().any(|x| matches!(x, Action::Command { .. })),
+        "not carried out"
+    );
     let r = command_results(&a);
     assert!(r.len() == 1 && r[0].1.contains("retained"), "{r:?}");
-    // The retained message is deleted: an empty retained publish.
-    assert!(a.contains(&Action::Publish {
-        topic: "fois/gw/a/command".into(),
-        payload: vec![],
-        qos: QoS::AtLeastOnce,
-        retain: true
-    }));
-    // 70 KiB, retained: skipped, said, deleted; the gateway carries on.
-    let big = vec![b'x'; 70 * 1024];
-    gw.on_incoming("fois/gw/a/command", &big, true, t0);
-    let a = gw.actions();
-    let r = command_results(&a);
-    assert!(
-        r.len() == 1 && r[0].1.contains("71680-byte message was skipped"),
-        "{r:?}"
+    // A check whose SUBACK never comes is refused, not carried out.
+    gw.on_incoming(
+        "fois/gw/a/command",
+        b"ack",
+        false,
+        t0 + Duration::from_secs(2),
     );
-    assert!(gw.connected());
-    // An empty message (what deleting a retained one delivers) is nothing.
-    gw.on_incoming("fois/gw/a/command", b"", false, t0);
-    assert!(gw.actions().is_empty());
+    gw.tick(t0 + Duration::from_secs(13), Duration::from_secs(3600));
+    let a = gw.actions();
+    assert!(!a.iter().any(|x| matches!(x, Action::Command { .. })));
+    assert!(
+        command_results(&a)[0].1.contains("did not confirm"),
+        "{:?}",
+        command_results(&a)
+    );
 }
 
 #[test]
