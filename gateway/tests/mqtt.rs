@@ -941,3 +941,46 @@ fn a_second_gateway_of_the_same_name_stops_and_the_first_keeps_its_fleet() {
     assert!(fresh > 10, "{fresh} measurements after the second stopped");
     assert_eq!(a.interrupt(), 0, "{}", a.output());
 }
+
+#[test]
+fn an_oversized_retained_command_is_skipped_and_the_connection_stays() {
+    let dir = tempfile::tempdir().unwrap();
+    let broker = Broker::start(dir.path(), "");
+    let sub = Subscriber::start(broker.port, "t-big", &["fois/#"], SubOptions::default());
+    // 70 KiB, retained, on the command topic before the gateway starts: it
+    // arrives at every subscription (every reconnection).
+    let big = "x".repeat(70 * 1024);
+    sub.publish("fois/gw/n1/command", &big, true);
+    let node = NodeProc::start(Scene::dry(5.0, 1));
+    let cfg = gateway_config(
+        dir.path(),
+        "gw",
+        broker.port,
+        &[(&node.path, "n1")],
+        "[commands]\nenabled = true\n",
+    );
+    let mut gw = GatewayProc::start(&cfg, &[], &dir.path().join("gw.out"));
+    sub.wait_for("the skip", Duration::from_secs(10), |m| {
+        m.iter().any(|m| {
+            m.topic == "fois/gw/n1/command/result" && m.text().contains("71680-byte message")
+        })
+    });
+    std::thread::sleep(Duration::from_secs(3));
+    let measured = sub.on("fois/gw/n1/measurement").len();
+    assert_eq!(gw.interrupt(), 0);
+    let out = gw.output();
+    assert!(
+        out.contains("1 broker connection(s)"),
+        "it never reconnected:\n{out}"
+    );
+    assert!(measured > 20, "{measured} measurements");
+    // The gateway deleted it: a new subscriber finds nothing retained.
+    let late = Subscriber::start(
+        broker.port,
+        "t-late",
+        &["fois/gw/n1/command"],
+        SubOptions::default(),
+    );
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(late.messages().is_empty(), "still retained");
+}
