@@ -8,6 +8,7 @@ use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
 use clap::Parser;
+use fois_link::numbers::{f64_in, non_negative};
 use tracing::info;
 
 use crate::config::{
@@ -43,38 +44,6 @@ impl std::fmt::Display for UsageError {
 }
 
 impl std::error::Error for UsageError {}
-
-fn number(s: &str) -> Result<f64, String> {
-    match s.trim().parse::<f64>() {
-        Ok(x) if x.is_finite() => Ok(x),
-        Ok(_) => Err(format!("`{s}` is not a finite number")),
-        Err(_) => Err(format!("`{s}` is not a number")),
-    }
-}
-
-/// A finite number ≥ 0.
-fn non_negative(s: &str) -> Result<f64, String> {
-    number(s).and_then(|x| {
-        if x >= 0.0 {
-            Ok(x)
-        } else {
-            Err(format!("must be >= 0, got {x}"))
-        }
-    })
-}
-
-/// A clap value parser for a finite number in `lo..=hi`.
-fn f64_in(lo: f64, hi: f64) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
-    move |s| {
-        number(s).and_then(|x| {
-            if (lo..=hi).contains(&x) {
-                Ok(x)
-            } else {
-                Err(format!("must be within {lo}..={hi}, got {x}"))
-            }
-        })
-    }
-}
 
 /// A gateway name usable as one MQTT topic level and in Home Assistant ids:
 /// 1 to 64 letters, digits, `-` or `_`.
@@ -223,17 +192,11 @@ pub fn check_config(cfg: &GatewayConfig) -> anyhow::Result<String> {
         crate::mqtt::rustls_config(t).map_err(|e| UsageError(format!("{e:#}")))?;
     }
     Ok(format!(
-        "config OK: gateway {}, {} node(s), broker {}:{}{}, queue {} (at most {} bytes), \
+        "config OK: gateway {}, {} node(s), broker {}, queue {} (at most {} bytes), \
          Home Assistant discovery {}, MQTT commands {}",
         cfg.name,
         cfg.nodes.len(),
-        cfg.broker.host,
-        cfg.broker.port,
-        if cfg.broker.tls.is_some() {
-            " (TLS)"
-        } else {
-            ""
-        },
+        cfg.broker.describe(),
         cfg.queue_dir.display(),
         cfg.queue_max_bytes,
         if cfg.homeassistant_prefix.is_some() {

@@ -158,16 +158,10 @@ impl Service {
         let limits_q = QueueLimits::for_max_bytes(cfg.queue_max_bytes);
         let (queue, rec) = Queue::open(&cfg.queue_dir, limits_q)?;
         info!(
-            "gateway {}: {} node(s), broker {}:{}{}, queue {}{}",
+            "gateway {}: {} node(s), broker {}, queue {}{}",
             cfg.name,
             cfg.nodes.len(),
-            cfg.broker.host,
-            cfg.broker.port,
-            if cfg.broker.tls.is_some() {
-                " (TLS)"
-            } else {
-                ""
-            },
+            cfg.broker.describe(),
             cfg.queue_dir.display(),
             if rec.pending > 0 {
                 format!(" ({} record(s) from the last run to send)", rec.pending)

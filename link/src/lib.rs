@@ -7,8 +7,10 @@
 //! - [`reading`]: a measurement or event in µA, °C, mm, with fault names.
 //! - [`text`]: one-line texts of protocol messages.
 //! - [`timefmt`]: host timestamps (Unix ms, ISO 8601 UTC).
+//! - [`numbers`]: finite-number parsers for command lines.
 
 pub mod link;
+pub mod numbers;
 pub mod reading;
 pub mod text;
 pub mod timefmt;

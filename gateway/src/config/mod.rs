@@ -81,6 +81,18 @@ pub struct BrokerConfig {
     pub tls: Option<TlsConfig>,
 }
 
+impl BrokerConfig {
+    /// `host:port`, and ` (TLS)` when TLS is on: how logs name the broker.
+    pub fn describe(&self) -> String {
+        format!(
+            "{}:{}{}",
+            self.host,
+            self.port,
+            if self.tls.is_some() { " (TLS)" } else { "" }
+        )
+    }
+}
+
 /// One node, resolved.
 #[derive(Debug, Clone, PartialEq)]
 pub struct NodeSpec {

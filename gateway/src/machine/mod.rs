@@ -406,12 +406,9 @@ impl Gateway {
         self.sum.broker_connects += 1;
         self.flight.clear();
         self.send_cursor = self.queue.acked();
-        let b = &self.cfg.broker;
         info!(
-            "connected to the broker {}:{}{}{}",
-            b.host,
-            b.port,
-            if b.tls.is_some() { " (TLS)" } else { "" },
+            "connected to the broker {}{}",
+            self.cfg.broker.describe(),
             match self.queue.pending() {
                 0 => String::new(),
                 n => format!("; sending {n} queued record(s)"),
@@ -443,11 +440,9 @@ impl Gateway {
     /// sent again from the queue after the reconnect).
     pub fn on_disconnected(&mut self, reason: &str) {
         if self.connected || self.down_said.as_deref() != Some(reason) {
-            let b = &self.cfg.broker;
             warn!(
-                "broker {}:{} {}: {reason}; {} record(s) wait in the disk queue, retrying every {} s",
-                b.host,
-                b.port,
+                "broker {} {}: {reason}; {} record(s) wait in the disk queue, retrying every {} s",
+                self.cfg.broker.describe(),
                 if self.connected {
                     "lost"
                 } else {

@@ -89,48 +89,9 @@ impl From<CoverArg> for Cover {
     }
 }
 
-fn number(s: &str) -> Result<f64, String> {
-    match s.trim().parse::<f64>() {
-        Ok(x) if x.is_finite() => Ok(x),
-        Ok(_) => Err(format!("`{s}` is not a finite number")),
-        Err(_) => Err(format!("`{s}` is not a number")),
-    }
-}
-
-/// A finite number > 0.
-pub fn positive(s: &str) -> Result<f64, String> {
-    number(s).and_then(|x| {
-        if x > 0.0 {
-            Ok(x)
-        } else {
-            Err(format!("must be > 0, got {x}"))
-        }
-    })
-}
-
-/// A finite number ≥ 0.
-pub fn non_negative(s: &str) -> Result<f64, String> {
-    number(s).and_then(|x| {
-        if x >= 0.0 {
-            Ok(x)
-        } else {
-            Err(format!("must be >= 0, got {x}"))
-        }
-    })
-}
-
-/// A clap value parser for a finite number in `lo..=hi`.
-pub fn f64_in(lo: f64, hi: f64) -> impl Fn(&str) -> Result<f64, String> + Clone + Send + Sync {
-    move |s| {
-        number(s).and_then(|x| {
-            if (lo..=hi).contains(&x) {
-                Ok(x)
-            } else {
-                Err(format!("must be within {lo}..={hi}, got {x}"))
-            }
-        })
-    }
-}
+// The finite-number parsers are fois-link's (the gateway's command line
+// uses them too).
+pub use fois_link::numbers::{f64_in, non_negative, positive};
 
 /// A worker-thread count ≥ 1.
 pub fn threads(s: &str) -> Result<usize, String> {
@@ -156,16 +117,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn number_parsers_refuse_out_of_range_and_non_finite_values() {
-        assert_eq!(positive("0.5"), Ok(0.5));
-        for bad in ["0", "-1", "nan", "inf", "x", ""] {
-            assert!(positive(bad).is_err(), "{bad}");
-        }
-        assert_eq!(non_negative("0"), Ok(0.0));
-        assert!(non_negative("-0.001").is_err());
-        let t = f64_in(-60.0, 80.0);
-        assert_eq!(t("-60"), Ok(-60.0));
-        assert!(t("80.01").is_err() && t("NaN").is_err());
+    fn thread_counts_and_current_pairs_refuse_bad_values() {
         assert_eq!(threads("2"), Ok(2));
         assert!(threads("0").is_err() && threads("-1").is_err());
         assert_eq!(ua_pair("3"), Ok([3.0, 3.0]));
