@@ -110,7 +110,7 @@ pub struct FrontEndCommand {
 /// command channel for other front ends.
 pub struct Service {
     cfg: GatewayConfig,
-    fleet_tx: tokio::sync::watch::Sender<Option<Fleet>>,
+    fleet: Fleet,
     commands_tx: mpsc::UnboundedSender<FrontEndCommand>,
     commands_rx: mpsc::UnboundedReceiver<FrontEndCommand>,
 }
@@ -120,17 +120,18 @@ impl Service {
     pub fn new(cfg: GatewayConfig) -> Service {
         let (commands_tx, commands_rx) = mpsc::unbounded_channel();
         Service {
+            fleet: Fleet::of(&cfg),
             cfg,
-            fleet_tx: tokio::sync::watch::Sender::new(None),
             commands_tx,
             commands_rx,
         }
     }
 
-    /// Where every node's latest state appears once the gateway runs (a
-    /// watch that holds the [`Fleet`] from the start of [`Service::run`]).
-    pub fn fleet(&self) -> tokio::sync::watch::Receiver<Option<Fleet>> {
-        self.fleet_tx.subscribe()
+    /// Every node's latest state, filled in while the gateway runs (a
+    /// shared handle: clone it into another front end before
+    /// [`Service::run`]).
+    pub fn fleet(&self) -> Fleet {
+        self.fleet.clone()
     }
 
     /// A sender of commands to nodes (they go through the same checks as
@@ -151,7 +152,7 @@ impl Service {
     async fn run_async(self, limits: RunLimits<'_>) -> anyhow::Result<GatewaySummary> {
         let Service {
             cfg,
-            fleet_tx,
+            fleet,
             commands_rx: mut front_rx,
             ..
         } = self;
@@ -203,7 +204,7 @@ impl Service {
 
         let started = Instant::now();
         let mut gw = Gateway::new(cfg, queue, started);
-        fleet_tx.send_replace(Some(gw.fleet()));
+        gw.share_fleet(fleet);
         let mut io = Io {
             client,
             resume: resume_tx,

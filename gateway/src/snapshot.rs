@@ -72,6 +72,17 @@ pub struct Fleet {
 }
 
 impl Fleet {
+    /// The nodes of a config, not heard from yet.
+    pub fn of(cfg: &crate::config::GatewayConfig) -> Fleet {
+        Fleet::new(
+            cfg.nodes
+                .iter()
+                .enumerate()
+                .map(|(k, n)| NodeSnapshot::new(k, n.name.clone(), n.port.clone()))
+                .collect(),
+        )
+    }
+
     /// Snapshots of nodes not heard from yet.
     pub fn new(nodes: Vec<NodeSnapshot>) -> Fleet {
         Fleet {

@@ -984,3 +984,77 @@ fn an_oversized_retained_command_is_skipped_and_the_connection_stays() {
     std::thread::sleep(Duration::from_millis(500));
     assert!(late.messages().is_empty(), "still retained");
 }
+
+#[test]
+fn another_front_end_reads_every_node_and_sends_commands_through_the_service() {
+    use fois_gateway::config::{FileConfig, Overrides};
+    use fois_gateway::driver::{FrontEndCommand, RunLimits, Service};
+    use fois_gateway::reader::NodeCommand;
+    use std::sync::atomic::{AtomicBool, Ordering};
+
+    let dir = tempfile::tempdir().unwrap();
+    let broker = Broker::start(dir.path(), "");
+    let sub = Subscriber::start(broker.port, "t-front", &["fois/#"], SubOptions::default());
+    let node = iced_node();
+    let cfg = FileConfig::parse(&gateway_toml(
+        broker.port,
+        &dir.path().join("q"),
+        &[(&node.path, "n1"), ("/dev/does-not-exist", "n2")],
+        "",
+    ))
+    .unwrap()
+    .resolve(&Overrides::default())
+    .unwrap();
+    let service = Service::new(cfg);
+    let fleet = service.fleet();
+    let commands = service.commands();
+    static STOP: AtomicBool = AtomicBool::new(false);
+    let run = std::thread::spawn(move || {
+        service.run(RunLimits {
+            stop: &STOP,
+            duration: None,
+            status_every: Duration::from_secs(3600),
+        })
+    });
+    // The alarm trips (rime at 30 mm/h after 2 s of dry face at ×10).
+    let t0 = Instant::now();
+    let iced = loop {
+        let n = fleet.node(0).unwrap();
+        if n.reading.as_ref().is_some_and(|r| r.alarm) {
+            break n;
+        }
+        assert!(t0.elapsed() < Duration::from_secs(20), "{n:?}");
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert!(iced.link_up && iced.hello.is_some());
+    assert!(iced.age(Instant::now()).unwrap() < Duration::from_secs(2));
+    let missing = fleet.node(1).unwrap();
+    assert!(!missing.link_up && missing.reading.is_none() && missing.age(Instant::now()).is_none());
+    // A command from the front end: the same path as MQTT's, its answer
+    // published as a command result.
+    commands
+        .send(FrontEndCommand {
+            node: 0,
+            command: NodeCommand::AckAlarm,
+        })
+        .unwrap();
+    let t0 = Instant::now();
+    while !fleet
+        .node(0)
+        .unwrap()
+        .reading
+        .is_some_and(|r| r.alarm_acked)
+    {
+        assert!(t0.elapsed() < Duration::from_secs(10), "not acknowledged");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    sub.wait_for("the command result", Duration::from_secs(5), |m| {
+        m.iter().any(|m| {
+            m.topic == "fois/gw/n1/command/result" && m.text().contains("AlarmAcknowledged")
+        })
+    });
+    STOP.store(true, Ordering::Relaxed);
+    let sum = run.join().unwrap().unwrap();
+    assert_eq!(sum.broker_connects, 1);
+    assert!(sum.frames > 20, "{sum:?}");
+}

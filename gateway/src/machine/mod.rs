@@ -35,7 +35,7 @@ use crate::inflight::{InFlight, WINDOW};
 use crate::payload::{EventJson, InfoJson, LinkEventJson, MeasurementJson, StateJson, StatusJson};
 use crate::queue::{Queue, Record};
 use crate::reader::{NodeCommand, NodeMsg, NodeUpdate};
-use crate::snapshot::{Fleet, NodeSnapshot};
+use crate::snapshot::Fleet;
 use crate::topics::Topics;
 
 pub use commands::MAX_COMMAND_BYTES;
@@ -158,13 +158,7 @@ impl Gateway {
                 check: None,
             })
             .collect();
-        let fleet = Fleet::new(
-            nodes
-                .iter()
-                .enumerate()
-                .map(|(k, n)| NodeSnapshot::new(k, n.name.clone(), n.spec.port.clone()))
-                .collect(),
-        );
+        let fleet = Fleet::of(&cfg);
         let send_cursor = queue.acked();
         Gateway {
             cfg,
@@ -201,6 +195,12 @@ impl Gateway {
     /// The shared per-node snapshots.
     pub fn fleet(&self) -> Fleet {
         self.fleet.clone()
+    }
+
+    /// Keep the per-node snapshots in `fleet` (made with [`Fleet::of`] of
+    /// this config, handed out before the gateway runs).
+    pub fn share_fleet(&mut self, fleet: Fleet) {
+        self.fleet = fleet;
     }
 
     /// The topics.
