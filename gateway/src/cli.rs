@@ -16,7 +16,7 @@ use crate::config::{
     Overrides, is_valid_name,
 };
 use crate::driver::{NameConflict, RunLimits, Service};
-use crate::logging::LogTime;
+use crate::logging::{LogTime, LogTo};
 
 /// Exit code of a bad command line or config.
 pub const EXIT_USAGE: i32 = 2;
@@ -24,8 +24,9 @@ pub const EXIT_USAGE: i32 = 2;
 pub const EXIT_NAME_CONFLICT: i32 = 3;
 
 const AFTER_HELP: &str = "\
-Logs go to stdout with levels (error, warn, info, debug); RUST_LOG filters them
-(e.g. RUST_LOG=debug, RUST_LOG=fois_gateway=debug). Ctrl-C or SIGTERM stops the
+Logs carry levels (error, warn, info, debug); RUST_LOG filters them (e.g.
+RUST_LOG=debug, RUST_LOG=fois_gateway=debug). Under systemd they go into the
+journal with their priority, elsewhere to stdout. Ctrl-C or SIGTERM stops the
 gateway cleanly: nodes and gateway marked offline, the last records acknowledged.
 
 Exit codes: 0 stopped as asked; 1 a failure while running (the queue directory
@@ -155,6 +156,10 @@ pub struct GatewayArgs {
     /// terminal (under systemd, journald stamps every line itself).
     #[arg(long, value_enum, default_value_t = LogTime::Auto, value_name = "WHEN")]
     pub log_time: LogTime,
+    /// Where logs go: `auto` = the systemd journal (with each entry's
+    /// priority) when systemd connected the output to it, else stdout.
+    #[arg(long, value_enum, default_value_t = LogTo::Auto, value_name = "WHERE")]
+    pub log_to: LogTo,
 }
 
 impl GatewayArgs {

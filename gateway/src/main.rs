@@ -13,7 +13,7 @@ static STOP: AtomicBool = AtomicBool::new(false);
 
 fn main() {
     let args = GatewayArgs::parse();
-    fois_gateway::logging::init(args.quiet, args.log_time);
+    fois_gateway::logging::init(args.quiet, args.log_time, args.log_to);
     // The first Ctrl-C / SIGTERM stops cleanly; a second one exits at once.
     let _ = ctrlc::set_handler(|| {
         if STOP.swap(true, Ordering::SeqCst) {

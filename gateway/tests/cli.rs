@@ -161,7 +161,13 @@ fn help_and_version_are_not_errors() {
         assert!(out.contains("fois-gateway"), "{out}");
     }
     let (_, help, _) = gateway(&["--help"]);
-    for needle in ["--check-config", "RUST_LOG", "Exit codes", "--log-time"] {
+    for needle in [
+        "--check-config",
+        "RUST_LOG",
+        "Exit codes",
+        "--log-time",
+        "--log-to",
+    ] {
         assert!(help.contains(needle), "`{needle}` not in --help:\n{help}");
     }
 }
@@ -271,4 +277,31 @@ fn a_server_that_is_not_an_mqtt_broker_is_named_as_such() {
     assert!(out.contains("did not answer as an MQTT broker"), "{out}");
     assert!(out.contains("PUBACK instead of CONNACK"), "{out}");
     assert!(!out.contains("Expected ConnAck"), "{out}");
+}
+
+#[test]
+fn without_a_reachable_journal_logs_stay_on_stdout() {
+    // This machine runs no journald: under a JOURNAL_STREAM (as systemd
+    // sets it) the gateway falls back to its stdout lines, and says so only
+    // when the journal was asked for explicitly.
+    let dir = tempfile::tempdir().unwrap();
+    let broker = format!("127.0.0.1:{}", closed_port());
+    let (_, out) = short_run(
+        dir.path(),
+        &broker,
+        "0.5",
+        &[],
+        &[("JOURNAL_STREAM", "8:1234")],
+    );
+    assert!(
+        out.contains("WARN") && out.contains("cannot connect"),
+        "{out}"
+    );
+    assert!(!out.contains("journal"), "{out}");
+    let (_, out) = short_run(dir.path(), &broker, "0.5", &["--log-to", "journald"], &[]);
+    assert!(
+        out.contains("the systemd journal cannot be reached"),
+        "{out}"
+    );
+    assert!(out.contains("cannot connect"), "{out}");
 }
