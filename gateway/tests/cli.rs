@@ -194,7 +194,8 @@ fn short_run(
         secs,
     ])
     .args(extra)
-    .env_remove("RUST_LOG");
+    .env_remove("RUST_LOG")
+    .env_remove("JOURNAL_STREAM");
     for (k, v) in env {
         cmd.env(k, v);
     }

@@ -375,7 +375,11 @@ impl GatewayProc {
             .append(true)
             .open(out)
             .unwrap();
+        // Its log lines in the output file, whatever the environment (a CI
+        // run under systemd has JOURNAL_STREAM and maybe a RUST_LOG).
         let child = Command::new(BIN)
+            .env_remove("JOURNAL_STREAM")
+            .env_remove("RUST_LOG")
             .arg("--config")
             .arg(config)
             .args(["--status-interval-s", "1"])
