@@ -15,6 +15,7 @@
 //! latest state in the shared [`Fleet`] for other front ends.
 
 mod commands;
+mod nodes;
 pub mod owner;
 #[cfg(test)]
 mod tests;
@@ -22,19 +23,17 @@ mod tests;
 use std::collections::{HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
-use fois_link::reading::{EventReading, Reading};
-use fois_link::text::{hello_text, unique_id_hex};
 use fois_link::timefmt::unix_ms_now;
-use fois_protocol::{DeviceMsg, Hello, SeqEvent};
+use fois_protocol::Hello;
 use rumqttc::QoS;
 use tracing::{error, info, warn};
 
 use crate::config::{GatewayConfig, NodeSpec};
 use crate::discovery;
 use crate::inflight::{InFlight, WINDOW};
-use crate::payload::{EventJson, InfoJson, LinkEventJson, MeasurementJson, StateJson, StatusJson};
+use crate::payload::{InfoJson, StateJson, StatusJson};
 use crate::queue::{Queue, Record};
-use crate::reader::{NodeCommand, NodeMsg, NodeUpdate};
+use crate::reader::NodeCommand;
 use crate::snapshot::Fleet;
 use crate::topics::Topics;
 
@@ -476,214 +475,6 @@ impl Gateway {
             self.queue.ack_through(upto);
             self.sum.records_acked += self.queue.acked().saturating_sub(before);
         }
-    }
-
-    fn resolve_name(&mut self, k: usize, h: &Hello) {
-        if self.nodes[k].name.is_some() {
-            return;
-        }
-        let mut name = unique_id_hex(h);
-        if self
-            .nodes
-            .iter()
-            .any(|n| n.name.as_deref() == Some(name.as_str()))
-        {
-            // Two nodes with one id (virtual nodes share theirs): keep the
-            // config position, stable across restarts.
-            name = format!("{name}-{k}");
-        }
-        info!(
-            "node on {} has no name in the config: named {name} after its unique id",
-            self.nodes[k].spec.port
-        );
-        self.nodes[k].name = Some(name.clone());
-        self.fleet.update(k, |n| n.name = Some(name));
-    }
-
-    fn link_event(
-        &mut self,
-        k: usize,
-        kind: &'static str,
-        detail: String,
-        seq: Option<u32>,
-        frames_lost: Option<u64>,
-        t_ms: u64,
-    ) {
-        let Some(name) = self.node_name(k).map(str::to_string) else {
-            return;
-        };
-        let mut e = LinkEventJson::new(&name, kind, detail, t_ms);
-        e.seq = seq;
-        e.frames_lost = frames_lost;
-        let payload = serde_json::to_vec(&e).unwrap_or_default();
-        self.queue_record(self.topics.event(&name), payload);
-    }
-
-    /// A report of a node reader.
-    pub fn on_node(&mut self, m: NodeMsg, now: Instant) {
-        let k = m.node;
-        if k >= self.nodes.len() {
-            return;
-        }
-        let t = m.host_unix_ms;
-        match m.update {
-            NodeUpdate::Up(h) => {
-                self.resolve_name(k, &h);
-                let name = self.node_name(k).unwrap_or_default().to_string();
-                let port = self.nodes[k].spec.port.clone();
-                info!("node {name} on {port}: connected ({})", hello_text(&h));
-                self.nodes[k].hello = Some(h.clone());
-                self.nodes[k].online = true;
-                self.fleet.update(k, |n| {
-                    n.hello = Some(h.clone());
-                    n.link_up = true;
-                });
-                self.link_event(
-                    k,
-                    "link_up",
-                    format!("port={port} {}", hello_text(&h)),
-                    None,
-                    None,
-                    t,
-                );
-                self.announce_node(k);
-            }
-            NodeUpdate::Down(reason) => {
-                let name = self.node_name(k).unwrap_or_default().to_string();
-                warn!(
-                    "node {name} on {}: link lost ({reason}); reconnecting",
-                    self.nodes[k].spec.port
-                );
-                self.nodes[k].online = false;
-                self.fleet.update(k, |n| n.link_up = false);
-                self.link_event(k, "link_lost", reason, None, None, t);
-                if !name.is_empty() {
-                    self.publish_now(
-                        self.topics.availability(&name),
-                        b"offline".to_vec(),
-                        true,
-                        QoS::AtMostOnce,
-                    );
-                }
-            }
-            NodeUpdate::Unreachable(reason) => {
-                warn!(
-                    "node on {}: cannot connect ({reason}); retrying",
-                    self.nodes[k].spec.port
-                );
-            }
-            NodeUpdate::Rejected => {}
-            NodeUpdate::CommandResult {
-                command,
-                ok,
-                detail,
-            } => {
-                let name = self.node_name(k).unwrap_or_default().to_string();
-                info!(
-                    "command {} for {name}: {} ({detail})",
-                    command.name(),
-                    if ok { "done" } else { "failed" }
-                );
-                self.publish_command_result(&name, command.name(), ok, detail, t);
-            }
-            NodeUpdate::Frame(f, ev) => self.on_frame(k, f, ev, t, now),
-        }
-    }
-
-    fn on_frame(
-        &mut self,
-        k: usize,
-        f: fois_protocol::DeviceFrame,
-        ev: SeqEvent,
-        t: u64,
-        now: Instant,
-    ) {
-        self.sum.frames += 1;
-        match ev {
-            SeqEvent::Gap(n) => {
-                self.nodes[k].lost += n;
-                self.sum.frames_lost += n;
-                let lost = self.nodes[k].lost;
-                self.fleet.update(k, |s| s.frames_lost = lost);
-                self.link_event(
-                    k,
-                    "frames_lost",
-                    format!("{n} frame(s) missing before seq {}", f.seq),
-                    Some(f.seq),
-                    Some(n),
-                    t,
-                );
-            }
-            SeqEvent::Restart => {
-                self.nodes[k].last_meas_uptime = None;
-                let detail = match &f.msg {
-                    DeviceMsg::Hello(h) => format!("reset reason {:?}", h.reset_reason),
-                    _ => "sequence number went back".into(),
-                };
-                let name = self.node_name(k).unwrap_or_default().to_string();
-                warn!("node {name} restarted ({detail}) at seq {}", f.seq);
-                self.link_event(k, "node_restart", detail, Some(f.seq), None, t);
-                if let DeviceMsg::Hello(h) = &f.msg {
-                    self.nodes[k].hello = Some(h.clone());
-                    self.announce_node(k);
-                }
-            }
-            SeqEvent::First | SeqEvent::InOrder | SeqEvent::Duplicate => {}
-        }
-        let Some(name) = self.node_name(k).map(str::to_string) else {
-            return;
-        };
-        if let Some(reading) = Reading::of(&f.msg) {
-            self.on_reading(k, &name, f.seq, reading, t, now);
-        } else if let DeviceMsg::Event(e) = &f.msg {
-            let r = EventReading::new(e);
-            let payload =
-                serde_json::to_vec(&EventJson::new(&name, f.seq, &r, t)).unwrap_or_default();
-            self.queue_record(self.topics.event(&name), payload);
-        }
-    }
-
-    fn on_reading(&mut self, k: usize, name: &str, seq: u32, r: Reading, t: u64, now: Instant) {
-        let lost = self.nodes[k].lost;
-        let state = StateJson::new(name, seq, &r, lost, t);
-        if r.estimate.is_some() && !self.nodes[k].has_estimate {
-            self.nodes[k].has_estimate = true;
-            self.announce_node(k);
-        }
-        let due = match &self.nodes[k].published_state {
-            None => true,
-            Some((p, at)) => {
-                p.differs_discretely(&state)
-                    || (state.thickness_moved(p, THICKNESS_STEP_MM)
-                        && now.saturating_duration_since(*at)
-                            >= Duration::from_millis(self.cfg.state_interval_ms))
-            }
-        };
-        self.nodes[k].last_state = Some(state.clone());
-        if due {
-            self.publish_state(k, state);
-        }
-        let interval = if self.connected {
-            self.cfg.measurement_interval_ms
-        } else {
-            self.cfg.offline_measurement_interval_ms
-        };
-        let take = match self.nodes[k].last_meas_uptime {
-            None => true,
-            Some(last) => r.uptime_ms < last || r.uptime_ms - last >= interval,
-        };
-        if take {
-            self.nodes[k].last_meas_uptime = Some(r.uptime_ms);
-            let payload =
-                serde_json::to_vec(&MeasurementJson::new(name, seq, &r, t)).unwrap_or_default();
-            self.queue_record(self.topics.measurement(name), payload);
-        }
-        self.fleet.update(k, |s| {
-            s.reading = Some(r);
-            s.seq = Some(seq);
-            s.received = Some(now);
-            s.received_unix_ms = Some(t);
-        });
     }
 
     /// Housekeeping: flush the queue, publish the status when due, publish
