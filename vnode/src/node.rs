@@ -13,8 +13,8 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 use fois_firmware::estimator::EstimatorParams;
 use fois_firmware::flash_store::FlashStore;
@@ -169,6 +169,23 @@ pub struct NodeOptions {
     /// estimator"). Passed to every `Node` this runner builds, after each
     /// reset too, as the board passes its own.
     pub estimator: EstimatorParams,
+    /// The MCU unique id the node reports in `Hello`. `None`: an id of its
+    /// own, distinct for every node built in any running process
+    /// ([`instance_unique_id`]), as every board has its own; a gateway
+    /// names entities after it, so two virtual nodes must not share one.
+    pub unique_id: Option<[u8; 12]>,
+}
+
+/// A unique id no other virtual node has while this process runs (nor
+/// another process: `FV`, the process id, a count of the nodes built here).
+pub fn instance_unique_id() -> [u8; 12] {
+    static BUILT: AtomicU32 = AtomicU32::new(0);
+    let n = BUILT.fetch_add(1, Ordering::Relaxed);
+    let mut id = [0u8; 12];
+    id[..2].copy_from_slice(b"FV");
+    id[2..6].copy_from_slice(&std::process::id().to_be_bytes());
+    id[8..].copy_from_slice(&n.to_be_bytes());
+    id
 }
 
 impl Default for NodeOptions {
@@ -180,6 +197,7 @@ impl Default for NodeOptions {
             state_file: None,
             calibrate_at_s: Some(1.0),
             estimator: EstimatorParams::default(),
+            unique_id: None,
         }
     }
 }
@@ -228,7 +246,7 @@ impl Hardware<'_> {
         );
         let mut info = BoardInfo::simulated(opts.board);
         info.reset_reason = reason;
-        info.unique_id = *b"FOIS-VIRTUAL";
+        info.unique_id = opts.unique_id.unwrap_or(*b"FOIS-VIRTUAL");
         let mut node = Node::new(
             adc,
             self.led.clone(),
@@ -245,7 +263,9 @@ impl Hardware<'_> {
 
 impl VirtualNode {
     /// Build a node at virtual time 0 in `env`.
-    pub fn new(env: Arc<Environment>, opts: NodeOptions) -> Self {
+    pub fn new(env: Arc<Environment>, mut opts: NodeOptions) -> Self {
+        // One id for the node's whole life, resets included.
+        opts.unique_id.get_or_insert_with(instance_unique_id);
         let clock = VirtualClock::new();
         let led = VirtualPin::with_clock(clock.clone());
         let alarm = VirtualPin::with_clock(clock.clone());
@@ -523,5 +543,41 @@ mod tests {
         vn.run_until_s(4.0, &mut |_: &[u8]| {});
         assert_eq!(vn.resets(), 1);
         assert_eq!(*vn.node().estimator().params(), params);
+    }
+
+    #[test]
+    fn every_virtual_node_has_its_own_unique_id_for_its_whole_life() {
+        let env = || {
+            Arc::new(Environment::new(
+                Timeline::new(vec![Segment::new(60.0, Cover::Dry)]),
+                fois_sim::SensorKind::B,
+                1,
+            ))
+        };
+        let mut a = VirtualNode::new(env(), NodeOptions::default());
+        let b = VirtualNode::new(env(), NodeOptions::default());
+        let id_a = a.node().hello().unique_id;
+        assert_ne!(id_a, b.node().hello().unique_id);
+        assert_eq!(&id_a[..2], b"FV");
+        assert_eq!(id_a[2..6], std::process::id().to_be_bytes());
+        // A reset keeps it (the board's id is in silicon).
+        let reset = encode_to_vec(&HostFrame {
+            id: 1,
+            cmd: Command::Reset,
+        });
+        a.run_until_s(2.0, &mut |_: &[u8]| {});
+        a.handle_rx(&reset, &mut |_: &[u8]| {});
+        a.run_until_s(4.0, &mut |_: &[u8]| {});
+        assert_eq!(a.resets(), 1);
+        assert_eq!(a.node().hello().unique_id, id_a);
+        // A fixed id is used as given.
+        let fixed = VirtualNode::new(
+            env(),
+            NodeOptions {
+                unique_id: Some(*b"FOIS-VIRTUAL"),
+                ..NodeOptions::default()
+            },
+        );
+        assert_eq!(&fixed.node().hello().unique_id, b"FOIS-VIRTUAL");
     }
 }
