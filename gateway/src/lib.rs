@@ -14,7 +14,8 @@
 //! | [`queue`] | the bounded on-disk store-and-forward queue |
 //! | [`snapshot`] | every node's latest state, shared with other front ends |
 //! | [`topics`], [`payload`] | the topic layout, the JSON payloads |
-//! | [`discovery`] | Home Assistant MQTT discovery configs |
+//! | [`state_filter`] | when the retained state is published: discrete changes at once, continuous values deadbanded |
+//! | [`discovery`] | Home Assistant MQTT discovery: the entities of a node, the messages for the configured release |
 //! | [`logging`] | `tracing` set-up: levels, `RUST_LOG`, timestamps only on a terminal |
 
 pub mod cli;
@@ -29,4 +30,5 @@ pub mod payload;
 pub mod queue;
 pub mod reader;
 pub mod snapshot;
+pub mod state_filter;
 pub mod topics;

@@ -8,7 +8,7 @@
 use fois_link::reading::{EstimateReading, EventReading, GainReading, Reading};
 use fois_link::text::{firmware_text, unique_id_hex};
 use fois_link::timefmt::iso_utc;
-use fois_protocol::Hello;
+use fois_protocol::{Hello, Medium};
 use serde::Serialize;
 
 /// `<node>/measurement`: the reading's keys, flattened, after the node's
@@ -42,7 +42,10 @@ impl<'a> MeasurementJson<'a> {
     }
 }
 
-/// `<node>/state` (retained): what a dashboard shows.
+/// `<node>/state` (retained): what a dashboard shows. Published when
+/// something discrete changes, the continuous values deadbanded
+/// ([`crate::state_filter`]): Home Assistant's entities read it, and every
+/// change of an entity is a row in its database.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StateJson {
     /// Node name.
@@ -69,19 +72,45 @@ pub struct StateJson {
     pub faults: Vec<&'static str>,
     /// A dark baseline is stored.
     pub dark_baseline: bool,
+    /// Frames received from the node since the gateway started (refreshed
+    /// at most every [`crate::state_filter::COUNTERS_EVERY`]).
+    pub frames_received: u64,
     /// Frames missing from the sequence since the gateway started.
     pub frames_lost: u64,
+    /// Net photocurrent of channel 1, µA (deadbanded).
+    pub i1_ua: f64,
+    /// Net photocurrent of channel 2, µA (deadbanded).
+    pub i2_ua: f64,
+    /// Air temperature, °C (deadbanded).
+    pub temperature_c: f64,
     /// The node's ice estimate, when it sends one.
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub estimate: Option<EstimateReading>,
+    /// The estimate's thickness when its medium is ice (glazed, rime), else
+    /// 0: a water film is not ice.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ice_thickness_mm: Option<f64>,
+    /// The estimate's thickness when its medium is water, else 0.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub water_film_mm: Option<f64>,
     /// The node's optical gain estimate, when it sends one.
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub gain: Option<GainReading>,
 }
 
 impl StateJson {
-    /// The state after one frame.
-    pub fn new(node: &str, seq: u32, r: &Reading, frames_lost: u64, host_unix_ms: u64) -> Self {
+    /// The state after one frame: its values exact (the filter holds them).
+    pub fn new(node: &str, seq: u32, r: &Reading, frames: (u64, u64), host_unix_ms: u64) -> Self {
+        let (frames_received, frames_lost) = frames;
+        let film = |of: &[Medium]| {
+            r.estimate.map(|e| {
+                if of.contains(&e.medium) {
+                    e.thickness_mm
+                } else {
+                    0.0
+                }
+            })
+        };
         StateJson {
             node: node.to_string(),
             seq,
@@ -95,8 +124,14 @@ impl StateJson {
             valid: r.valid,
             faults: r.faults.clone(),
             dark_baseline: r.dark_baseline,
+            frames_received,
             frames_lost,
+            i1_ua: r.i1_ua,
+            i2_ua: r.i2_ua,
+            temperature_c: r.temperature_c,
             estimate: r.estimate,
+            ice_thickness_mm: film(&[Medium::Glazed, Medium::Rime]),
+            water_film_mm: film(&[Medium::Water]),
             gain: r.gain,
         }
     }
@@ -113,14 +148,6 @@ impl StateJson {
             || self.dark_baseline != other.dark_baseline
             || self.estimate.map(|e| e.medium) != other.estimate.map(|e| e.medium)
             || self.gain.is_some() != other.gain.is_some()
-    }
-
-    /// True when the thickness moved by at least `mm`.
-    pub fn thickness_moved(&self, other: &StateJson, mm: f64) -> bool {
-        match (self.estimate, other.estimate) {
-            (Some(a), Some(b)) => (a.thickness_mm - b.thickness_mm).abs() >= mm,
-            _ => false,
-        }
     }
 }
 
@@ -343,22 +370,31 @@ mod tests {
             gain_ppm: 1_000_000,
             sigma_ppm: 50_000,
         };
-        let s = StateJson::new("n1", 1, &Reading::new(&meas(), None, Some(&gain)), 3, 0);
+        let s = StateJson::new(
+            "n1",
+            1,
+            &Reading::new(&meas(), None, Some(&gain)),
+            (40, 3),
+            0,
+        );
         let v = serde_json::to_value(&s).unwrap();
         assert_eq!(v["ice"], true);
         assert_eq!(v["alarm_acked"], true);
         assert_eq!(v["frames_lost"], 3);
+        assert_eq!(v["frames_received"], 40);
+        assert_eq!(v["i1_ua"], 1.5);
+        assert_eq!(v["temperature_c"], -5.12);
         assert_eq!(v["gain"], 1.0);
         assert_eq!(v["gain_sigma"], 0.05);
         let mut m = meas();
         m.uptime_ms += 100;
-        let same = StateJson::new("n1", 2, &Reading::new(&m, None, Some(&gain)), 3, 5);
+        let same = StateJson::new("n1", 2, &Reading::new(&m, None, Some(&gain)), (41, 3), 5);
         assert!(!s.differs_discretely(&same));
         m.flags &= !flags::ALARM_ACKED;
-        let unacked = StateJson::new("n1", 3, &Reading::new(&m, None, Some(&gain)), 3, 5);
+        let unacked = StateJson::new("n1", 3, &Reading::new(&m, None, Some(&gain)), (41, 3), 5);
         assert!(s.differs_discretely(&unacked));
         m.flags |= flags::ALARM_ACKED | flags::GAIN_OUT_OF_BAND;
-        let out_of_band = StateJson::new("n1", 4, &Reading::new(&m, None, Some(&gain)), 3, 5);
+        let out_of_band = StateJson::new("n1", 4, &Reading::new(&m, None, Some(&gain)), (41, 3), 5);
         assert!(s.differs_discretely(&out_of_band), "a new fault");
     }
 

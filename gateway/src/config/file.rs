@@ -112,6 +112,9 @@ pub struct HomeAssistantFile {
     pub enabled: Option<bool>,
     /// Discovery prefix [default: homeassistant].
     pub prefix: Option<String>,
+    /// The oldest Home Assistant release of the site, `YEAR.MONTH`: newer
+    /// discovery keys only when it takes them [default: 2024.1].
+    pub version: Option<String>,
 }
 
 /// `[commands]`.

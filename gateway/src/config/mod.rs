@@ -127,6 +127,8 @@ pub struct GatewayConfig {
     pub queue_max_bytes: u64,
     /// Home Assistant discovery prefix (None: discovery off).
     pub homeassistant_prefix: Option<String>,
+    /// The oldest Home Assistant release the discovery messages must suit.
+    pub homeassistant_version: crate::discovery::HaVersion,
     /// Command topic template with `{node}` (None: commands off).
     pub command_topic: Option<String>,
     /// A node accepts a command from MQTT at most this often (each

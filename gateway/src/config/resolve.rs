@@ -4,6 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
+use crate::discovery::HaVersion;
+
 use super::file::{
     BrokerFile, CommandsFile, FileConfig, HomeAssistantFile, NodeFile, Overrides, PublishFile,
     QueueFile,
@@ -85,7 +87,8 @@ impl FileConfig {
         let broker = resolve_broker(self.broker, o, &name)?;
         let publish = resolve_publish(self.publish, o)?;
         let (queue_dir, queue_max_bytes) = resolve_queue(self.queue, o, &name)?;
-        let homeassistant_prefix = resolve_homeassistant(self.homeassistant, o)?;
+        let (homeassistant_prefix, homeassistant_version) =
+            resolve_homeassistant(self.homeassistant, o)?;
         let commands = resolve_commands(self.commands, &topic_prefix, &name)?;
         let nodes = resolve_nodes(self.nodes, o)?;
         Ok(GatewayConfig {
@@ -99,6 +102,7 @@ impl FileConfig {
             queue_dir,
             queue_max_bytes,
             homeassistant_prefix,
+            homeassistant_version,
             command_topic: commands.topic,
             command_min_interval: commands.min_interval,
             nodes,
@@ -223,14 +227,23 @@ fn resolve_queue(q: QueueFile, o: &Overrides, name: &str) -> anyhow::Result<(Pat
 }
 
 /// `[homeassistant]` with `--no-homeassistant`: the discovery prefix, or
-/// `None` when discovery is off.
-fn resolve_homeassistant(h: HomeAssistantFile, o: &Overrides) -> anyhow::Result<Option<String>> {
+/// `None` when discovery is off; the release the messages suit.
+fn resolve_homeassistant(
+    h: HomeAssistantFile,
+    o: &Overrides,
+) -> anyhow::Result<(Option<String>, HaVersion)> {
+    let version = match &h.version {
+        Some(v) => {
+            HaVersion::parse(v).map_err(|e| anyhow::anyhow!("[homeassistant] version: {e}"))?
+        }
+        None => HaVersion::OLDEST,
+    };
     if o.no_homeassistant || h.enabled == Some(false) {
-        return Ok(None);
+        return Ok((None, version));
     }
     let p = h.prefix.unwrap_or_else(|| "homeassistant".into());
     check_topic("homeassistant prefix", &p)?;
-    Ok(Some(p))
+    Ok((Some(p), version))
 }
 
 /// `[commands]` (no flag turns commands on).
@@ -326,6 +339,7 @@ dir = "q"
 max_bytes = 1000000
 [homeassistant]
 prefix = "ha"
+version = "2024.3.3"
 [commands]
 enabled = true
 [[node]]
@@ -362,6 +376,7 @@ baud = 57600
         assert_eq!(c.offline_measurement_interval_ms, 30000);
         assert_eq!(c.queue_max_bytes, 1_000_000);
         assert_eq!(c.homeassistant_prefix.as_deref(), Some("ha"));
+        assert_eq!(c.homeassistant_version, HaVersion::new(2024, 3));
         assert_eq!(
             c.command_topic.as_deref(),
             Some("wind/farm-7/{node}/command")
@@ -419,6 +434,7 @@ baud = 57600
         assert_eq!(c.offline_measurement_interval_ms, 10_000);
         assert_eq!(c.queue_max_bytes, DEFAULT_QUEUE_MAX_BYTES);
         assert_eq!(c.homeassistant_prefix.as_deref(), Some("homeassistant"));
+        assert_eq!(c.homeassistant_version, HaVersion::OLDEST);
         assert_eq!(c.command_topic, None, "commands are off by default");
         assert_eq!(c.command_min_interval, Duration::from_secs(5));
         assert!(is_valid_name(&c.name));
@@ -467,6 +483,14 @@ baud = 57600
         bad(
             &format!("[homeassistant]\nprefix = \"$ha\"\n{node}"),
             "starts with `$`",
+        );
+        bad(
+            &format!("[homeassistant]\nversion = \"2023.12\"\n{node}"),
+            "[homeassistant] version: 2023.12 is older than 2024.1",
+        );
+        bad(
+            &format!("[homeassistant]\nversion = \"latest\"\n{node}"),
+            "[homeassistant] version: `latest` is not a Home Assistant release",
         );
         bad(
             &format!("[commands]\nenabled = true\ntopic = \"$x/{{node}}\"\n{node}"),

@@ -1,34 +1,87 @@
 //! Home Assistant MQTT discovery: retained config messages under
 //! `<ha prefix>/<component>/<node_id>/<object_id>/config` that make every
-//! node appear as a device with
+//! node a device under the gateway's device (`via_device`), with the
+//! entities of [`entities`] reading the node's retained state topic, and
+//! the gateway a device with a `connectivity` binary sensor.
 //!
-//! - `binary_sensor` `ice` (device class `cold`: on = ice on the face, the
-//!   detector's state; Home Assistant shows "Cold" / "Normal"),
-//! - `sensor` `i1`, `i2` (µA, from the measurement topic), `temperature`
-//!   (°C, device class `temperature`),
-//! - `sensor` `thickness` (mm, device class `distance`, from the state
-//!   topic) once the node sends an ice estimate,
+//! - Ids come from the node's hardware id (`Hello::unique_id`), not its
+//!   configured name: the device `fois_node_<id hex>`, each entity
+//!   `fois_node_<id hex>_<object>`, so renaming a node in the config keeps
+//!   its entities and their history (the device's name follows the config).
+//! - Each node entity is available only while both the gateway and the
+//!   node are (`availability_mode: all`): a dead gateway or an unplugged
+//!   node shows "unavailable", never a stale "Normal".
+//! - The messages fit the oldest Home Assistant release configured
+//!   ([`HaVersion`]): newer keys only when it takes them.
+//! - Stale configs are deleted (an empty retained message) once per node
+//!   and run: the buttons when commands are off, and the configs of
+//!   gateway versions that named entities after the node's name.
 //!
-//! and the gateway as a device with a `connectivity` binary sensor. Each
-//! node entity is available only while both the gateway and the node are
-//! (`availability_mode: all`), so a dead gateway or an unplugged node shows
-//! "unavailable", never a stale "Normal".
+//! Checked by a real Home Assistant: `cargo xtask ha-check` (gateway
+//! README, "Home Assistant").
+
+pub mod entities;
+pub mod version;
 
 use fois_protocol::Hello;
-use serde_json::{Value, json};
+use serde_json::{Map, Value, json};
 
 use fois_link::text::{firmware_text, unique_id_hex};
 
 use crate::topics::Topics;
+use entities::{Entity, Source};
+pub use version::HaVersion;
 
-/// The `node_id` of a node's discovery topics (also its device identifier).
-pub fn node_id(gateway: &str, node: &str) -> String {
-    format!("fois_{gateway}_{node}")
+/// A node's device identifier and the `node_id` level of its discovery
+/// topics: from its hardware key ([`hardware_key`]).
+pub fn node_id(key: &str) -> String {
+    format!("fois_node_{key}")
 }
 
 /// The gateway's device identifier.
 pub fn gateway_id(gateway: &str) -> String {
     format!("fois_{gateway}")
+}
+
+/// The key a node's ids are made of: its unique id in hex; when another
+/// node of the same gateway reports the same id (a misconfigured fleet),
+/// `-<index>` is added so that neither's entities replace the other's.
+pub fn hardware_key(hello: &Hello, index: usize, others: &[Option<&Hello>]) -> String {
+    let id = unique_id_hex(hello);
+    let shared = others
+        .iter()
+        .enumerate()
+        .any(|(j, h)| j != index && h.is_some_and(|h| h.unique_id == hello.unique_id));
+    if shared { format!("{id}-{index}") } else { id }
+}
+
+/// What one gateway announces, and for which Home Assistant.
+#[derive(Debug, Clone, Copy)]
+pub struct Discovery<'a> {
+    /// The discovery prefix (`homeassistant`).
+    pub prefix: &'a str,
+    /// The gateway's topics.
+    pub topics: &'a Topics,
+    /// The gateway's name.
+    pub gateway: &'a str,
+    /// The oldest Home Assistant release to satisfy.
+    pub version: HaVersion,
+}
+
+/// One node as discovery sees it.
+#[derive(Debug, Clone, Copy)]
+pub struct NodeInfo<'a> {
+    /// Its name in topics (the config's, or its unique id).
+    pub name: &'a str,
+    /// Its hardware key ([`hardware_key`]).
+    pub key: &'a str,
+    /// Its `Hello`.
+    pub hello: &'a Hello,
+    /// It has sent an ice estimate: the thickness, water film, σ and medium
+    /// entities.
+    pub estimate: bool,
+    /// It has sent an optical gain estimate: the gain entity.
+    pub gain: bool,
 }
 
 fn origin() -> Value {
@@ -38,174 +91,190 @@ fn origin() -> Value {
     })
 }
 
-/// The gateway's own discovery message: (topic, payload).
-pub fn gateway_config(ha_prefix: &str, topics: &Topics, gateway: &str) -> (String, Vec<u8>) {
-    let id = gateway_id(gateway);
-    let cfg = json!({
-        "name": "Connectivity",
-        "unique_id": format!("{id}_connectivity"),
-        "device_class": "connectivity",
-        "state_topic": topics.gateway_availability(),
-        "payload_on": "online",
-        "payload_off": "offline",
-        "entity_category": "diagnostic",
-        "device": {
-            "identifiers": [id],
-            "name": format!("FOIS gateway {gateway}"),
+impl Discovery<'_> {
+    fn topic(&self, component: &str, node_id: &str, object: &str) -> String {
+        format!("{}/{component}/{node_id}/{object}/config", self.prefix)
+    }
+
+    /// The gateway's own discovery message: (topic, payload).
+    pub fn gateway_config(&self) -> (String, Vec<u8>) {
+        let id = gateway_id(self.gateway);
+        let cfg = json!({
+            "name": "Connectivity",
+            "unique_id": format!("{id}_connectivity"),
+            "device_class": "connectivity",
+            "state_topic": self.topics.gateway_availability(),
+            "payload_on": "online",
+            "payload_off": "offline",
+            "entity_category": "diagnostic",
+            "device": {
+                "identifiers": [id],
+                "name": format!("FOIS gateway {}", self.gateway),
+                "manufacturer": "FOIS",
+                "model": "fois-gateway",
+                "sw_version": env!("CARGO_PKG_VERSION"),
+            },
+            "origin": origin(),
+        });
+        (
+            self.topic("binary_sensor", &id, "connectivity"),
+            cfg.to_string().into_bytes(),
+        )
+    }
+
+    fn device(&self, node: &NodeInfo) -> Value {
+        let mut d = json!({
+            "identifiers": [node_id(node.key)],
+            "name": format!("FOIS {}", node.name),
             "manufacturer": "FOIS",
-            "model": "fois-gateway",
-            "sw_version": env!("CARGO_PKG_VERSION"),
-        },
-        "origin": origin(),
-    });
-    (
-        format!("{ha_prefix}/binary_sensor/{id}/connectivity/config"),
-        cfg.to_string().into_bytes(),
+            "model": node.hello.board_name(),
+            "sw_version": firmware_text(node.hello),
+            "via_device": gateway_id(self.gateway),
+        });
+        if self.version.serial_number() {
+            d["serial_number"] = json!(unique_id_hex(node.hello));
+        }
+        d
+    }
+
+    /// The entities a node has now (its estimate and gain as sent so far,
+    /// the buttons when commands are on).
+    fn wanted(&self, node: &NodeInfo) -> impl Iterator<Item = &'static Entity> {
+        let commands = self.topics.command(node.name).is_some();
+        let (estimate, gain) = (node.estimate, node.gain);
+        entities::NODE.iter().filter(move |e| match e.needs {
+            entities::Needs::Always => true,
+            entities::Needs::Estimate => estimate,
+            entities::Needs::Gain => gain,
+            entities::Needs::Commands => commands,
+        })
+    }
+
+    /// The discovery messages of one node: (topic, payload) each.
+    pub fn node_configs(&self, node: &NodeInfo) -> Vec<(String, Vec<u8>)> {
+        let id = node_id(node.key);
+        let device = self.device(node);
+        let availability = json!([
+            { "topic": self.topics.gateway_availability() },
+            { "topic": self.topics.availability(node.name) },
+        ]);
+        let state = self.topics.state(node.name);
+        self.wanted(node)
+            .map(|e| {
+                let mut m = Map::new();
+                m.insert("name".into(), json!(e.name));
+                m.insert("unique_id".into(), json!(format!("{id}_{}", e.object)));
+                m.insert("availability".into(), availability.clone());
+                m.insert("availability_mode".into(), json!("all"));
+                m.insert("payload_available".into(), json!("online"));
+                m.insert("payload_not_available".into(), json!("offline"));
+                m.insert("device".into(), device.clone());
+                m.insert("origin".into(), origin());
+                if let Some(c) = e.category {
+                    m.insert("entity_category".into(), json!(c));
+                }
+                if let Some(c) = e.device_class {
+                    m.insert("device_class".into(), json!(c));
+                }
+                match e.source {
+                    Source::Flag(key) => {
+                        m.insert("state_topic".into(), json!(state));
+                        m.insert(
+                            "value_template".into(),
+                            json!(format!("{{{{ 'ON' if value_json.{key} else 'OFF' }}}}")),
+                        );
+                        m.insert("payload_on".into(), json!("ON"));
+                        m.insert("payload_off".into(), json!("OFF"));
+                    }
+                    Source::Any(key) => {
+                        m.insert("state_topic".into(), json!(state));
+                        m.insert(
+                            "value_template".into(),
+                            json!(format!(
+                                "{{{{ 'ON' if value_json.{key} | length > 0 else 'OFF' }}}}"
+                            )),
+                        );
+                        m.insert("payload_on".into(), json!("ON"));
+                        m.insert("payload_off".into(), json!("OFF"));
+                    }
+                    Source::Value(key) => {
+                        m.insert("state_topic".into(), json!(state));
+                        m.insert("value_template".into(), json!(defined(key)));
+                    }
+                    Source::Press(payload) => {
+                        if let Some(t) = self.topics.command(node.name) {
+                            m.insert("command_topic".into(), json!(t));
+                        }
+                        m.insert("payload_press".into(), json!(payload));
+                        m.insert("retain".into(), json!(false));
+                    }
+                }
+                if let Some(u) = e.unit {
+                    m.insert("unit_of_measurement".into(), json!(u));
+                }
+                if let Some(c) = e.state_class {
+                    m.insert("state_class".into(), json!(c));
+                }
+                if let Some(p) = e.precision {
+                    m.insert("suggested_display_precision".into(), json!(p));
+                }
+                if !e.options.is_empty() && self.version.enum_options() {
+                    m.insert("options".into(), json!(e.options));
+                }
+                if !e.attributes.is_empty() {
+                    m.insert("json_attributes_topic".into(), json!(state));
+                    m.insert(
+                        "json_attributes_template".into(),
+                        json!(attributes_template(e.attributes)),
+                    );
+                }
+                (
+                    self.topic(e.component, &id, e.object),
+                    Value::Object(m).to_string().into_bytes(),
+                )
+            })
+            .collect()
+    }
+
+    /// Discovery topics to empty (retained) once per node and run: the
+    /// node's entities it does not have now that never come back by
+    /// themselves (the buttons with commands off), and the configs of
+    /// gateway versions that named everything after the node's name.
+    pub fn stale_topics(&self, node: &NodeInfo) -> Vec<String> {
+        let id = node_id(node.key);
+        let wanted: Vec<&str> = self.wanted(node).map(|e| e.object).collect();
+        let mut out: Vec<String> = entities::NODE
+            .iter()
+            .filter(|e| e.needs == entities::Needs::Commands && !wanted.contains(&e.object))
+            .map(|e| self.topic(e.component, &id, e.object))
+            .collect();
+        let old = format!("fois_{}_{}", self.gateway, node.name);
+        for (component, object) in entities::BY_NAME_BEFORE {
+            out.push(self.topic(component, &old, object));
+        }
+        out
+    }
+}
+
+/// `{{ value_json.KEY if value_json.KEY is defined else none }}`: a key the
+/// node has not sent yet shows "unknown", not a template error.
+fn defined(key: &str) -> String {
+    format!("{{{{ value_json.{key} if value_json.{key} is defined else none }}}}")
+}
+
+/// The attributes `(name, state key)` of an entity, as a template that
+/// renders a JSON object (`{}` until the first key is sent).
+fn attributes_template(attributes: &[(&str, &str)]) -> String {
+    let pairs: Vec<String> = attributes
+        .iter()
+        .map(|(name, key)| format!("'{name}': value_json.{key}"))
+        .collect();
+    format!(
+        "{{{{ {{{}}} | tojson if value_json.{} is defined else '{{}}' }}}}",
+        pairs.join(", "),
+        attributes[0].1
     )
 }
 
-/// The discovery messages of one node: (topic, payload) each.
-/// `with_thickness`: the node sends an estimate, add the thickness sensor.
-pub fn node_configs(
-    ha_prefix: &str,
-    topics: &Topics,
-    gateway: &str,
-    node: &str,
-    hello: &Hello,
-    with_thickness: bool,
-) -> Vec<(String, Vec<u8>)> {
-    let id = node_id(gateway, node);
-    let device = json!({
-        "identifiers": [id],
-        "name": format!("FOIS {node}"),
-        "manufacturer": "FOIS",
-        "model": hello.board_name(),
-        "sw_version": firmware_text(hello),
-        "serial_number": unique_id_hex(hello),
-        "via_device": gateway_id(gateway),
-    });
-    let availability = json!([
-        { "topic": topics.gateway_availability() },
-        { "topic": topics.availability(node) },
-    ]);
-    let common = |name: &str, obj: &str| -> serde_json::Map<String, Value> {
-        let mut m = serde_json::Map::new();
-        m.insert("name".into(), json!(name));
-        m.insert("unique_id".into(), json!(format!("{id}_{obj}")));
-        m.insert("availability".into(), availability.clone());
-        m.insert("availability_mode".into(), json!("all"));
-        m.insert("payload_available".into(), json!("online"));
-        m.insert("payload_not_available".into(), json!("offline"));
-        m.insert("device".into(), device.clone());
-        m.insert("origin".into(), origin());
-        m
-    };
-    let mut out = Vec::new();
-    let mut push = |component: &str, obj: &str, m: serde_json::Map<String, Value>| {
-        out.push((
-            format!("{ha_prefix}/{component}/{id}/{obj}/config"),
-            Value::Object(m).to_string().into_bytes(),
-        ));
-    };
-
-    let mut ice = common("Ice", "ice");
-    ice.insert("device_class".into(), json!("cold"));
-    ice.insert("state_topic".into(), json!(topics.state(node)));
-    ice.insert(
-        "value_template".into(),
-        json!("{{ 'ON' if value_json.ice else 'OFF' }}"),
-    );
-    ice.insert("payload_on".into(), json!("ON"));
-    ice.insert("payload_off".into(), json!("OFF"));
-    ice.insert("json_attributes_topic".into(), json!(topics.state(node)));
-    push("binary_sensor", "ice", ice);
-
-    for (obj, name, key) in [("i1", "I1", "i1_ua"), ("i2", "I2", "i2_ua")] {
-        let mut s = common(name, obj);
-        s.insert("state_topic".into(), json!(topics.measurement(node)));
-        s.insert(
-            "value_template".into(),
-            json!(format!("{{{{ value_json.{key} }}}}")),
-        );
-        // Home Assistant's `current` device class takes A and mA only.
-        s.insert("unit_of_measurement".into(), json!("µA"));
-        s.insert("state_class".into(), json!("measurement"));
-        s.insert("suggested_display_precision".into(), json!(3));
-        push("sensor", obj, s);
-    }
-
-    let mut t = common("Temperature", "temperature");
-    t.insert("device_class".into(), json!("temperature"));
-    t.insert("state_topic".into(), json!(topics.measurement(node)));
-    t.insert(
-        "value_template".into(),
-        json!("{{ value_json.temperature_c }}"),
-    );
-    t.insert("unit_of_measurement".into(), json!("°C"));
-    t.insert("state_class".into(), json!("measurement"));
-    t.insert("suggested_display_precision".into(), json!(1));
-    push("sensor", "temperature", t);
-
-    if with_thickness {
-        let mut d = common("Ice thickness", "thickness");
-        d.insert("device_class".into(), json!("distance"));
-        d.insert("state_topic".into(), json!(topics.state(node)));
-        d.insert(
-            "value_template".into(),
-            json!("{{ value_json.thickness_mm if value_json.thickness_mm is defined else none }}"),
-        );
-        d.insert("unit_of_measurement".into(), json!("mm"));
-        d.insert("state_class".into(), json!("measurement"));
-        d.insert("suggested_display_precision".into(), json!(2));
-        push("sensor", "thickness", d);
-    }
-    out
-}
-
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn hello() -> Hello {
-        Hello {
-            protocol_version: 2,
-            firmware_version: [0, 3, 1],
-            board: Hello::board_from_str("nucleo-f446re"),
-            unique_id: [1; 12],
-            reset_reason: fois_protocol::ResetReason::PowerOn,
-        }
-    }
-
-    #[test]
-    fn node_configs_carry_what_home_assistant_needs() {
-        let t = Topics::new("fois", "gw", None);
-        let msgs = node_configs("homeassistant", &t, "gw", "n1", &hello(), false);
-        let topics: Vec<&str> = msgs.iter().map(|m| m.0.as_str()).collect();
-        assert_eq!(
-            topics,
-            vec![
-                "homeassistant/binary_sensor/fois_gw_n1/ice/config",
-                "homeassistant/sensor/fois_gw_n1/i1/config",
-                "homeassistant/sensor/fois_gw_n1/i2/config",
-                "homeassistant/sensor/fois_gw_n1/temperature/config",
-            ]
-        );
-        let ice: Value = serde_json::from_slice(&msgs[0].1).unwrap();
-        assert_eq!(ice["device_class"], "cold");
-        assert_eq!(ice["state_topic"], "fois/gw/n1/state");
-        assert_eq!(ice["unique_id"], "fois_gw_n1_ice");
-        assert_eq!(ice["availability_mode"], "all");
-        assert_eq!(ice["availability"][1]["topic"], "fois/gw/n1/availability");
-        assert_eq!(ice["device"]["identifiers"][0], "fois_gw_n1");
-        assert_eq!(ice["device"]["model"], "nucleo-f446re");
-        assert_eq!(ice["device"]["sw_version"], "0.3.1");
-        let temp: Value = serde_json::from_slice(&msgs[3].1).unwrap();
-        assert_eq!(temp["unit_of_measurement"], "°C");
-        assert_eq!(temp["device_class"], "temperature");
-        let with = node_configs("ha", &t, "gw", "n1", &hello(), true);
-        let thick: Value = serde_json::from_slice(&with[4].1).unwrap();
-        assert_eq!(with[4].0, "ha/sensor/fois_gw_n1/thickness/config");
-        assert_eq!(thick["unit_of_measurement"], "mm");
-        assert_eq!(thick["device_class"], "distance");
-    }
-}
+mod tests;

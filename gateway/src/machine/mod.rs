@@ -15,6 +15,7 @@
 //! latest state in the shared [`Fleet`] for other front ends.
 
 mod commands;
+mod homeassistant;
 mod nodes;
 pub mod owner;
 #[cfg(test)]
@@ -29,20 +30,18 @@ use rumqttc::QoS;
 use tracing::{error, info, warn};
 
 use crate::config::{GatewayConfig, NodeSpec};
-use crate::discovery;
 use crate::inflight::{InFlight, WINDOW};
 use crate::payload::{InfoJson, StateJson, StatusJson};
 use crate::queue::{Queue, Record};
 use crate::reader::NodeCommand;
 use crate::snapshot::Fleet;
+use crate::state_filter::StateFilter;
 use crate::topics::Topics;
 
 pub use commands::MAX_COMMAND_BYTES;
 
 /// Wait before reconnecting to the broker.
 pub const RECONNECT_DELAY: Duration = Duration::from_secs(1);
-/// A thickness change below this never re-publishes the state.
-pub const THICKNESS_STEP_MM: f64 = 0.01;
 
 /// What the driver is to do.
 #[derive(Debug, Clone, PartialEq)]
@@ -99,9 +98,15 @@ pub(crate) struct NodeSlot {
     hello: Option<Hello>,
     online: bool,
     last_state: Option<StateJson>,
-    published_state: Option<(StateJson, Instant)>,
+    /// When the state is published, with which (held) values.
+    state_filter: StateFilter,
     last_meas_uptime: Option<u64>,
     has_estimate: bool,
+    has_gain: bool,
+    /// Frames received since the gateway started.
+    frames: u64,
+    /// Stale discovery configs emptied (once per node and run).
+    stale_cleared: bool,
     subscribed: bool,
     lost: u64,
     /// When the last command was handed to the node (rate limit).
@@ -148,9 +153,12 @@ impl Gateway {
                 hello: None,
                 online: false,
                 last_state: None,
-                published_state: None,
+                state_filter: StateFilter::default(),
                 last_meas_uptime: None,
                 has_estimate: false,
+                has_gain: false,
+                frames: 0,
+                stale_cleared: false,
                 subscribed: false,
                 lost: 0,
                 last_command: None,
@@ -315,7 +323,6 @@ impl Gateway {
         let online = slot.online;
         let port = slot.spec.port.clone();
         let hello = slot.hello.clone();
-        let with_thickness = slot.has_estimate;
         let state = slot.last_state.clone();
         self.publish_now(
             self.topics.availability(&name),
@@ -326,21 +333,11 @@ impl Gateway {
         if let Some(h) = &hello {
             let info = serde_json::to_vec(&InfoJson::new(&name, &port, h)).unwrap_or_default();
             self.publish_now(self.topics.info(&name), info, true, QoS::AtMostOnce);
-            if let Some(prefix) = self.cfg.homeassistant_prefix.clone() {
-                for (t, p) in discovery::node_configs(
-                    &prefix,
-                    &self.topics,
-                    &self.cfg.name,
-                    &name,
-                    h,
-                    with_thickness,
-                ) {
-                    self.publish_now(t, p, true, QoS::AtMostOnce);
-                }
-            }
+            self.announce_discovery(k);
         }
         if let Some(s) = state {
-            self.publish_state(k, s);
+            let s = self.nodes[k].state_filter.force(s, Instant::now());
+            self.publish_state(s);
         }
         if let Some(topic) = self.topics.command(&name)
             && self.connected
@@ -372,13 +369,10 @@ impl Gateway {
         }
     }
 
-    fn publish_state(&mut self, k: usize, s: StateJson) {
+    fn publish_state(&mut self, s: StateJson) {
         let payload = serde_json::to_vec(&s).unwrap_or_default();
         let topic = self.topics.state(&s.node);
         self.publish_now(topic, payload, true, QoS::AtMostOnce);
-        if self.connected {
-            self.nodes[k].published_state = Some((s, Instant::now()));
-        }
     }
 
     fn publish_status(&mut self, now: Instant) {
@@ -425,8 +419,8 @@ impl Gateway {
             true,
             QoS::AtLeastOnce,
         );
-        if let Some(prefix) = self.cfg.homeassistant_prefix.clone() {
-            let (t, p) = discovery::gateway_config(&prefix, &self.topics, &self.cfg.name);
+        if let Some(d) = self.discovery() {
+            let (t, p) = d.gateway_config();
             self.publish_now(t, p, true, QoS::AtMostOnce);
         }
         for k in 0..self.nodes.len() {

@@ -12,7 +12,7 @@ use fois_protocol::{DeviceMsg, Hello, SeqEvent};
 use rumqttc::QoS;
 use tracing::{info, warn};
 
-use super::{Gateway, THICKNESS_STEP_MM};
+use super::Gateway;
 use crate::payload::{EventJson, LinkEventJson, MeasurementJson, StateJson};
 use crate::reader::{NodeMsg, NodeUpdate};
 
@@ -138,6 +138,7 @@ impl Gateway {
         now: Instant,
     ) {
         self.sum.frames += 1;
+        self.nodes[k].frames += 1;
         match ev {
             SeqEvent::Gap(n) => {
                 self.nodes[k].lost += n;
@@ -183,24 +184,13 @@ impl Gateway {
     }
 
     fn on_reading(&mut self, k: usize, name: &str, seq: u32, r: Reading, t: u64, now: Instant) {
-        let lost = self.nodes[k].lost;
-        let state = StateJson::new(name, seq, &r, lost, t);
-        if r.estimate.is_some() && !self.nodes[k].has_estimate {
-            self.nodes[k].has_estimate = true;
-            self.announce_node(k);
-        }
-        let due = match &self.nodes[k].published_state {
-            None => true,
-            Some((p, at)) => {
-                p.differs_discretely(&state)
-                    || (state.thickness_moved(p, THICKNESS_STEP_MM)
-                        && now.saturating_duration_since(*at)
-                            >= Duration::from_millis(self.cfg.state_interval_ms))
-            }
-        };
+        let frames = (self.nodes[k].frames, self.nodes[k].lost);
+        let state = StateJson::new(name, seq, &r, frames, t);
         self.nodes[k].last_state = Some(state.clone());
-        if due {
-            self.publish_state(k, state);
+        self.new_entities(k, &r);
+        let interval = Duration::from_millis(self.cfg.state_interval_ms);
+        if let Some(s) = self.nodes[k].state_filter.offer(state, now, interval) {
+            self.publish_state(s);
         }
         let interval = if self.connected {
             self.cfg.measurement_interval_ms
