@@ -169,9 +169,18 @@ fn three_nodes_every_record_arrives_once_with_discovery_and_state() {
     assert_eq!(gw_av.first().unwrap().text(), "online");
     assert_eq!(gw_av.last().unwrap().text(), "offline");
 
-    // Home Assistant discovery: what HA needs to build the entities.
+    // Home Assistant discovery: what HA needs to build the entities, each
+    // node a device named by its hardware id (`cargo xtask ha-check` runs
+    // a real Home Assistant on them).
+    let mut ids = Vec::new();
     for n in ["iced", "wet", "dry"] {
-        let id = format!("fois_gw_{n}");
+        let info = sub.on(&format!("fois/gw/{n}/info"));
+        let uid = info.last().expect("the node's info").json()["unique_id"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        let id = format!("fois_node_{uid}");
+        ids.push(id.clone());
         let cfg = |comp: &str, obj: &str| -> serde_json::Value {
             let t = format!("homeassistant/{comp}/{id}/{obj}/config");
             let m = sub.on(&t);
@@ -214,7 +223,7 @@ fn three_nodes_every_record_arrives_once_with_discovery_and_state() {
         ] {
             let s = cfg("sensor", obj);
             assert_eq!(s["unit_of_measurement"], unit, "{obj}");
-            assert_eq!(s["state_topic"], format!("fois/gw/{n}/measurement"));
+            assert_eq!(s["state_topic"], format!("fois/gw/{n}/state"));
             assert!(s["value_template"].as_str().unwrap().contains(key), "{s}");
             assert_eq!(s["device"]["identifiers"][0], id);
             assert_eq!(s["state_class"], "measurement");
@@ -228,6 +237,9 @@ fn three_nodes_every_record_arrives_once_with_discovery_and_state() {
         assert_eq!(t["unit_of_measurement"], "mm");
         assert_eq!(t["state_topic"], format!("fois/gw/{n}/state"));
     }
+    ids.sort();
+    ids.dedup();
+    assert_eq!(ids.len(), 3, "every virtual node has its own id: {ids:?}");
     let gwc = sub.on("homeassistant/binary_sensor/fois_gw/connectivity/config");
     assert_eq!(gwc.last().unwrap().json()["device_class"], "connectivity");
 }
@@ -852,14 +864,15 @@ fn a_node_with_an_ice_estimate_gets_a_thickness_entity() {
     let cfg = gateway_config(dir.path(), "gw", broker.port, &[(&path, "est")], "");
     let mut gw = GatewayProc::start(&cfg, &[], &dir.path().join("gw.out"));
     sub.wait_for("the thickness entity", Duration::from_secs(10), |m| {
-        m.iter()
-            .any(|m| m.topic == "homeassistant/sensor/fois_gw_est/thickness/config")
+        m.iter().any(|m| {
+            m.topic == "homeassistant/sensor/fois_node_424242424242424242424242/thickness/config"
+        })
     });
     std::thread::sleep(Duration::from_millis(500));
     assert_eq!(gw.interrupt(), 0);
     stop.store(true, Ordering::Relaxed);
     feeder.join().unwrap();
-    let t = sub.on("homeassistant/sensor/fois_gw_est/thickness/config");
+    let t = sub.on("homeassistant/sensor/fois_node_424242424242424242424242/thickness/config");
     let t = t.last().unwrap().json();
     assert_eq!(t["unit_of_measurement"], "mm");
     assert_eq!(t["device_class"], "distance");
