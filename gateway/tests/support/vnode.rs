@@ -99,15 +99,32 @@ impl NodeProc {
     }
 
     fn serve(scene: Scene, link: Option<&Path>) -> NodeProc {
+        Self::serve_node(scene.speed, link, move || scene.node())
+    }
+
+    /// Serve the node `build` makes (on the serving thread: building
+    /// ray-traces its curves) at `speed` virtual seconds per real second.
+    pub fn start_with(
+        speed: f64,
+        build: impl FnOnce() -> VirtualNode + Send + 'static,
+    ) -> NodeProc {
+        Self::serve_node(speed, None, build)
+    }
+
+    fn serve_node(
+        speed: f64,
+        link: Option<&Path>,
+        build: impl FnOnce() -> VirtualNode + Send + 'static,
+    ) -> NodeProc {
         let stop = Arc::new(AtomicBool::new(false));
         let (tx, rx) = std::sync::mpsc::channel();
         let s2 = stop.clone();
         let thread = std::thread::spawn(move || {
-            let mut node = scene.node();
+            let mut node = build();
             let mut pty = Pty::open().expect("a pseudo-terminal");
             tx.send(pty.path().display().to_string()).unwrap();
             let opts = ServeOptions {
-                speed: scene.speed,
+                speed,
                 duration: None,
             };
             pty::serve(&mut node, &mut pty, &opts, &s2).expect("serving the virtual node");

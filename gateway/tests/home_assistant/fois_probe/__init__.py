@@ -2,7 +2,8 @@
 
 Loaded as a custom integration from the test's config directory, it writes
 what a user of this Home Assistant sees to ``fois_probe.json`` every half
-second (written to a temporary file, then renamed): the version, every
+second (written to a temporary file, then renamed): the version, the
+config entries and their state (MQTT: ``loaded``), every
 entity's state and attributes, the device and entity registries, how many
 state changes each entity has had (the recorder writes one row per state
 change), the rows per entity in the recorder's database, and every
@@ -136,9 +137,14 @@ async def async_setup(hass: HomeAssistant, config: dict) -> bool:
             }
             for s in hass.states.async_all()
         ]
+        config_entries = [
+            {"domain": e.domain, "title": e.title, "state": e.state.value}
+            for e in hass.config_entries.async_entries()
+        ]
         return _plain(
             {
                 "version": __version__,
+                "config_entries": config_entries,
                 "states": states,
                 "devices": devices,
                 "entities": entities,
