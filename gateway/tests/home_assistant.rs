@@ -1,5 +1,5 @@
 //! The gateway's Home Assistant discovery, checked by a real Home Assistant
-//! core: a Mosquitto broker, three virtual nodes on ptys (the firmware's own
+//! core: a Mosquitto broker, four virtual nodes on ptys (the firmware's own
 //! `Node`), `fois-gateway` with discovery and commands on, and Home
 //! Assistant (from the virtualenv `FOIS_HA_PYTHON` names) on the same
 //! broker. What a user of that Home Assistant sees is read through the
@@ -124,6 +124,9 @@ const EXPECTED: [(
     ("ack", "button", None, None, None, None),
     ("calibrate_dark", "button", None, None, None, Some("config")),
 ];
+
+/// The nodes, by name in the config.
+const NODES: [&str; 4] = ["iced", "wet", "dry", "rime"];
 
 /// A virtual node on `segments` at `speed`.
 fn node(speed: f64, segments: Vec<Segment>, seed: u64) -> NodeProc {
@@ -294,7 +297,22 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
         12,
     );
     let mut dry = node(1.0, vec![Segment::new(f64::INFINITY, Cover::Dry)], 13);
-    let names = [("iced", &iced), ("wet", &wet), ("dry", &dry)];
+    // Rime growing at 6 mm/h in real time: the rate of state changes while
+    // ice grows, as a site would see it.
+    let rime = node(
+        1.0,
+        vec![
+            Segment::new(3.0, Cover::Dry),
+            Segment::new(f64::INFINITY, Cover::Rime).rate(6.0),
+        ],
+        14,
+    );
+    let names = [
+        ("iced", &iced),
+        ("wet", &wet),
+        ("dry", &dry),
+        ("rime", &rime),
+    ];
     let ports: Vec<(&str, &str)> = names.iter().map(|(n, p)| (p.path.as_str(), *n)).collect();
     let cfg = config(dir.path(), broker.port, &configured, &ports);
     let out = dir.path().join("gw.out");
@@ -302,11 +320,11 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
 
     // Devices: one per node, under the gateway's.
     let s = ha.wait(
-        "the gateway and three node devices",
+        "the gateway and four node devices",
         Duration::from_secs(60),
         |s| {
             s.device("FOIS gateway gw").is_some()
-                && ["iced", "wet", "dry"].iter().all(|n| {
+                && NODES.iter().all(|n| {
                     Device::of(s, n).is_some_and(|d| s.entities_of(&d.id).len() >= EXPECTED.len())
                 })
         },
@@ -315,14 +333,11 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
         .as_str()
         .unwrap()
         .to_string();
-    let devs: Vec<Device> = ["iced", "wet", "dry"]
-        .iter()
-        .map(|n| Device::of(&s, n).unwrap())
-        .collect();
+    let devs: Vec<Device> = NODES.iter().map(|n| Device::of(&s, n).unwrap()).collect();
     let serial = fois_gateway::discovery::HaVersion::parse(&configured)
         .unwrap()
         .serial_number();
-    for (d, n) in devs.iter().zip(["iced", "wet", "dry"]) {
+    for (d, n) in devs.iter().zip(NODES) {
         let reg = s.device(&format!("FOIS {n}")).unwrap();
         assert_eq!(
             reg["via_device_id"],
@@ -341,15 +356,18 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
             "{n}: serial_number where the release takes it"
         );
     }
-    assert_ne!(devs[0].ident, devs[1].ident);
+    let mut idents: Vec<&str> = devs.iter().map(|d| d.ident.as_str()).collect();
+    idents.sort_unstable();
+    idents.dedup();
+    assert_eq!(idents.len(), NODES.len(), "one device per node");
     let _ = writeln!(
         report,
-        "devices: FOIS gateway gw; FOIS iced, FOIS wet, FOIS dry, each via the gateway (serial_number {})",
+        "devices: FOIS gateway gw; FOIS iced, FOIS wet, FOIS dry, FOIS rime, each via the gateway (serial_number {})",
         if serial { "shown" } else { "left out" }
     );
 
     // Every entity with its unit and classes (the registry: what the UI shows).
-    for (d, n) in devs.iter().zip(["iced", "wet", "dry"]) {
+    for (d, n) in devs.iter().zip(NODES) {
         for (object, domain, class, unit, state_class, category) in EXPECTED {
             let e = s
                 .entity(&d.uid(object))
@@ -368,7 +386,7 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
     }
 
     // The iced node: ice on, alarm on; the button acknowledges it.
-    let (di, dw, dd) = (&devs[0], &devs[1], &devs[2]);
+    let (di, dw, dd, dr) = (&devs[0], &devs[1], &devs[2], &devs[3]);
     let icing = (s.clone(), Instant::now());
     let s = ha.wait("ice on the iced node", Duration::from_secs(40), |s| {
         s.state(&di.uid("ice")) == Some("on") && s.state(&di.uid("alarm")) == Some("on")
@@ -447,7 +465,12 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
     std::thread::sleep(Duration::from_secs(60));
     let b = ha.snapshot().unwrap();
     let minutes = ta.elapsed().as_secs_f64() / 60.0;
-    for (d, n, speed) in [(di, "iced", 10), (dw, "wet", 10), (dd, "dry", 1)] {
+    for (d, n, speed) in [
+        (di, "iced", 10),
+        (dw, "wet", 10),
+        (dd, "dry", 1),
+        (dr, "rime", 1),
+    ] {
         let (ca, cb) = (changes(&a, d), changes(&b, d));
         let delta: u64 = cb
             .iter()
@@ -464,7 +487,7 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
             minutes
         );
         assert!(
-            per_min <= 13.0,
+            per_min <= 30.0,
             "{n}: {per_min:.1} state changes per minute"
         );
         if n == "dry" {
@@ -489,7 +512,7 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
         },
     );
     let unplug_s = t0.elapsed().as_secs_f64();
-    for d in [di, dw] {
+    for d in [di, dw, dr] {
         for e in s.entities_of(&d.id) {
             let st = s.state_of(e["entity_id"].as_str().unwrap()).unwrap();
             assert_ne!(st["state"], "unavailable", "{st}");
@@ -512,6 +535,7 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
         (iced.path.as_str(), "iced"),
         (wet.path.as_str(), "pond"),
         (dry.path.as_str(), "dry"),
+        (rime.path.as_str(), "rime"),
     ];
     let cfg = config(dir.path(), broker.port, &configured, &ports);
     let mut gw = GatewayProc::start(&cfg, &[], &out);
@@ -530,7 +554,7 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
     b4.sort();
     assert_eq!(after, b4, "the same entities (and their history)");
     assert!(s.device("FOIS wet").is_none());
-    assert_eq!(s.devices().len(), 4, "no device left behind");
+    assert_eq!(s.devices().len(), 1 + NODES.len(), "no device left behind");
     let _ = writeln!(
         report,
         "wet renamed pond in the config: the same device and its {} entities (ids unchanged), now \"FOIS pond\"",
@@ -553,7 +577,7 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
         report,
         "what a user sees (after the rename; dry unplugged):"
     );
-    for (d, n) in [(di, "iced"), (dw, "pond"), (dd, "dry")] {
+    for (d, n) in [(di, "iced"), (dw, "pond"), (dd, "dry"), (dr, "rime")] {
         let _ = writeln!(report, "  FOIS {n}");
         table(&s, d, &mut report);
     }

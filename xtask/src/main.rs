@@ -6,10 +6,14 @@
 //!   ([`crates`]), clippy (host crates, and the firmware on its thumb
 //!   target), the whole test suite, the firmware's release cross-build with
 //!   its size budget, the firmware logic on an emulated Cortex-M4F, the
-//!   fuzz crates' build, and the gateway's Debian package ([`package`]).
+//!   fuzz crates' build, the gateway's Debian package ([`package`]), and
+//!   the Home Assistant check when its inputs changed since its recorded
+//!   pass ([`ha_check`]).
 //! - `cargo xtask tools` — only the system tools.
 //! - `cargo xtask crates` — only the crate rules.
 //! - `cargo xtask deb` — build the gateway's Debian package and check it.
+//! - `cargo xtask ha-check` — the gateway's Home Assistant discovery checked
+//!   by real Home Assistant releases (installed into cached virtualenvs).
 //! - `cargo xtask size` — cross-build the firmware and check its size budget.
 //! - `cargo xtask qemu` — run the firmware logic under qemu-system-arm.
 //! - `cargo xtask fuzz [--runs N] [--target NAME]` — every cargo-fuzz target
@@ -23,6 +27,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 
 mod crates;
+mod ha_check;
 mod package;
 mod tools;
 
@@ -54,6 +59,7 @@ fn main() -> Result<()> {
         "tools" => tools::ensure(),
         "crates" => crates::check(&root),
         "deb" => package::build().and_then(|deb| package::check(&deb)),
+        "ha-check" => ha_check::run(&root),
         "size" => firmware_size().map(|_| ()),
         "qemu" => qemu(true),
         "fuzz" => fuzz(&std::env::args().skip(2).collect::<Vec<_>>()),
@@ -62,10 +68,13 @@ fn main() -> Result<()> {
                 "usage: cargo xtask <task>\n\n\
                  tasks:\n  \
                  ci     system tools, format, crate rules, clippy (host + thumb), tests, firmware size\n         \
-                 budget, QEMU run, fuzz crates build, the gateway's Debian package\n  \
-                 tools  install the system tools the tests need (mosquitto, qemu-system-arm, systemd)\n  \
+                 budget, QEMU run, fuzz crates build, the gateway's Debian package, the Home\n         \
+                 Assistant check when its inputs changed since its recorded pass\n  \
+                 tools  install the system tools the tests need (mosquitto, qemu-system-arm, systemd, python3)\n  \
                  crates check the crate rules of ARCHITECTURE.md on the dependency graph\n  \
                  deb    build the gateway's Debian package and check its files, config and unit\n  \
+                 ha-check  the gateway's Home Assistant discovery checked by Home Assistant 2024.1.6 and\n           \
+                 2024.3.3 (installed into virtualenvs under ~/.cache/fois/home-assistant); records a pass\n  \
                  size   cross-build the firmware (release) and check flash <= 128 KiB, RAM <= 32 KiB\n  \
                  qemu   run the firmware logic tests on qemu-system-arm (mps2-an386)\n  \
                  fuzz   [--runs N] [--target NAME] run every fuzz target (or one) N times (default 10^7; installs nightly + cargo-fuzz)"
@@ -169,6 +178,11 @@ fn ci() -> Result<()> {
     step("gateway Debian package", &mut || {
         let deb = package::build()?;
         package::check(&deb)
+    })?;
+    // Minutes and a download of Home Assistant: only when the discovery
+    // code, the payloads or the check changed since the recorded pass.
+    step("Home Assistant check (if changed)", &mut || {
+        ha_check::if_changed(&root)
     })?;
 
     eprintln!("\n=== summary ===");

@@ -9,6 +9,7 @@
 //! | `qemu-system-arm` | `qemu-system-arm` | the firmware logic on an emulated Cortex-M4F |
 //! | `systemd-analyze` | `systemd` | `systemd-analyze verify` of the gateway's unit file |
 //! | `dpkg-deb` | `dpkg` | reading the gateway's Debian package back |
+//! | `python3` (3.11 or 3.12, with `venv`) | `python3-venv` | the Home Assistant check's virtualenvs ([`crate::ha_check`]) |
 //!
 //! Cargo tools (`flip-link`, `cargo-deb`) are installed with `cargo install`
 //! by the steps that need them.
@@ -33,7 +34,7 @@ pub struct Tool {
 const SBIN: &[&str] = &["/usr/sbin", "/usr/local/sbin", "/sbin"];
 
 /// Every system tool `cargo xtask ci` needs.
-pub const TOOLS: [Tool; 5] = [
+pub const TOOLS: [Tool; 6] = [
     Tool {
         name: "mosquitto",
         package: "mosquitto",
@@ -57,6 +58,11 @@ pub const TOOLS: [Tool; 5] = [
     Tool {
         name: "dpkg-deb",
         package: "dpkg",
+        dirs: &[],
+    },
+    Tool {
+        name: "python3",
+        package: "python3-venv",
         dirs: &[],
     },
 ];
@@ -185,11 +191,14 @@ mod tests {
     fn each_missing_package_is_named_once_in_one_command() {
         // mosquitto and mosquitto_passwd are one package.
         let missing = missing_packages(&TOOLS, |t| t.name == "dpkg-deb");
-        assert_eq!(missing, vec!["mosquitto", "qemu-system-arm", "systemd"]);
+        assert_eq!(
+            missing,
+            vec!["mosquitto", "qemu-system-arm", "systemd", "python3-venv"]
+        );
         assert_eq!(
             install_command(&missing),
             "sudo apt-get update && sudo apt-get install -y --no-install-recommends \
-             mosquitto qemu-system-arm systemd"
+             mosquitto qemu-system-arm systemd python3-venv"
         );
         assert!(missing_packages(&TOOLS, |_| true).is_empty());
     }
