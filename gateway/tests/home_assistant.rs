@@ -29,7 +29,7 @@ use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
+use fois_vnode::{Cover, Environment, NodeOptions, NtcWiring, Segment, Timeline, VirtualNode};
 use serde_json::{Value, json};
 use support::home_assistant::{HomeAssistant, Snapshot};
 use support::*;
@@ -296,7 +296,12 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
         ],
         12,
     );
-    let mut dry = node(1.0, vec![Segment::new(f64::INFINITY, Cover::Dry)], 13);
+    // A dry face in real time, its NTC unplugged: a fault.
+    let mut dry = node(
+        1.0,
+        vec![Segment::new(f64::INFINITY, Cover::Dry).ntc(NtcWiring::Open)],
+        13,
+    );
     // Rime growing at 6 mm/h in real time: the rate of state changes while
     // ice grows, as a site would see it.
     let rime = node(
@@ -497,6 +502,29 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
             );
         }
     }
+
+    // The fault, by name; dark calibration from its button.
+    let s = ha.snapshot().unwrap();
+    let problem = s.state_of(&entity_id(&s, dd, "problem")).unwrap().clone();
+    assert_eq!(problem["state"], "on", "{problem}");
+    let faults = problem["attributes"]["faults"].clone();
+    assert!(
+        faults.as_array().unwrap().iter().any(|f| f == "ntc_open"),
+        "{problem}"
+    );
+    ha.call(
+        "button",
+        "press",
+        json!({"entity_id": entity_id(&s, dd, "calibrate_dark")}),
+    );
+    gw.wait_output(
+        "command calibrate-dark for dry: done",
+        Duration::from_secs(20),
+    );
+    let _ = writeln!(
+        report,
+        "dry (NTC unplugged): Problem on, faults {faults}; \"Dark calibration\" pressed -> the node calibrated"
+    );
 
     // Unplugged: the node's entities unavailable, the others not.
     dry.kill9();
