@@ -34,16 +34,19 @@ use serde_json::{Value, json};
 use support::home_assistant::{HomeAssistant, Snapshot};
 use support::*;
 
-/// What a user must see of each entity: (object, entity domain, device
+/// What a user must see of an entity: (object, entity domain, device
 /// class, unit, state class, category).
-const EXPECTED: [(
-    &str,
-    &str,
-    Option<&str>,
-    Option<&str>,
-    Option<&str>,
-    Option<&str>,
-); 16] = [
+type Expected = (
+    &'static str,
+    &'static str,
+    Option<&'static str>,
+    Option<&'static str>,
+    Option<&'static str>,
+    Option<&'static str>,
+);
+
+/// Every entity of a node (with an estimate, commands on).
+const EXPECTED: [Expected; 16] = [
     ("ice", "binary_sensor", Some("cold"), None, None, None),
     ("surface", "sensor", Some("enum"), None, None, None),
     ("alarm", "binary_sensor", Some("safety"), None, None, None),
@@ -486,10 +489,25 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
             .map(|(k, v)| v.1.saturating_sub(ca.get(k).map_or(0, |x| x.1)))
             .sum();
         let per_min = delta as f64 / minutes;
+        let mut which: Vec<String> = cb
+            .iter()
+            .filter_map(|(k, v)| {
+                let d = v.0 - ca.get(k).map_or(0, |x| x.0);
+                let short = k
+                    .split_once(&format!(".fois_{n}_"))
+                    .map_or(k.as_str(), |x| x.1);
+                (d > 0).then(|| format!("{short} {d}"))
+            })
+            .collect();
+        which.sort();
         let _ = writeln!(
             report,
-            "{n} (x{speed} real time): {per_min:.1} state changes/min over {:.1} min ({rows} recorder rows)",
-            minutes
+            "{n} (x{speed} real time): {per_min:.1} state changes/min over {minutes:.1} min ({rows} recorder rows){}",
+            if which.is_empty() {
+                String::new()
+            } else {
+                format!(": {}", which.join(", "))
+            }
         );
         assert!(
             per_min <= 30.0,
