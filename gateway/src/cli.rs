@@ -205,9 +205,12 @@ pub fn check_config(cfg: &GatewayConfig) -> anyhow::Result<String> {
         cfg.queue_dir.display(),
         cfg.queue_max_bytes,
         if cfg.homeassistant_prefix.is_some() {
-            "on"
+            format!(
+                "on (for Home Assistant {} and later)",
+                cfg.homeassistant_version
+            )
         } else {
-            "off"
+            "off".to_string()
         },
         if cfg.command_topic.is_some() {
             "on"

@@ -15,7 +15,9 @@
 //!   `state_interval_ms` (default 5 s) — values that did not move past their
 //!   band stay held even then, so a quiet node changes nothing in Home
 //!   Assistant;
-//! - the frame counter (`frames_received`) is refreshed at most every
+//! - the frame counter (`frames_received`) is refreshed [`COUNTERS_FIRST`]
+//!   after a node's state is first published (or republished after a
+//!   reconnection: it would show 1 for minutes), then at most every
 //!   [`COUNTERS_EVERY`]; `frames_lost` is a continuous value of band 1.
 //!
 //! The measurement topic keeps every value exact, at its own rate.
@@ -26,6 +28,8 @@ use crate::payload::StateJson;
 
 /// `frames_received` is refreshed at most this often.
 pub const COUNTERS_EVERY: Duration = Duration::from_secs(300);
+/// ... and this long after the state was first published.
+pub const COUNTERS_FIRST: Duration = Duration::from_secs(30);
 
 /// A continuous value of the state and its deadband: the value is
 /// re-published when it moved by at least `max(absolute, relative × |last|)`.
@@ -138,7 +142,8 @@ pub const DEADBANDS: [Deadband; 10] = [
 #[derive(Debug, Clone, Default)]
 pub struct StateFilter {
     published: Option<(StateJson, Instant)>,
-    counters_at: Option<Instant>,
+    /// When `frames_received` may be refreshed next.
+    counters_due: Option<Instant>,
 }
 
 impl StateFilter {
@@ -156,9 +161,7 @@ impl StateFilter {
         };
         let moved = DEADBANDS.iter().any(|b| b.moved(last, &next));
         let counters_due = next.frames_received != last.frames_received
-            && self
-                .counters_at
-                .is_none_or(|t| now.saturating_duration_since(t) >= COUNTERS_EVERY);
+            && self.counters_due.is_none_or(|t| now >= t);
         let spaced = now.saturating_duration_since(*at) >= interval;
         if !(last.differs_discretely(&next) || ((moved || counters_due) && spaced)) {
             return None;
@@ -177,7 +180,7 @@ impl StateFilter {
             g.gain_sigma = old.gain_sigma;
         }
         if counters_due {
-            self.counters_at = Some(now);
+            self.counters_due = Some(now + COUNTERS_EVERY);
         } else {
             next.frames_received = last.frames_received;
         }
@@ -188,7 +191,7 @@ impl StateFilter {
     /// Publish `next` as it is (a reconnection, a new node): it becomes the
     /// baseline the next frames are held against.
     pub fn force(&mut self, next: StateJson, now: Instant) -> StateJson {
-        self.counters_at = Some(now);
+        self.counters_due = Some(now + COUNTERS_FIRST);
         self.published = Some((next.clone(), now));
         next
     }
@@ -281,7 +284,7 @@ mod tests {
     }
 
     #[test]
-    fn discrete_changes_go_out_at_once_counters_every_five_minutes() {
+    fn discrete_changes_go_out_at_once_counters_after_30_s_then_every_five_minutes() {
         let t0 = Instant::now();
         let mut f = StateFilter::default();
         f.offer(state(0, -500, None, 10), t0, FIVE_S);
@@ -294,30 +297,27 @@ mod tests {
         assert!(out.ice);
         assert_eq!(out.i1_ua, 28.0, "a jump past its band goes with it");
         assert_eq!(out.frames_received, 10, "the counter is held");
-        // Only the counter moved: not before 5 minutes.
-        iced.frames_received = 2_000;
+        // Only the counter moved: 30 s after the first state, then not
+        // before 5 minutes more.
+        let at = |s: u64| t0 + Duration::from_secs(s);
+        iced.frames_received = 300;
+        assert_eq!(f.offer(iced.clone(), at(29), FIVE_S), None);
         assert_eq!(
-            f.offer(iced.clone(), t0 + Duration::from_secs(200), FIVE_S),
-            None
+            f.offer(iced.clone(), at(30), FIVE_S)
+                .unwrap()
+                .frames_received,
+            300
         );
+        iced.frames_received = 2_000;
+        assert_eq!(f.offer(iced.clone(), at(329), FIVE_S), None);
         iced.frames_received = 3_000;
-        let out = f
-            .offer(iced, t0 + Duration::from_secs(300), FIVE_S)
-            .unwrap();
+        let out = f.offer(iced, at(330), FIVE_S).unwrap();
         assert_eq!(out.frames_received, 3_000);
         // A lost frame is shown (band 1), spaced like any value.
         let mut lost = out.clone();
         lost.frames_lost = 1;
-        assert_eq!(
-            f.offer(lost.clone(), t0 + Duration::from_secs(302), FIVE_S),
-            None
-        );
-        assert_eq!(
-            f.offer(lost, t0 + Duration::from_secs(305), FIVE_S)
-                .unwrap()
-                .frames_lost,
-            1
-        );
+        assert_eq!(f.offer(lost.clone(), at(332), FIVE_S), None);
+        assert_eq!(f.offer(lost, at(335), FIVE_S).unwrap().frames_lost, 1);
     }
 
     #[test]

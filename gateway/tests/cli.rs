@@ -134,6 +134,10 @@ fn check_config_validates_certificates_and_opens_nothing() {
         out.contains("config OK: gateway farm-7, 2 node(s), broker broker.example:8883 (TLS)"),
         "{out}"
     );
+    assert!(
+        out.contains("Home Assistant discovery on (for Home Assistant 2024.1 and later)"),
+        "{out}"
+    );
     assert!(!dir.path().join("q").exists(), "the queue was not created");
     // The server's key with the client's certificate: they do not match.
     let mismatched = write(

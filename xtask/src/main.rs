@@ -12,8 +12,10 @@
 //! - `cargo xtask tools` — only the system tools.
 //! - `cargo xtask crates` — only the crate rules.
 //! - `cargo xtask deb` — build the gateway's Debian package and check it.
-//! - `cargo xtask ha-check` — the gateway's Home Assistant discovery checked
-//!   by real Home Assistant releases (installed into cached virtualenvs).
+//! - `cargo xtask ha-check [--if-changed]` — the gateway's Home Assistant
+//!   discovery checked by real Home Assistant releases (installed into
+//!   cached virtualenvs); `--if-changed`: only when its inputs changed since
+//!   the recorded pass (what `ci` runs).
 //! - `cargo xtask size` — cross-build the firmware and check its size budget.
 //! - `cargo xtask qemu` — run the firmware logic under qemu-system-arm.
 //! - `cargo xtask fuzz [--runs N] [--target NAME]` — every cargo-fuzz target
@@ -59,7 +61,11 @@ fn main() -> Result<()> {
         "tools" => tools::ensure(),
         "crates" => crates::check(&root),
         "deb" => package::build().and_then(|deb| package::check(&deb)),
-        "ha-check" => ha_check::run(&root),
+        "ha-check" => match std::env::args().nth(2).as_deref() {
+            None => ha_check::run(&root),
+            Some("--if-changed") => ha_check::if_changed(&root),
+            Some(other) => bail!("usage: cargo xtask ha-check [--if-changed] (not `{other}`)"),
+        },
         "size" => firmware_size().map(|_| ()),
         "qemu" => qemu(true),
         "fuzz" => fuzz(&std::env::args().skip(2).collect::<Vec<_>>()),
@@ -73,8 +79,9 @@ fn main() -> Result<()> {
                  tools  install the system tools the tests need (mosquitto, qemu-system-arm, systemd, python3)\n  \
                  crates check the crate rules of ARCHITECTURE.md on the dependency graph\n  \
                  deb    build the gateway's Debian package and check its files, config and unit\n  \
-                 ha-check  the gateway's Home Assistant discovery checked by Home Assistant 2024.1.6 and\n           \
-                 2024.3.3 (installed into virtualenvs under ~/.cache/fois/home-assistant); records a pass\n  \
+                 ha-check [--if-changed]  the gateway's Home Assistant discovery checked by Home Assistant\n         \
+                 2024.1.6 and 2024.3.3 (installed into virtualenvs under ~/.cache/fois/home-assistant);\n         \
+                 records a pass; --if-changed: only when its inputs changed since the recorded pass\n  \
                  size   cross-build the firmware (release) and check flash <= 128 KiB, RAM <= 32 KiB\n  \
                  qemu   run the firmware logic tests on qemu-system-arm (mps2-an386)\n  \
                  fuzz   [--runs N] [--target NAME] run every fuzz target (or one) N times (default 10^7; installs nightly + cargo-fuzz)"
