@@ -26,5 +26,5 @@ pub use clock::{VirtualClock, VirtualDelay, VirtualPin};
 pub use environment::{Cover, Environment, NtcWiring, Segment, Timeline, Truth};
 pub use flash::VirtualFlash;
 pub use frontend::FrontEnd;
-pub use node::{FirmwareNode, NodeOptions, SharedStorage, VirtualNode};
+pub use node::{FirmwareNode, NodeOptions, SharedStorage, VirtualNode, instance_unique_id};
 pub use scenario::Scenario;
