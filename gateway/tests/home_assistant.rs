@@ -236,7 +236,9 @@ fn table(s: &Snapshot, d: &Device, out: &mut String) {
                     id,
                     st["state"].as_str().unwrap_or("-"),
                     extra.join(", ")
-                ),
+                )
+                .trim_end()
+                .to_string(),
             )
         })
         .collect();
