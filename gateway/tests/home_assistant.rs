@@ -23,15 +23,14 @@
 
 mod support;
 
-use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::path::Path;
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use fois_vnode::{Cover, Environment, NodeOptions, NtcWiring, Segment, Timeline, VirtualNode};
+use fois_vnode::{Cover, NtcWiring, Segment};
 use serde_json::{Value, json};
-use support::home_assistant::{HomeAssistant, Snapshot};
+use support::ha_snapshot::{Device, changes, entity_id, log_problems, table};
+use support::home_assistant::HomeAssistant;
 use support::*;
 
 /// What a user must see of an entity: (object, entity domain, device
@@ -131,24 +130,6 @@ const EXPECTED: [Expected; 16] = [
 /// The nodes, by name in the config.
 const NODES: [&str; 4] = ["iced", "wet", "dry", "rime"];
 
-/// A virtual node on `segments` at `speed`.
-fn node(speed: f64, segments: Vec<Segment>, seed: u64) -> NodeProc {
-    NodeProc::start_with(speed, move || {
-        let env = Arc::new(Environment::new(
-            Timeline::new(segments),
-            fois_sim::SensorKind::B,
-            seed,
-        ));
-        VirtualNode::new(
-            env,
-            NodeOptions {
-                seed,
-                ..NodeOptions::default()
-            },
-        )
-    })
-}
-
 /// The gateway's config: defaults for publishing (what a site runs),
 /// discovery for `version`, commands on.
 fn config(dir: &Path, broker: u16, version: &str, nodes: &[(&str, &str)]) -> std::path::PathBuf {
@@ -164,101 +145,6 @@ fn config(dir: &Path, broker: u16, version: &str, nodes: &[(&str, &str)]) -> std
     let p = dir.join("gw.toml");
     std::fs::write(&p, s).unwrap();
     p
-}
-
-/// A node as Home Assistant shows it.
-struct Device {
-    id: String,
-    /// `fois_node_<hardware id>`.
-    ident: String,
-}
-
-impl Device {
-    fn of(s: &Snapshot, name: &str) -> Option<Device> {
-        let d = s.device(&format!("FOIS {name}"))?;
-        let ident = d["identifiers"][0][1].as_str()?.to_string();
-        Some(Device {
-            id: d["id"].as_str()?.to_string(),
-            ident,
-        })
-    }
-
-    fn uid(&self, object: &str) -> String {
-        format!("{}_{object}", self.ident)
-    }
-}
-
-fn entity_id(s: &Snapshot, d: &Device, object: &str) -> String {
-    s.entity(&d.uid(object))
-        .and_then(|e| e["entity_id"].as_str())
-        .unwrap_or_else(|| panic!("no entity {}", d.uid(object)))
-        .to_string()
-}
-
-/// The state changes of every entity of a device.
-fn changes(s: &Snapshot, d: &Device) -> BTreeMap<String, (u64, u64)> {
-    s.entities_of(&d.id)
-        .iter()
-        .map(|e| {
-            let id = e["entity_id"].as_str().unwrap();
-            (id.to_string(), (s.changes(id), s.rows(id)))
-        })
-        .collect()
-}
-
-/// A table of a device's entities as a user sees them.
-fn table(s: &Snapshot, d: &Device, out: &mut String) {
-    let mut rows: Vec<(String, String)> = s
-        .entities_of(&d.id)
-        .iter()
-        .map(|e| {
-            let id = e["entity_id"].as_str().unwrap();
-            let st = s.state_of(id).cloned().unwrap_or(Value::Null);
-            let attrs = &st["attributes"];
-            let mut extra = Vec::new();
-            for key in ["unit_of_measurement", "device_class", "state_class"] {
-                if let Some(v) = attrs[key].as_str() {
-                    extra.push(v.to_string());
-                }
-            }
-            if let Some(c) = e["entity_category"].as_str() {
-                extra.push(c.to_string());
-            }
-            for key in ["faults", "probability", "sigma"] {
-                if !attrs[key].is_null() {
-                    extra.push(format!("{key}={}", attrs[key]));
-                }
-            }
-            (
-                id.to_string(),
-                format!(
-                    "    {:<48} {:<12} {}",
-                    id,
-                    st["state"].as_str().unwrap_or("-"),
-                    extra.join(", ")
-                )
-                .trim_end()
-                .to_string(),
-            )
-        })
-        .collect();
-    rows.sort();
-    for (_, r) in rows {
-        let _ = writeln!(out, "{r}");
-    }
-}
-
-fn log_problems(s: &Snapshot) -> Vec<String> {
-    s.log()
-        .into_iter()
-        .filter(|l| {
-            l.starts_with("ERROR")
-                || l.contains("homeassistant.components.mqtt")
-                || l.contains("homeassistant.helpers.template")
-                || l.contains("fois")
-                    && !l.contains("custom integration fois_probe which has not been tested")
-        })
-        .collect()
 }
 
 #[test]
@@ -283,7 +169,7 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
 
     // Rime grows for 60 s of real time, then the face is dry again; a water
     // film at +5 °C grows to 0.4 mm and stays; a dry node in real time.
-    let iced = node(
+    let iced = NodeProc::timeline(
         10.0,
         vec![
             Segment::new(3.0, Cover::Dry),
@@ -292,7 +178,7 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
         ],
         11,
     );
-    let wet = node(
+    let wet = NodeProc::timeline(
         10.0,
         vec![
             Segment::new(3.0, Cover::Dry).temp(5.0),
@@ -302,14 +188,14 @@ fn home_assistant_shows_each_node_under_the_gateway_as_a_user_expects() {
         12,
     );
     // A dry face in real time, its NTC unplugged: a fault.
-    let mut dry = node(
+    let mut dry = NodeProc::timeline(
         1.0,
         vec![Segment::new(f64::INFINITY, Cover::Dry).ntc(NtcWiring::Open)],
         13,
     );
     // Rime growing at 6 mm/h in real time: the rate of state changes while
     // ice grows, as a site would see it.
-    let rime = node(
+    let rime = NodeProc::timeline(
         1.0,
         vec![
             Segment::new(3.0, Cover::Dry),

@@ -36,7 +36,7 @@ pub const RECORD: &str = "gateway/tests/home_assistant/last-pass.txt";
 
 /// The files the check's verdict depends on (directories: every file
 /// below, but not the record itself).
-pub const INPUTS: [&str; 9] = [
+pub const INPUTS: [&str; 10] = [
     "gateway/src/discovery",
     "gateway/src/payload.rs",
     "gateway/src/state_filter.rs",
@@ -45,6 +45,7 @@ pub const INPUTS: [&str; 9] = [
     "gateway/tests/home_assistant.rs",
     "gateway/tests/home_assistant",
     "gateway/tests/support/home_assistant.rs",
+    "gateway/tests/support/ha_snapshot.rs",
     "xtask/src/ha_check.rs",
 ];
 

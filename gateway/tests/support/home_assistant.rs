@@ -22,6 +22,7 @@ use std::time::{Duration, Instant};
 use serde_json::{Value, json};
 
 use super::free_port;
+use super::ha_snapshot::Snapshot;
 
 /// The probe integration's sources.
 fn probe_dir() -> PathBuf {
@@ -227,115 +228,5 @@ impl Drop for HomeAssistant {
             let _ = c.kill();
             let _ = c.wait();
         }
-    }
-}
-
-/// One probe snapshot: what a user of this Home Assistant sees.
-#[derive(Debug, Clone)]
-pub struct Snapshot(pub Value);
-
-impl Snapshot {
-    /// The running release, e.g. `2024.3.3`.
-    pub fn version(&self) -> &str {
-        self.0["version"].as_str().unwrap_or("?")
-    }
-
-    /// The MQTT config entry is set up (connected to the broker).
-    pub fn mqtt_loaded(&self) -> bool {
-        self.0["config_entries"].as_array().is_some_and(|a| {
-            a.iter()
-                .any(|e| e["domain"] == "mqtt" && e["state"] == "loaded")
-        })
-    }
-
-    /// Every device.
-    pub fn devices(&self) -> Vec<&Value> {
-        self.0["devices"]
-            .as_array()
-            .map(|a| a.iter().collect())
-            .unwrap_or_default()
-    }
-
-    /// The device named `name`.
-    pub fn device(&self, name: &str) -> Option<&Value> {
-        self.devices().into_iter().find(|d| d["name"] == name)
-    }
-
-    /// The registry entries of a device's entities.
-    pub fn entities_of(&self, device_id: &str) -> Vec<&Value> {
-        self.0["entities"]
-            .as_array()
-            .map(|a| a.iter().filter(|e| e["device_id"] == device_id).collect())
-            .unwrap_or_default()
-    }
-
-    /// The registry entry with this unique id.
-    pub fn entity(&self, unique_id: &str) -> Option<&Value> {
-        self.0["entities"]
-            .as_array()?
-            .iter()
-            .find(|e| e["unique_id"] == unique_id)
-    }
-
-    /// The state object of an entity id.
-    pub fn state_of(&self, entity_id: &str) -> Option<&Value> {
-        self.0["states"]
-            .as_array()?
-            .iter()
-            .find(|s| s["entity_id"] == entity_id)
-    }
-
-    /// The state (text) of the entity with this unique id.
-    pub fn state(&self, unique_id: &str) -> Option<&str> {
-        let e = self.entity(unique_id)?;
-        self.state_of(e["entity_id"].as_str()?)?["state"].as_str()
-    }
-
-    /// State changes of an entity since Home Assistant started.
-    pub fn changes(&self, entity_id: &str) -> u64 {
-        self.0["state_changes"][entity_id].as_u64().unwrap_or(0)
-    }
-
-    /// Rows of an entity in the recorder's `states` table.
-    pub fn rows(&self, entity_id: &str) -> u64 {
-        self.0["recorder_rows"][entity_id].as_u64().unwrap_or(0)
-    }
-
-    /// Warnings and errors logged, as `LEVEL logger: message`.
-    pub fn log(&self) -> Vec<String> {
-        self.0["log"]
-            .as_array()
-            .map(|a| {
-                a.iter()
-                    .map(|l| {
-                        format!(
-                            "{} {}: {}",
-                            l["level"].as_str().unwrap_or(""),
-                            l["logger"].as_str().unwrap_or(""),
-                            l["message"].as_str().unwrap_or("")
-                        )
-                    })
-                    .collect()
-            })
-            .unwrap_or_default()
-    }
-
-    /// Every state, one a line (for failure messages).
-    pub fn states_text(&self) -> String {
-        self.0["states"]
-            .as_array()
-            .map(|a| {
-                a.iter()
-                    .map(|s| {
-                        format!(
-                            "  {} = {}",
-                            s["entity_id"].as_str().unwrap_or(""),
-                            s["state"]
-                        )
-                    })
-                    .collect::<Vec<_>>()
-                    .join("\n")
-            })
-            .unwrap_or_default()
     }
 }

@@ -13,6 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
+pub mod ha_snapshot;
 pub mod home_assistant;
 pub mod pki;
 pub mod vnode;

@@ -102,6 +102,25 @@ impl NodeProc {
         Self::serve_node(scene.speed, link, move || scene.node())
     }
 
+    /// A node on its own timeline of `segments` (sensor B, ADC noise and
+    /// accretion seeded by `seed`) at `speed`.
+    pub fn timeline(speed: f64, segments: Vec<Segment>, seed: u64) -> NodeProc {
+        Self::start_with(speed, move || {
+            let env = Arc::new(Environment::new(
+                Timeline::new(segments),
+                fois_sim::SensorKind::B,
+                seed,
+            ));
+            VirtualNode::new(
+                env,
+                NodeOptions {
+                    seed,
+                    ..NodeOptions::default()
+                },
+            )
+        })
+    }
+
     /// Serve the node `build` makes (on the serving thread: building
     /// ray-traces its curves) at `speed` virtual seconds per real second.
     pub fn start_with(
