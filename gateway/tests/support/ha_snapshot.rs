@@ -79,18 +79,22 @@ impl Snapshot {
         self.0["recorder_rows"][entity_id].as_u64().unwrap_or(0)
     }
 
-    /// Warnings and errors logged, as `LEVEL logger: message`.
+    /// Warnings and errors logged, as `LEVEL logger: message` and the
+    /// exception's traceback if any (level `PROBE`: the probe's own).
     pub fn log(&self) -> Vec<String> {
         self.0["log"]
             .as_array()
             .map(|a| {
                 a.iter()
                     .map(|l| {
+                        let exc = l["exc"].as_str().unwrap_or("");
                         format!(
-                            "{} {}: {}",
+                            "{} {}: {}{}{}",
                             l["level"].as_str().unwrap_or(""),
                             l["logger"].as_str().unwrap_or(""),
-                            l["message"].as_str().unwrap_or("")
+                            l["message"].as_str().unwrap_or(""),
+                            if exc.is_empty() { "" } else { "\n" },
+                            exc
                         )
                     })
                     .collect()
@@ -204,18 +208,33 @@ pub fn table(s: &Snapshot, d: &Device, out: &mut String) {
     }
 }
 
-/// What Home Assistant logged that concerns the gateway's messages: every
-/// error, anything from MQTT or the templates, anything naming FOIS (but
-/// the note that the probe is a custom integration).
-pub fn log_problems(s: &Snapshot) -> Vec<String> {
-    s.log()
-        .into_iter()
-        .filter(|l| {
-            l.starts_with("ERROR")
-                || l.contains("homeassistant.components.mqtt")
-                || l.contains("homeassistant.helpers.template")
-                || l.contains("fois")
-                    && !l.contains("custom integration fois_probe which has not been tested")
-        })
-        .collect()
+/// What Home Assistant logged: (what concerns the gateway's messages —
+/// anything from MQTT or the templates, anything naming FOIS but the note
+/// that the probe is a custom integration, an error whose traceback passes
+/// through MQTT or the templates, the probe's own failures —, Home
+/// Assistant's other errors).
+pub fn log_problems(s: &Snapshot) -> (Vec<String>, Vec<String>) {
+    let ours = |l: &str| {
+        l.starts_with("PROBE")
+            || [
+                "components.mqtt",
+                "components/mqtt",
+                "helpers.template",
+                "helpers/template",
+            ]
+            .iter()
+            .any(|k| l.contains(k))
+            || l.contains("fois")
+                && !l.contains("custom integration fois_probe which has not been tested")
+    };
+    let mut mine = Vec::new();
+    let mut other = Vec::new();
+    for l in s.log() {
+        if ours(&l) {
+            mine.push(l);
+        } else if l.starts_with("ERROR") {
+            other.push(l);
+        }
+    }
+    (mine, other)
 }

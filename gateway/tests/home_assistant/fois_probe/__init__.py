@@ -27,6 +27,7 @@ import logging
 import os
 import asyncio
 import sqlite3
+import traceback
 
 from homeassistant.const import EVENT_STATE_CHANGED, __version__
 from homeassistant.core import Event, HomeAssistant, callback
@@ -51,9 +52,16 @@ class _Collect(logging.Handler):
             message = record.getMessage()
         except Exception:  # noqa: BLE001 - a broken log call must not stop the probe
             message = str(record.msg)
+        exc = ""
+        if record.exc_info:
+            exc = logging.Formatter().formatException(record.exc_info)[-3000:]
+        self.add(record.levelname, record.name, message, exc)
+
+    def add(self, level: str, logger: str, message: str, exc: str = "") -> None:
+        """Keep one record (at most 500)."""
         if len(self.records) < 500:
             self.records.append(
-                {"level": record.levelname, "logger": record.name, "message": message}
+                {"level": level, "logger": logger, "message": message, "exc": exc}
             )
 
 
@@ -180,7 +188,17 @@ async def async_setup(hass: HomeAssistant, config: dict) -> bool:
         if busy.locked():
             return
         async with busy:
-            await serve_and_write()
+            try:
+                await serve_and_write()
+            except Exception as err:  # noqa: BLE001 - reported to the test
+                # The probe's own failure (not Home Assistant's): recorded
+                # with its traceback, and the next tick tries again.
+                collect.add(
+                    "PROBE",
+                    DOMAIN,
+                    f"the probe failed: {err!r}",
+                    traceback.format_exc()[-3000:],
+                )
 
     async def serve_and_write() -> None:
         for path, request in await hass.async_add_executor_job(pending):
