@@ -9,6 +9,7 @@
 //! - [`node::Node`]: the whole node behind them; [`schedule::Schedule`]: when
 //!   it sends `Hello` and runs its frames.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
+//! - [`dark_cal`]: the dark calibration under noise (how long to average, trend and step tests).
 //! - [`watchdog`]: the IWDG prescaler, reload and timeout arithmetic the board
 //!   programs; [`reply_time`]: the worst time to answer a command (the
 //!   host's timeout).
@@ -17,6 +18,7 @@
 
 #![cfg_attr(not(test), no_std)]
 
+pub mod dark_cal;
 pub mod dispatch;
 pub mod estimator;
 pub mod flash_store;

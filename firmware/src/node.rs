@@ -5,11 +5,12 @@
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use fois_protocol::{
-    Ack, AckResult, Baseline, CalibrationRefusal, Command, Config, ConfigV1, DetectorState,
-    DeviceFrame, DeviceMsg, ErrorCode, ErrorReply, Event, EventKind, FrameDecoder, Hello,
-    HostFrame, MAX_FRAME, Measurement, MeasurementV3, PROTOCOL_VERSION, encode, flags,
+    Ack, AckResult, Baseline, Command, Config, ConfigV1, DetectorState, DeviceFrame, DeviceMsg,
+    ErrorCode, ErrorReply, Event, EventKind, FrameDecoder, Hello, HostFrame, MAX_FRAME,
+    Measurement, MeasurementV3, PROTOCOL_VERSION, encode, flags,
 };
 
+use crate::dark_cal;
 use crate::dispatch::{self, BUTTON_ID};
 use crate::estimator::{Estimator, EstimatorParams};
 use crate::hal::{BoardInfo, PhotoAdc, Storage};
@@ -36,9 +37,6 @@ const fn parse_u8(s: &str) -> u8 {
     }
     v
 }
-
-/// Dark calibration averages this many frames of K cycles.
-pub const CAL_FRAMES: u16 = 4;
 
 /// A change is saved once no further change came for this long, ms: a burst
 /// of config changes and calibrations is one flash write.
@@ -602,33 +600,17 @@ where
             // become the baseline and hide the next film).
             return Err(ErrorCode::NotDry);
         }
-        let mut min = [i32::MAX; 2];
-        let mut max = [i32::MIN; 2];
-        let mut sum = [0i64; 2];
-        for _ in 0..CAL_FRAMES {
-            let v = self.measure_frame();
-            if v.flags & flags::INVALID_MASK != 0 {
-                return Err(ErrorCode::CalibrationRefused(CalibrationRefusal::Saturated));
-            }
-            for ch in 0..2 {
-                let i = v.currents.net_na[ch];
-                min[ch] = min[ch].min(i);
-                max[ch] = max[ch].max(i);
-                sum[ch] += i64::from(i);
-            }
-        }
-        // Steady: the spread over the frames stays under half the onset rise.
-        let tolerance = i64::from(self.config.onset_rise_na / 2);
-        for ch in 0..2 {
-            if i64::from(max[ch]) - i64::from(min[ch]) > tolerance {
-                return Err(ErrorCode::CalibrationRefused(CalibrationRefusal::Noisy));
-            }
-        }
-        let n = i64::from(CAL_FRAMES);
-        let baseline = Baseline {
-            i1_na: (sum[0] / n) as i32,
-            i2_na: (sum[1] / n) as i32,
-        };
+        // Average as long as the noise needs, within the time bound; refuse
+        // a trend, a step, too much noise or saturation (`dark_cal`).
+        let baseline = dark_cal::run(
+            &mut self.adc,
+            &mut self.led,
+            &mut self.delay,
+            &self.config,
+            &self.info.cal,
+        )
+        .map_err(ErrorCode::CalibrationRefused)?
+        .baseline;
         self.baseline = Some(baseline);
         // A clean, dry face: the estimator starts from "dry".
         self.estimator.set_dry();
