@@ -10,6 +10,8 @@
 //!   it sends `Hello` and runs its frames.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
 //! - [`dark_cal`]: the dark calibration under noise (how long to average, trend and step tests).
+//! - [`boot`]: what survives a reset (panic resets in a row, the rule's state) and what a boot does
+//!   with it; [`supply`]: flash writes wait for a healthy supply.
 //! - [`watchdog`]: the IWDG prescaler, reload and timeout arithmetic the board
 //!   programs; [`reply_time`]: the worst time to answer a command (the
 //!   host's timeout).
@@ -18,6 +20,7 @@
 
 #![cfg_attr(not(test), no_std)]
 
+pub mod boot;
 pub mod dark_cal;
 pub mod dispatch;
 pub mod estimator;
@@ -33,6 +36,7 @@ pub mod rule;
 pub mod schedule;
 #[cfg(feature = "sim-board")]
 pub mod sim_board;
+pub mod supply;
 pub mod vref;
 pub mod watchdog;
 

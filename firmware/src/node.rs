@@ -10,6 +10,7 @@ use fois_protocol::{
     Measurement, MeasurementV3, PROTOCOL_VERSION, encode, flags,
 };
 
+use crate::boot::RuleSnapshot;
 use crate::dark_cal;
 use crate::dispatch::{self, BUTTON_ID};
 use crate::estimator::{Estimator, EstimatorParams};
@@ -18,6 +19,7 @@ use crate::measure::{self, Currents};
 use crate::ntc::{self, NtcReading};
 use crate::persist::{self, LoadError, MAX_RECORD, Record};
 use crate::rule::{Rule, RuleInput};
+use crate::supply;
 use crate::vref;
 
 /// Firmware version sent in [`Hello`] (the crate's version).
@@ -90,6 +92,12 @@ where
     config_defaulted: bool,
     storage_failed: bool,
     clock_fallback: bool,
+    /// Boot faults the board found (`BOR_NOT_SET`, `STORE_SKIPPED`).
+    boot_faults: u16,
+    /// The PVD reports V_DD below its threshold: saves wait.
+    supply_low: bool,
+    /// A panic reset to report once: (line, resets in a row).
+    panic_report: Option<(u32, u8)>,
     /// The record the storage holds, as far as the node knows.
     stored: Option<Record>,
     pending_save: Option<PendingSave>,
@@ -160,6 +168,9 @@ where
             config_defaulted,
             storage_failed: false,
             clock_fallback: false,
+            boot_faults: 0,
+            supply_low: false,
+            panic_report: None,
             stored,
             pending_save: None,
             last_save_ms: None,
@@ -264,6 +275,13 @@ where
             );
         }
         self.reported_faults = faults;
+        if let Some((line, resets_in_row)) = self.panic_report.take() {
+            let kind = EventKind::PanicReset {
+                line,
+                resets_in_row,
+            };
+            self.send(DeviceMsg::Event(event(kind, 1)), tx);
+        }
         self.last = Some(m);
         // After the frame, so a save's erase never delays a measurement.
         self.poll_storage(now_ms);
@@ -302,6 +320,48 @@ where
     /// clock did not start (raises `CLOCK_FALLBACK`).
     pub fn set_clock_fallback(&mut self, fallback: bool) {
         self.clock_fallback = fallback;
+    }
+
+    /// Faults the board found at boot: the brown-out level in the option
+    /// bytes is not the provisioned one (`BOR_NOT_SET`), or the node booted
+    /// without its flash store after repeated panic resets
+    /// (`STORE_SKIPPED`). Raised with the first frame.
+    pub fn set_boot_faults(&mut self, bor_not_set: bool, store_skipped: bool) {
+        self.boot_faults = 0;
+        if bor_not_set {
+            self.boot_faults |= flags::BOR_NOT_SET;
+        }
+        if store_skipped {
+            self.boot_faults |= flags::STORE_SKIPPED;
+        }
+    }
+
+    /// This boot followed a panic reset: send `EventKind::PanicReset` once,
+    /// with the next frame.
+    pub fn report_panic_reset(&mut self, line: u32, resets_in_row: u8) {
+        self.panic_report = Some((line, resets_in_row));
+    }
+
+    /// The programmable voltage detector reports V_DD below its threshold:
+    /// saves wait until it does not (and the last V_DDA is healthy:
+    /// `supply`).
+    pub fn set_supply_low(&mut self, low: bool) {
+        self.supply_low = low;
+    }
+
+    /// The rule's state, for the board to keep across a reset.
+    pub fn rule_snapshot(&self) -> RuleSnapshot {
+        RuleSnapshot {
+            state: self.rule.state(),
+            acked: self.rule.acked(),
+        }
+    }
+
+    /// Resume the rule's state after a reset (`boot::RuleSnapshot::resume`):
+    /// the outputs follow at once.
+    pub fn resume_rule(&mut self, snapshot: RuleSnapshot) {
+        self.rule = Rule::resumed(snapshot.state, snapshot.acked);
+        self.drive_outputs();
     }
 
     /// Bytes received from the host link, in any chunking. Each complete
@@ -440,6 +500,7 @@ where
         if self.clock_fallback {
             f |= flags::CLOCK_FALLBACK;
         }
+        f |= self.boot_faults;
         if self.baseline.is_none() {
             f |= flags::NO_BASELINE;
         }
@@ -645,8 +706,14 @@ where
         });
     }
 
-    /// Write the record now.
+    /// Write the record now, if the supply allows (else it stays pending).
     fn save(&mut self, now_ms: u64) {
+        // V_DDA now, not the last frame's: a save can come before the first
+        // frame (a `Reset` right after a `SetConfig`) or long after one.
+        let vdda_mv = vref::vdda_mv(&self.info.cal, self.adc.read_vrefint());
+        if !supply::flash_write_allowed(vdda_mv, self.supply_low) {
+            return;
+        }
         let record = self.record();
         let mut buf = [0u8; MAX_RECORD];
         let n = persist::encode(&record, &mut buf);
