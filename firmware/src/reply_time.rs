@@ -25,7 +25,7 @@ pub const SAVE_PROGRAM_MAX_MS: u32 = 50;
 pub const TX_PIPE_BYTES: u32 = 1_024;
 /// The slowest link rate the board offers, Bd (the field link's long-cable
 /// rate).
-pub const SLOWEST_BAUD: u32 = 19_200;
+pub const SLOWEST_BAUD: u32 = crate::field_link::LONG_CABLE_BAUD;
 /// The transmit pipe drained at [`SLOWEST_BAUD`], 10 bits a byte, ms
 /// (rounded up: 534 ms; 89 ms at 115 200 Bd).
 pub const TX_QUEUE_MAX_MS: u32 = (TX_PIPE_BYTES * 10 * 1_000).div_ceil(SLOWEST_BAUD);
