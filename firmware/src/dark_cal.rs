@@ -63,11 +63,10 @@ pub const CAL_MAX_MS: u32 = 2_000;
 /// default 1 µA onset: the baseline error then moves the alarm threshold
 /// by 5 % at one standard error).
 pub const SE_FRACTION_OF_ONSET: u32 = 20;
-/// The longest one `read_photo` (both channels) takes on the board, µs.
-/// embassy-stm32 0.6 powers the ADC down and up for every conversion
-/// (`blocking_read`: ADON off, on, 3 µs t_STAB wait), then samples 56 ADC
-/// cycles and converts in 12 at 8 MHz: ≈ 3 + 7 + 1.5 µs + register access
-/// per channel, ≈ 27 µs a pair (`firmware/README.md`, the board binary).
+/// The longest one `read_photo` (both channels) takes on the board, µs: two
+/// conversions of 56 + 12 ADC cycles at 8 MHz (8.5 µs each) with the
+/// converter kept on, and the register work around them, ≈ 19 µs
+/// (`firmware/README.md`, the board binary), with room.
 pub const PHOTO_PAIR_MAX_US: u32 = 30;
 
 /// A block this many standard deviations off its neighbours' level is a

@@ -51,4 +51,16 @@ mod tests {
         assert_eq!(WORST_REPLY_MS, 5_827);
         assert_eq!(fois_protocol::REPLY_TIMEOUT_MS, 8_000);
     }
+
+    #[test]
+    fn on_a_failed_over_clock_the_worst_reply_still_fits() {
+        // After the clock security system switched to HSI the node's
+        // milliseconds are HSI's: at its slowest (−8 % over −40…105 °C,
+        // field_link::HSI_FULL_RANGE_PPM) the worst case takes 5 827 / 0.92
+        // = 6 334 ms of the host's time, 1.67 s inside its timeout.
+        let slow = 1.0 - f64::from(crate::field_link::HSI_FULL_RANGE_PPM) * 1e-6;
+        let real_ms = f64::from(WORST_REPLY_MS) / slow;
+        assert!((6_333.0..6_335.0).contains(&real_ms), "{real_ms}");
+        assert!(real_ms + 1_500.0 < fois_protocol::REPLY_TIMEOUT_MS as f64);
+    }
 }

@@ -200,3 +200,35 @@ fn saves_wait_for_a_healthy_supply() {
     let mut buf = [0u8; 256];
     assert!(storage.read(&mut buf).unwrap() > 0);
 }
+
+#[test]
+fn a_clock_that_fails_over_mid_run_is_flagged_and_the_node_keeps_working() {
+    // Streaming on the HSE; the clock security system switches to HSI
+    // (the board's NMI sets the flag): CLOCK_FALLBACK is raised once, every
+    // frame carries it, the frames keep coming and the rule still alarms.
+    let (mut node, w) = node();
+    for _ in 0..5 {
+        assert_eq!(flags_of(&step(&mut node, &w)) & flags::CLOCK_FALLBACK, 0);
+    }
+    node.set_clock_fallback(true);
+    let fs = step(&mut node, &w);
+    assert_ne!(flags_of(&fs) & flags::CLOCK_FALLBACK, 0);
+    assert_eq!(events(&fs), [EventKind::FaultRaised(flags::CLOCK_FALLBACK)]);
+    w.set(|s| {
+        s.signal_na = [5_000.0, 1_500.0];
+        s.temp_c = -8.0;
+    });
+    let mut onset = None;
+    for i in 1..=node.config().onset_frames {
+        let fs = step(&mut node, &w);
+        assert_ne!(flags_of(&fs) & flags::CLOCK_FALLBACK, 0);
+        if events(&fs).contains(&EventKind::IceOnset) {
+            onset = Some(i);
+        }
+    }
+    assert_eq!(onset, Some(node.config().onset_frames));
+    assert!(w.alarm.get());
+    // Commands are still answered.
+    let fs = command(&mut node, &w, 5, Command::GetConfig);
+    assert!(matches!(&fs[0].msg, DeviceMsg::Ack(a) if a.id == 5));
+}

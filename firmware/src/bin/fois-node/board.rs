@@ -83,38 +83,18 @@ pub fn reset_reason_name(r: ResetReason) -> &'static str {
 }
 
 /// ADC1 with the node's channels: PA0, PA1 (phototransistors), PA4 (NTC),
-/// VREFINT and the temperature sensor, all single blocking conversions.
+/// VREFINT and the temperature sensor, single conversions. embassy-stm32
+/// 0.6's `blocking_read` powers the converter down and up around every
+/// conversion (ADON off, on, a 3 µs t_STAB wait, the sequence and sample
+/// time rewritten) — tens of µs per photo pair, which stretch the settle gap
+/// Δ of the synchronous detection and its flicker residual. So embassy sets
+/// the ADC up (clock, prescaler, pins in analog mode, VREFINT) and every
+/// conversion after that is ours, through the PAC, with the converter kept
+/// on: SQR3 ← channel, SWSTART, EOC — 56 + 12 ADC cycles = 8.5 µs at 8 MHz
+/// per channel (RM0390 §13.5, "Channel-wise programmable sampling time").
 pub struct BoardAdc {
-    adc: Adc<'static, ADC1>,
-    photo1: Peri<'static, PA0>,
-    photo2: Peri<'static, PA1>,
-    ntc: Peri<'static, PA4>,
-    vrefint: VrefInt,
-    temp: Temperature,
-}
-
-impl BoardAdc {
-    /// Take ADC1 and the pins; enables VREFINT and the temperature sensor.
-    pub fn new(
-        adc: Peri<'static, ADC1>,
-        photo1: Peri<'static, PA0>,
-        photo2: Peri<'static, PA1>,
-        ntc: Peri<'static, PA4>,
-    ) -> Self {
-        let adc = Adc::new(adc);
-        let vrefint = adc.enable_vrefint();
-        let temp = adc.enable_temperature();
-        // VREFINT and the sensor need 10 µs to start.
-        embassy_time::block_for(embassy_time::Duration::from_micros(20));
-        BoardAdc {
-            adc,
-            photo1,
-            photo2,
-            ntc,
-            vrefint,
-            temp,
-        }
-    }
+    /// Owns ADC1 (its clock and prescaler stay as embassy set them).
+    _adc: Adc<'static, ADC1>,
 }
 
 // ADC clock: PCLK2 16 MHz / 2 = 8 MHz. 56 cycles = 7 µs sampling: settles
@@ -125,22 +105,89 @@ impl BoardAdc {
 const PHOTO_SAMPLE: SampleTime = SampleTime::CYCLES56;
 const NTC_SAMPLE: SampleTime = SampleTime::CYCLES84;
 const INTERNAL_SAMPLE: SampleTime = SampleTime::CYCLES144;
+/// ADC1 channels (RM0390 §13.3.3; the F446's temperature sensor is on 18).
+const CH_PHOTO1: u8 = 0;
+const CH_PHOTO2: u8 = 1;
+const CH_NTC: u8 = 4;
+const CH_VREFINT: u8 = 17;
+const CH_TEMP: u8 = 18;
+/// Polls of EOC before a conversion counts as failed (code 0: the node
+/// then flags V_DDA or the NTC): ≥ 4 ms, a conversion takes ≤ 19 µs.
+const EOC_POLLS: u32 = 10_000;
+
+impl BoardAdc {
+    /// Take ADC1 and the pins; enable VREFINT and the temperature sensor;
+    /// set every channel's sample time once.
+    pub fn new(
+        adc: Peri<'static, ADC1>,
+        mut photo1: Peri<'static, PA0>,
+        mut photo2: Peri<'static, PA1>,
+        mut ntc: Peri<'static, PA4>,
+    ) -> Self {
+        let mut adc = Adc::new(adc);
+        let _vrefint: VrefInt = adc.enable_vrefint();
+        let _temp: Temperature = adc.enable_temperature();
+        // One embassy read per pin puts it in analog mode and leaves the
+        // converter powered (ADON); the pins are not touched again.
+        adc.blocking_read(&mut photo1, PHOTO_SAMPLE);
+        adc.blocking_read(&mut photo2, PHOTO_SAMPLE);
+        adc.blocking_read(&mut ntc, NTC_SAMPLE);
+        let r = pac::ADC1;
+        r.smpr2().modify(|w| {
+            w.set_smp(usize::from(CH_PHOTO1), PHOTO_SAMPLE);
+            w.set_smp(usize::from(CH_PHOTO2), PHOTO_SAMPLE);
+            w.set_smp(usize::from(CH_NTC), NTC_SAMPLE);
+        });
+        r.smpr1().modify(|w| {
+            w.set_smp(usize::from(CH_VREFINT - 10), INTERNAL_SAMPLE);
+            w.set_smp(usize::from(CH_TEMP - 10), INTERNAL_SAMPLE);
+        });
+        r.sqr1().modify(|w| w.set_l(0));
+        // VREFINT and the sensor need 10 µs to start.
+        embassy_time::block_for(embassy_time::Duration::from_micros(20));
+        BoardAdc { _adc: adc }
+    }
+
+    fn convert(channel: u8) -> u16 {
+        let r = pac::ADC1;
+        r.sqr3().write(|w| w.set_sq(0, channel));
+        r.sr().modify(|w| w.set_eoc(false));
+        r.cr2().modify(|w| w.set_swstart(true));
+        for _ in 0..EOC_POLLS {
+            if r.sr().read().eoc() {
+                return r.dr().read().data();
+            }
+        }
+        0
+    }
+
+    /// How long one `read_photo` takes, CPU cycles (the mean of 16, by the
+    /// DWT cycle counter; `None` if the core peripherals are taken): the
+    /// conversion part of the settle gap Δ, logged at boot.
+    pub fn measure_photo_pair_cycles(&mut self) -> Option<u32> {
+        let mut cp = cortex_m::Peripherals::take()?;
+        cp.DCB.enable_trace();
+        cp.DWT.enable_cycle_counter();
+        let start = cortex_m::peripheral::DWT::cycle_count();
+        for _ in 0..16 {
+            self.read_photo();
+        }
+        Some(cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) / 16)
+    }
+}
 
 impl PhotoAdc for BoardAdc {
     fn read_photo(&mut self) -> [u16; 2] {
-        [
-            self.adc.blocking_read(&mut self.photo1, PHOTO_SAMPLE),
-            self.adc.blocking_read(&mut self.photo2, PHOTO_SAMPLE),
-        ]
+        [Self::convert(CH_PHOTO1), Self::convert(CH_PHOTO2)]
     }
     fn read_ntc(&mut self) -> u16 {
-        self.adc.blocking_read(&mut self.ntc, NTC_SAMPLE)
+        Self::convert(CH_NTC)
     }
     fn read_vrefint(&mut self) -> u16 {
-        self.adc.blocking_read(&mut self.vrefint, INTERNAL_SAMPLE)
+        Self::convert(CH_VREFINT)
     }
     fn read_internal_temp(&mut self) -> u16 {
-        self.adc.blocking_read(&mut self.temp, INTERNAL_SAMPLE)
+        Self::convert(CH_TEMP)
     }
 }
 
