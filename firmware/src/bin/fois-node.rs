@@ -316,13 +316,8 @@ mod app {
                 Ok(n) => {
                     LAST_RX_US.store(now_us32(), Ordering::Relaxed);
                     RX_SEEN.store(true, Ordering::Relaxed);
-                    let mut rest = buf.get(..n).unwrap_or(&[]);
-                    while !rest.is_empty() {
-                        let cut = rest
-                            .iter()
-                            .position(|b| *b == 0)
-                            .map_or(rest.len(), |i| i + 1);
-                        let (piece, tail) = rest.split_at(cut);
+                    let bytes = buf.get(..n).unwrap_or(&[]);
+                    for piece in bytes.split_inclusive(|b| *b == 0) {
                         {
                             let mut guard = NODE.lock().await;
                             if let Some(node) = guard.as_mut() {
@@ -330,7 +325,6 @@ mod app {
                             }
                         }
                         COMMANDED.signal(());
-                        rest = tail;
                         embassy_futures::yield_now().await;
                     }
                 }

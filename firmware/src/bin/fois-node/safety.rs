@@ -249,13 +249,19 @@ fn record_and_reset(line: u32) -> ! {
     cortex_m::peripheral::SCB::sys_reset()
 }
 
+/// Set by the first panic: a panic while logging it (the logger taken
+/// twice) goes straight to the record and the reset.
+static PANICKING: AtomicBool = AtomicBool::new(false);
+
 #[panic_handler]
 fn panic(info: &core::panic::PanicInfo) -> ! {
     cortex_m::interrupt::disable();
     let line = info.location().map_or(0, |l| l.line());
-    // RTT never blocks (defmt-rtt `disable-blocking-mode`): with no probe
-    // this costs nothing.
-    defmt::error!("panic at line {}: resetting", line);
+    if !PANICKING.swap(true, Ordering::Relaxed) {
+        // RTT never blocks (defmt-rtt `disable-blocking-mode`): with no
+        // probe this costs nothing.
+        defmt::error!("panic at line {}: resetting", line);
+    }
     record_and_reset(line)
 }
 
