@@ -6,20 +6,16 @@
 // A test crate: unwrap and expect are assertions here (helpers included).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use fois_hil::{Outcome, check, scenario};
+mod common;
+
+use fois_hil::Outcome;
 use fois_protocol::{AckResult, Baseline, CalibrationRefusal, ErrorCode};
 use fois_vnode::Environment;
 
 /// Run one shipped scenario file (its own expectations must hold too);
 /// also the true dry-face currents of its environment, nA.
 fn run(file: &str) -> (Outcome, [f64; 2]) {
-    let path = scenario::default_dir().join(file);
-    let mut scenarios = scenario::load(&path).expect("the scenario loads");
-    assert_eq!(scenarios.len(), 1, "{file}: one run");
-    let sc = scenarios.remove(0);
-    let o = fois_hil::run(&sc).expect("the scenario runs");
-    let failures = check::check(&sc, &o);
-    assert!(failures.is_empty(), "{file}: {}", failures.join("; "));
+    let (o, sc) = common::run_file(file);
     let env = Environment::new(sc.timeline.clone(), sc.sensor, sc.seed);
     let dry = env.truth(0).led_signal_ua.map(|ua| ua * 1e3);
     (o, dry)
