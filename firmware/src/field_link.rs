@@ -80,6 +80,12 @@ pub const IDLE_BYTES_BEFORE_TX: u32 = 3;
 /// parts the wiring table names) with room.
 pub const DE_LEAD_US: u32 = 10;
 
+/// The longest an answer waits for the line and the driver on the field
+/// link, ms: the quiet bytes at the slowest rate and the DE lead, rounded
+/// up (1.57 ms → 2 ms).
+pub const TURNAROUND_MAX_MS: u32 =
+    (IDLE_BYTES_BEFORE_TX * byte_time_us(LONG_CABLE_BAUD) + DE_LEAD_US).div_ceil(1_000);
+
 /// May the node start transmitting now? `quiet_us`: time since the last
 /// byte was received (`None`: nothing received yet).
 pub const fn line_free(quiet_us: Option<u32>, baud: u32) -> bool {
@@ -131,5 +137,6 @@ mod tests {
         assert_eq!(byte_time_us(LONG_CABLE_BAUD), 521);
         assert!(!line_free(Some(1_500), LONG_CABLE_BAUD));
         assert!(line_free(Some(1_563), LONG_CABLE_BAUD));
+        assert_eq!(TURNAROUND_MAX_MS, 2);
     }
 }
