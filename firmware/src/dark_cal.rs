@@ -5,7 +5,8 @@
 //!
 //! The calibration measures *blocks*: synchronous detection as in a frame
 //! (`measure::acquire`, the config's settle time) with
-//! `min(K, CAL_BLOCK_CYCLES)` cycles each, back to back. After
+//! [`CAL_BLOCK_CYCLES`] cycles each, whatever the frames' K (every cycle's
+//! net has the same expectation), back to back. After
 //! [`CAL_MIN_BLOCKS`] blocks it stops as soon as the standard error of the
 //! mean of each channel is at most the onset rise / [`SE_FRACTION_OF_ONSET`]
 //! (50 nA with the default 1 µA onset), or when the next block would pass
@@ -47,9 +48,9 @@ use crate::hal::{FactoryCal, PhotoAdc};
 use crate::measure;
 use crate::vref;
 
-/// Cycles per calibration block at most (the config's K if smaller): short
-/// blocks give enough of them to see a trend or a step even at K = 64 and
-/// 5 ms settle (8 cycles × 2 × 5 ms = 80 ms a block).
+/// Cycles per calibration block: short blocks give enough of them to see a
+/// trend or a step even at 5 ms settle (8 cycles × 2 × 5 ms = 80 ms a
+/// block), long enough ones that 256 of them average 2 048 cycles.
 pub const CAL_BLOCK_CYCLES: u16 = 8;
 /// Blocks measured at least (a trend or a step needs some to be seen).
 pub const CAL_MIN_BLOCKS: usize = 16;
@@ -109,7 +110,7 @@ pub fn block_max_us(cycles: u16, settle_us: u16) -> u32 {
 
 /// The plan for `config`.
 pub fn plan(config: &Config) -> Plan {
-    let block_cycles = config.cycles_per_frame.clamp(1, CAL_BLOCK_CYCLES);
+    let block_cycles = CAL_BLOCK_CYCLES;
     let block_us = block_max_us(block_cycles, config.settle_us).max(1);
     let fit = (CAL_MAX_MS * 1_000 / block_us) as usize;
     Plan {
@@ -473,12 +474,12 @@ mod tests {
         assert_eq!((p.block_cycles, p.max_blocks), (8, 23));
         assert!(p.max_blocks >= CAL_MIN_BLOCKS);
         assert!(p.max_blocks as u32 * block_max_us(8, 5_000) <= CAL_MAX_MS * 1_000);
-        // K = 2: blocks of 2 cycles.
+        // K = 1 (fast frames): still blocks of 8 cycles, as many of them.
         let p = plan(&Config {
-            cycles_per_frame: 2,
+            cycles_per_frame: 1,
             ..cfg()
         });
-        assert_eq!(p.block_cycles, 2);
+        assert_eq!((p.block_cycles, p.max_blocks), (8, 256));
         // The smallest onset (50 nA): SE target 2 nA.
         let p = plan(&Config {
             onset_rise_na: 50,
