@@ -1,11 +1,11 @@
 //! Flash writes wait for a healthy supply. The F446 erases and programs at
-//! x32 parallelism only from 2.7 V (RM0390 §3.5.4, program/erase
+//! x32 parallelism only from 2.7 V (RM0390 §3.5, program/erase
 //! parallelism; the board programs at x32 always), and a write that a
 //! sagging supply cuts short is the one a power-loss-safe store can still
 //! survive but should not have to: so a save starts only when the last
 //! V_DDA (measured through VREFINT just before) is at least
 //! [`FLASH_WRITE_MIN_VDDA_MV`] (and plausible: at most 3.6 V) and the programmable voltage detector does
-//! not report V_DD below its threshold (PWR_CSR.PVDO, RM0390 §5.2.2: the
+//! not report V_DD below its threshold (PWR_CSR.PVDO, RM0390 §5.2.3: the
 //! board sets it to 2.8 V). Otherwise the save is postponed, not failed: it
 //! runs at the first poll after the supply has recovered.
 

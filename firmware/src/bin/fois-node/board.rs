@@ -91,7 +91,7 @@ pub fn reset_reason_name(r: ResetReason) -> &'static str {
 /// the ADC up (clock, prescaler, pins in analog mode, VREFINT) and every
 /// conversion after that is ours, through the PAC, with the converter kept
 /// on: SQR3 ← channel, SWSTART, EOC — 56 + 12 ADC cycles = 8.5 µs at 8 MHz
-/// per channel (RM0390 §13.5, "Channel-wise programmable sampling time").
+/// per channel (RM0390 §13, ADC: single conversions, channel-wise sampling time).
 pub struct BoardAdc {
     /// Owns ADC1 (its clock and prescaler stay as embassy set them).
     _adc: Adc<'static, ADC1>,
@@ -105,7 +105,7 @@ pub struct BoardAdc {
 const PHOTO_SAMPLE: SampleTime = SampleTime::CYCLES56;
 const NTC_SAMPLE: SampleTime = SampleTime::CYCLES84;
 const INTERNAL_SAMPLE: SampleTime = SampleTime::CYCLES144;
-/// ADC1 channels (RM0390 §13.3.3; the F446's temperature sensor is on 18).
+/// ADC1 channels (RM0390 §13, ADC; the F446's temperature sensor is on 18).
 const CH_PHOTO1: u8 = 0;
 const CH_PHOTO2: u8 = 1;
 const CH_NTC: u8 = 4;
@@ -199,7 +199,7 @@ const STORE_OFFSET: u32 = 0x0004_0000;
 const STORE_SECTOR_BYTES: u32 = fois_firmware::flash_store::BOARD_SECTOR_BYTES as u32;
 const STORE_FIRST_SECTOR: u8 = 6;
 const STORE_SECTORS: u32 = 2;
-/// x32 parallelism needs V_DD ≥ 2.7 V (RM0390 §3.5.4, program/erase
+/// x32 parallelism needs V_DD ≥ 2.7 V (RM0390 §3.5, program/erase
 /// parallelism); the node starts a save only above it (`supply`).
 const X32_MIN_VDDA_MV: u16 = fois_firmware::supply::FLASH_WRITE_MIN_VDDA_MV;
 
