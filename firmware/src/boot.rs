@@ -1,7 +1,7 @@
 //! What survives a reset, and what the node does with it at boot: the
 //! board keeps a few words in the STM32's backup registers (RTC_BKPxR,
-//! RM0390 §22, RTC backup registers: kept across every reset but a power loss or a backup
-//! domain reset), each record with a CRC so that garbage reads as nothing.
+//! RM0390 §22: kept across every reset but a power loss or a backup domain
+//! reset), each record with a CRC so that garbage reads as nothing.
 //!
 //! - **Panic resets** ([`PanicRecord`]): the panic handler records the
 //!   source line, counts the panic resets in a row and resets at once

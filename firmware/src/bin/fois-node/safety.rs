@@ -25,9 +25,9 @@ impl Watchdog {
     /// Start the IWDG, before `embassy_stm32::init` (which waits without a
     /// bound on HSERDY, PLLRDY and the LSI): a hang there resets the chip.
     /// The IWDG needs no clock enable and starts the LSI itself (RM0390
-    /// §20, independent watchdog). It cannot be stopped again. In debug builds it is frozen
-    /// while a debugger halts the core (DBGMCU_APB1_FZ.DBG_IWDG_STOP);
-    /// release images leave it running.
+    /// §20, independent watchdog). It cannot be stopped again. In debug
+    /// builds it is frozen while a debugger halts the core
+    /// (DBGMCU_APB1_FZ.DBG_IWDG_STOP); release images leave it running.
     pub fn start_first() -> Self {
         if cfg!(debug_assertions) {
             pac::DBGMCU.apb1fzr().modify(|w| w.set_iwdg(true));
@@ -167,9 +167,10 @@ unsafe fn NonMaskableInt() {
 // ---- Brown-out level and supply ----
 
 /// BOR level 3 (FLASH_OPTCR.BOR_LEV = 0b00): reset below ≈ 2.7 V (RM0390
-/// §5.2.2 and the option bytes, §3.6). Set when the board is provisioned (`firmware/README.md`,
-/// "Provisioning: the brown-out level"); the firmware only reads it. The
-/// factory value is "off" (0b11: only the ≈ 1.7 V power-on reset).
+/// §5.2.2, and the option bytes in §3.6). Set when the board is
+/// provisioned (`firmware/README.md`, "Provisioning: the brown-out
+/// level"); the firmware only reads it. The factory value is "off" (0b11:
+/// only the ≈ 1.7 V power-on reset).
 const BOR_LEVEL_3: u8 = 0b00;
 
 /// True when the option bytes hold the provisioned brown-out level.
