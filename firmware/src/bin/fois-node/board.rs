@@ -99,8 +99,9 @@ pub struct BoardAdc {
 
 // ADC clock: PCLK2 16 MHz / 2 = 8 MHz. 56 cycles = 7 µs sampling: settles
 // sources up to 96 kΩ to ¼ LSB (RM0390 / datasheet eq. 1 with C_ADC = 7 pF,
-// R_ADC = 6 kΩ), which is why the config rule caps the load resistors at
-// fois_protocol::LOAD_R_MAX_OHM = 90 kΩ. The internal channels need ≥ 10 µs
+// R_ADC = 6 kΩ), beyond the datasheet's R_AIN limit of 50 kΩ at which the
+// config rule caps the load resistors (fois_protocol::LOAD_R_MAX_OHM). The
+// internal channels need ≥ 10 µs
 // (112 cycles).
 const PHOTO_SAMPLE: SampleTime = SampleTime::CYCLES56;
 const NTC_SAMPLE: SampleTime = SampleTime::CYCLES84;
