@@ -9,6 +9,10 @@
 //! - [`node::Node`]: the whole node behind them; [`schedule::Schedule`]: when
 //!   it sends `Hello` and runs its frames.
 //! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
+//! - [`dark_cal`]: the dark calibration under noise (how long to average, trend and step tests).
+//! - [`boot`]: what survives a reset (panic resets in a row, the rule's state) and what a boot does
+//!   with it; [`supply`]: flash writes wait for a healthy supply; [`field_link`]: baud rates,
+//!   their error against the node's clock, the RS-485 turn-taking.
 //! - [`watchdog`]: the IWDG prescaler, reload and timeout arithmetic the board
 //!   programs; [`reply_time`]: the worst time to answer a command (the
 //!   host's timeout).
@@ -17,8 +21,11 @@
 
 #![cfg_attr(not(test), no_std)]
 
+pub mod boot;
+pub mod dark_cal;
 pub mod dispatch;
 pub mod estimator;
+pub mod field_link;
 pub mod flash_store;
 pub mod hal;
 pub mod measure;
@@ -31,6 +38,7 @@ pub mod rule;
 pub mod schedule;
 #[cfg(feature = "sim-board")]
 pub mod sim_board;
+pub mod supply;
 pub mod vref;
 pub mod watchdog;
 

@@ -5,11 +5,13 @@
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use fois_protocol::{
-    Ack, AckResult, Baseline, CalibrationRefusal, Command, Config, ConfigV1, DetectorState,
-    DeviceFrame, DeviceMsg, ErrorCode, ErrorReply, Event, EventKind, FrameDecoder, Hello,
-    HostFrame, MAX_FRAME, Measurement, MeasurementV3, PROTOCOL_VERSION, encode, flags,
+    Ack, AckResult, Baseline, Command, Config, ConfigV1, DetectorState, DeviceFrame, DeviceMsg,
+    ErrorCode, ErrorReply, Event, EventKind, FrameDecoder, Hello, HostFrame, MAX_FRAME,
+    Measurement, MeasurementV3, PROTOCOL_VERSION, encode, flags,
 };
 
+use crate::boot::RuleSnapshot;
+use crate::dark_cal;
 use crate::dispatch::{self, BUTTON_ID};
 use crate::estimator::{Estimator, EstimatorParams};
 use crate::hal::{BoardInfo, PhotoAdc, Storage};
@@ -17,6 +19,7 @@ use crate::measure::{self, Currents};
 use crate::ntc::{self, NtcReading};
 use crate::persist::{self, LoadError, MAX_RECORD, Record};
 use crate::rule::{Rule, RuleInput};
+use crate::supply;
 use crate::vref;
 
 /// Firmware version sent in [`Hello`] (the crate's version).
@@ -36,9 +39,6 @@ const fn parse_u8(s: &str) -> u8 {
     }
     v
 }
-
-/// Dark calibration averages this many frames of K cycles.
-pub const CAL_FRAMES: u16 = 4;
 
 /// A change is saved once no further change came for this long, ms: a burst
 /// of config changes and calibrations is one flash write.
@@ -92,6 +92,12 @@ where
     config_defaulted: bool,
     storage_failed: bool,
     clock_fallback: bool,
+    /// Boot faults the board found (`BOR_NOT_SET`, `STORE_SKIPPED`).
+    boot_faults: u16,
+    /// The PVD reports V_DD below its threshold: saves wait.
+    supply_low: bool,
+    /// A panic reset to report once: (line, resets in a row).
+    panic_report: Option<(u32, u8)>,
     /// The record the storage holds, as far as the node knows.
     stored: Option<Record>,
     pending_save: Option<PendingSave>,
@@ -162,6 +168,9 @@ where
             config_defaulted,
             storage_failed: false,
             clock_fallback: false,
+            boot_faults: 0,
+            supply_low: false,
+            panic_report: None,
             stored,
             pending_save: None,
             last_save_ms: None,
@@ -266,6 +275,13 @@ where
             );
         }
         self.reported_faults = faults;
+        if let Some((line, resets_in_row)) = self.panic_report.take() {
+            let kind = EventKind::PanicReset {
+                line,
+                resets_in_row,
+            };
+            self.send(DeviceMsg::Event(event(kind, 1)), tx);
+        }
         self.last = Some(m);
         // After the frame, so a save's erase never delays a measurement.
         self.poll_storage(now_ms);
@@ -304,6 +320,48 @@ where
     /// clock did not start (raises `CLOCK_FALLBACK`).
     pub fn set_clock_fallback(&mut self, fallback: bool) {
         self.clock_fallback = fallback;
+    }
+
+    /// Faults the board found at boot: the brown-out level in the option
+    /// bytes is not the provisioned one (`BOR_NOT_SET`), or the node booted
+    /// without its flash store after repeated panic resets
+    /// (`STORE_SKIPPED`). Raised with the first frame.
+    pub fn set_boot_faults(&mut self, bor_not_set: bool, store_skipped: bool) {
+        self.boot_faults = 0;
+        if bor_not_set {
+            self.boot_faults |= flags::BOR_NOT_SET;
+        }
+        if store_skipped {
+            self.boot_faults |= flags::STORE_SKIPPED;
+        }
+    }
+
+    /// This boot followed a panic reset: send `EventKind::PanicReset` once,
+    /// with the next frame.
+    pub fn report_panic_reset(&mut self, line: u32, resets_in_row: u8) {
+        self.panic_report = Some((line, resets_in_row));
+    }
+
+    /// The programmable voltage detector reports V_DD below its threshold:
+    /// saves wait until it does not (and the last V_DDA is healthy:
+    /// `supply`).
+    pub fn set_supply_low(&mut self, low: bool) {
+        self.supply_low = low;
+    }
+
+    /// The rule's state, for the board to keep across a reset.
+    pub fn rule_snapshot(&self) -> RuleSnapshot {
+        RuleSnapshot {
+            state: self.rule.state(),
+            acked: self.rule.acked(),
+        }
+    }
+
+    /// Resume the rule's state after a reset (`boot::RuleSnapshot::resume`):
+    /// the outputs follow at once.
+    pub fn resume_rule(&mut self, snapshot: RuleSnapshot) {
+        self.rule = Rule::resumed(snapshot.state, snapshot.acked);
+        self.drive_outputs();
     }
 
     /// Bytes received from the host link, in any chunking. Each complete
@@ -442,6 +500,7 @@ where
         if self.clock_fallback {
             f |= flags::CLOCK_FALLBACK;
         }
+        f |= self.boot_faults;
         if self.baseline.is_none() {
             f |= flags::NO_BASELINE;
         }
@@ -602,33 +661,17 @@ where
             // become the baseline and hide the next film).
             return Err(ErrorCode::NotDry);
         }
-        let mut min = [i32::MAX; 2];
-        let mut max = [i32::MIN; 2];
-        let mut sum = [0i64; 2];
-        for _ in 0..CAL_FRAMES {
-            let v = self.measure_frame();
-            if v.flags & flags::INVALID_MASK != 0 {
-                return Err(ErrorCode::CalibrationRefused(CalibrationRefusal::Saturated));
-            }
-            for ch in 0..2 {
-                let i = v.currents.net_na[ch];
-                min[ch] = min[ch].min(i);
-                max[ch] = max[ch].max(i);
-                sum[ch] += i64::from(i);
-            }
-        }
-        // Steady: the spread over the frames stays under half the onset rise.
-        let tolerance = i64::from(self.config.onset_rise_na / 2);
-        for ch in 0..2 {
-            if i64::from(max[ch]) - i64::from(min[ch]) > tolerance {
-                return Err(ErrorCode::CalibrationRefused(CalibrationRefusal::Noisy));
-            }
-        }
-        let n = i64::from(CAL_FRAMES);
-        let baseline = Baseline {
-            i1_na: (sum[0] / n) as i32,
-            i2_na: (sum[1] / n) as i32,
-        };
+        // Average as long as the noise needs, within the time bound; refuse
+        // a trend, a step, too much noise or saturation (`dark_cal`).
+        let baseline = dark_cal::run(
+            &mut self.adc,
+            &mut self.led,
+            &mut self.delay,
+            &self.config,
+            &self.info.cal,
+        )
+        .map_err(ErrorCode::CalibrationRefused)?
+        .baseline;
         self.baseline = Some(baseline);
         // A clean, dry face: the estimator starts from "dry".
         self.estimator.set_dry();
@@ -663,8 +706,14 @@ where
         });
     }
 
-    /// Write the record now.
+    /// Write the record now, if the supply allows (else it stays pending).
     fn save(&mut self, now_ms: u64) {
+        // V_DDA now, not the last frame's: a save can come before the first
+        // frame (a `Reset` right after a `SetConfig`) or long after one.
+        let vdda_mv = vref::vdda_mv(&self.info.cal, self.adc.read_vrefint());
+        if !supply::flash_write_allowed(vdda_mv, self.supply_low) {
+            return;
+        }
         let record = self.record();
         let mut buf = [0u8; MAX_RECORD];
         let n = persist::encode(&record, &mut buf);

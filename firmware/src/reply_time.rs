@@ -9,28 +9,36 @@
 //!   erases at x32 from the first frame on at V_DDA ≥ 2.7 V, x16 below),
 //!   plus the item's programming and read-back ([`SAVE_PROGRAM_MAX_MS`]).
 //!
-//! Then it runs itself: a dark calibration measures [`CAL_FRAMES`] longest
-//! frames before its `Ack` (any other command answers at once), which then
-//! queues behind at most a full transmit pipe ([`TX_QUEUE_MAX_MS`]). (The
-//! save a command causes is deferred and coalesced: it never delays the
-//! command's own answer.)
+//! Then it runs itself: a dark calibration averages for at most
+//! [`CAL_MAX_MS`] before its `Ack` (any other command answers at once),
+//! which then queues behind at most a full transmit pipe drained at the
+//! slowest link rate ([`TX_QUEUE_MAX_MS`]), and on the field link waits for
+//! a quiet line and the driver enable ([`TURNAROUND_MAX_MS`]). (The save a command causes is
+//! deferred and coalesced: it never delays the command's own answer.)
 
-use crate::node::CAL_FRAMES;
+use crate::dark_cal::CAL_MAX_MS;
+use crate::field_link::TURNAROUND_MAX_MS;
 use crate::watchdog::{ERASE_128K_X16_MAX_MS, LONGEST_FRAME_MS};
 
 /// Programming one record item and reading it back, ms (a ~50-byte item
 /// at ≤ 100 µs per 32-bit word, RM0390 t_PROG, with room).
 pub const SAVE_PROGRAM_MAX_MS: u32 = 50;
-/// The board's transmit pipe (1 KiB) drained at 115 200 Bd, 10 bits a
-/// byte: 89 ms, rounded up.
-pub const TX_QUEUE_MAX_MS: u32 = 90;
+/// The board's transmit pipe, bytes.
+pub const TX_PIPE_BYTES: u32 = 1_024;
+/// The slowest link rate the board offers, Bd (the field link's long-cable
+/// rate).
+pub const SLOWEST_BAUD: u32 = crate::field_link::LONG_CABLE_BAUD;
+/// The transmit pipe drained at [`SLOWEST_BAUD`], 10 bits a byte, ms
+/// (rounded up: 534 ms; 89 ms at 115 200 Bd).
+pub const TX_QUEUE_MAX_MS: u32 = (TX_PIPE_BYTES * 10 * 1_000).div_ceil(SLOWEST_BAUD);
 /// The worst time from a command's last byte to the first byte of its
-/// answer, ms (5 955 ms).
+/// answer, ms (5 829 ms).
 pub const WORST_REPLY_MS: u32 = LONGEST_FRAME_MS
     + ERASE_128K_X16_MAX_MS
     + SAVE_PROGRAM_MAX_MS
-    + CAL_FRAMES as u32 * LONGEST_FRAME_MS
-    + TX_QUEUE_MAX_MS;
+    + CAL_MAX_MS
+    + TX_QUEUE_MAX_MS
+    + TURNAROUND_MAX_MS;
 
 // The host waits longer than the node can take, with 2 s for the host's own
 // latency (USB-serial, scheduling).
@@ -42,9 +50,23 @@ mod tests {
 
     #[test]
     fn the_worst_reply_and_the_host_timeout() {
-        assert_eq!(WORST_REPLY_MS, 643 + 2_600 + 50 + 4 * 643 + 90);
-        // 5.955 s: longer than the host's former 3 s timeout.
-        assert_eq!(WORST_REPLY_MS, 5_955);
+        assert_eq!(TX_QUEUE_MAX_MS, 534);
+        assert_eq!(WORST_REPLY_MS, 643 + 2_600 + 50 + 2_000 + 534 + 2);
+        // 5.829 s: longer than the host's former 3 s timeout, 2.17 s inside
+        // the 8 s it waits now.
+        assert_eq!(WORST_REPLY_MS, 5_829);
         assert_eq!(fois_protocol::REPLY_TIMEOUT_MS, 8_000);
+    }
+
+    #[test]
+    fn on_a_failed_over_clock_the_worst_reply_still_fits() {
+        // After the clock security system switched to HSI the node's
+        // milliseconds are HSI's: at its slowest (−8 % over −40…105 °C,
+        // field_link::HSI_FULL_RANGE_PPM) the worst case takes 5 829 / 0.92
+        // = 6 336 ms of the host's time, 1.66 s inside its timeout.
+        let slow = 1.0 - f64::from(crate::field_link::HSI_FULL_RANGE_PPM) * 1e-6;
+        let real_ms = f64::from(WORST_REPLY_MS) / slow;
+        assert!((6_335.0..6_337.0).contains(&real_ms), "{real_ms}");
+        assert!(real_ms + 1_500.0 < fois_protocol::REPLY_TIMEOUT_MS as f64);
     }
 }

@@ -82,6 +82,15 @@ impl Rule {
         }
     }
 
+    /// The rule resumed in `state` after a reset (counters at zero; the
+    /// acknowledgement kept only while iced): see `boot::RuleSnapshot`.
+    pub const fn resumed(state: DetectorState, acked: bool) -> Self {
+        let mut rule = Rule::new();
+        rule.state = state;
+        rule.acked = acked && matches!(state, DetectorState::Ice);
+        rule
+    }
+
     /// The current state.
     pub fn state(&self) -> DetectorState {
         self.state

@@ -33,8 +33,15 @@ use core::ops::Deref;
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::{ErrorType, OutputPin};
 
+use rand_core::Rng;
+use rand_pcg::Pcg32;
+
 use crate::hal::{BoardInfo, FactoryCal, PhotoAdc, Storage};
 use crate::node::Node;
+
+/// The noise stream's PCG state and stream constants (any fixed values).
+const NOISE_STATE: u64 = 0xcafe_f00d_d15e_a5e5;
+const NOISE_STREAM: u64 = 0x0a02_bdbf_7bb3_c0a7;
 
 /// Physical quantities → 12-bit ADC codes: the inverse of what the firmware
 /// computes from the codes (`measure`, `ntc`, `vref`).
@@ -143,6 +150,17 @@ pub struct Scene {
     /// V_CE(sat) of the phototransistors, mV: the emitter (the ADC input)
     /// clips at `vdda_mv` minus this in strong light.
     pub vce_sat_mv: f64,
+    /// ADC noise, rms LSB per photo conversion (Gaussian, from the board's
+    /// seeded stream: [`SimBoard::seed_noise`]).
+    pub noise_lsb: f64,
+    /// A change at a board time, ns: from then on the LED's photocurrent
+    /// and the ambient light are higher by these, nA (a drop landing, a
+    /// cloud edge). `None`: no change.
+    pub step_at_ns: Option<u64>,
+    /// The LED photocurrent's change at `step_at_ns`, nA.
+    pub signal_step_na: [f64; 2],
+    /// The ambient light's change at `step_at_ns`, nA.
+    pub ambient_step_na: [f64; 2],
 }
 
 impl Scene {
@@ -161,6 +179,10 @@ impl Scene {
         load_ohm: [10_000.0; 2],
         conversion_ns: 15_000,
         vce_sat_mv: codes::VCE_SAT_TYPICAL_V * 1000.0,
+        noise_lsb: 0.0,
+        step_at_ns: None,
+        signal_step_na: [0.0; 2],
+        ambient_step_na: [0.0; 2],
     };
 }
 
@@ -171,7 +193,7 @@ impl Default for Scene {
 }
 
 /// The board: its clock, output levels and scene.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct SimBoard {
     /// Board time, ns.
     pub t_ns: Cell<u64>,
@@ -185,11 +207,19 @@ pub struct SimBoard {
     pub led_toggles: Cell<u32>,
     /// The optics and the air.
     pub scene: RefCell<Scene>,
+    /// The ADC noise stream.
+    noise: RefCell<Pcg32>,
+}
+
+impl Default for SimBoard {
+    fn default() -> Self {
+        Self::new()
+    }
 }
 
 impl SimBoard {
     /// A board at t = 0 in [`Scene::DEFAULT`].
-    pub const fn new() -> Self {
+    pub fn new() -> Self {
         SimBoard {
             t_ns: Cell::new(0),
             led: Cell::new(false),
@@ -197,7 +227,22 @@ impl SimBoard {
             indicator: Cell::new(false),
             led_toggles: Cell::new(0),
             scene: RefCell::new(Scene::DEFAULT),
+            noise: RefCell::new(Pcg32::new(NOISE_STATE, NOISE_STREAM)),
         }
+    }
+
+    /// Restart the ADC noise stream from `seed` (the same seed gives the
+    /// same draws).
+    pub fn seed_noise(&self, seed: u64) {
+        *self.noise.borrow_mut() = Pcg32::new(NOISE_STATE ^ seed, NOISE_STREAM);
+    }
+
+    /// One standard normal draw (Box–Muller).
+    fn gaussian(&self) -> f64 {
+        let mut rng = self.noise.borrow_mut();
+        let u1 = ((rng.next_u64() >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+        let u2 = (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+        libm::sqrt(-2.0 * libm::log(u1)) * libm::cos(2.0 * core::f64::consts::PI * u2)
     }
 
     /// Board time, ms.
@@ -246,20 +291,28 @@ impl<B: Deref<Target = SimBoard>> PhotoAdc for BoardAdc<B> {
         let phase = 2.0 * core::f64::consts::PI * s.flicker_hz * t_s + s.flicker_phase;
         let wave = libm::sin(phase);
         let led_on = board.led.get();
+        let stepped = s.step_at_ns.is_some_and(|t| board.t_ns.get() >= t);
         let codes = [0, 1].map(|ch| {
             let flicker = s.flicker_na[ch] * wave;
+            let (signal_step, ambient_step) = if stepped {
+                (s.signal_step_na[ch], s.ambient_step_na[ch])
+            } else {
+                (0.0, 0.0)
+            };
             let led = if led_on {
-                s.signal_na[ch] + s.signal_ramp_na_per_s[ch] * t_s
+                s.signal_na[ch] + signal_step + s.signal_ramp_na_per_s[ch] * t_s
             } else {
                 0.0
             };
-            let i_na = s.ambient_na[ch] + flicker + led;
-            codes::photo_code(
-                i_na,
-                s.load_ohm[ch],
-                s.vdda_mv / 1000.0,
-                s.vce_sat_mv / 1000.0,
-            )
+            let i_na = s.ambient_na[ch] + ambient_step + flicker + led;
+            let vdda_v = s.vdda_mv / 1000.0;
+            let volts = codes::photo_volts(i_na, s.load_ohm[ch], vdda_v, s.vce_sat_mv / 1000.0);
+            let noise = if s.noise_lsb > 0.0 {
+                s.noise_lsb * board.gaussian()
+            } else {
+                0.0
+            };
+            codes::code(codes::lsb(volts, vdda_v) + noise)
         });
         board.t_ns.set(board.t_ns.get() + s.conversion_ns);
         codes

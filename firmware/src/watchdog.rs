@@ -12,9 +12,14 @@
 //! time t_ERASE128KB is 1 s typ / 2 s max at x32 parallelism, 1.3 / 2.6 s at
 //! x16 and 2 / 4 s at x8 (embassy-stm32 0.6 erases at x8; the board erases
 //! at x32, or x16 when V_DDA is below 2.7 V). The board feeds the watchdog
-//! right before each erase and in every settle wait of a frame (so a dark
-//! calibration's four frames are covered); between two feeds there is at
-//! most one erase plus the rest of one pass of the measure loop.
+//! only in its measure loop and right before and after each erase (a hung
+//! loop must not be kept alive by anything else). Between two feeds the loop
+//! sleeps, may wait for the node behind one command from the link and one
+//! button press (the link task yields after each host frame and wakes the
+//! loop), each at most a dark calibration, then runs a frame and the save
+//! work before an erase.
+
+use crate::dark_cal::CAL_MAX_MS;
 
 /// Slowest LSI, Hz (F446 datasheet, LSI oscillator characteristics).
 pub const LSI_MIN_HZ: u32 = 17_000;
@@ -41,10 +46,20 @@ pub const MAX_SLEEP_MS: u32 = 500;
 /// The longest frame the config rule allows: K = 64 cycles × 2 × 5 ms
 /// settle, plus 2 × 65 photo conversions and four others of ≤ 20 µs, ms.
 pub const LONGEST_FRAME_MS: u32 = 643;
-/// The most the node can go without a feed: a sleep, a frame, a save whose
-/// erase (fed just before) runs at the worst parallelism the board may use
-/// (x16), and the save's programming and read-back (< 50 ms), ms.
-pub const WORST_UNFED_MS: u32 = MAX_SLEEP_MS + LONGEST_FRAME_MS + ERASE_128K_X16_MAX_MS + 50;
+/// A save's programming and read-back around its erase, ms.
+pub const SAVE_WORK_MS: u32 = 50;
+/// The most the node can go without a feed, ms: a sleep, two dark
+/// calibrations (a command's and the button's) and a frame with the save
+/// work before an erase; or an erase (fed just before, at the worst
+/// parallelism the board may use, x16) and the programming after it.
+pub const WORST_UNFED_MS: u32 = max(
+    MAX_SLEEP_MS + 2 * CAL_MAX_MS + LONGEST_FRAME_MS + SAVE_WORK_MS,
+    ERASE_128K_X16_MAX_MS + SAVE_WORK_MS,
+);
+
+const fn max(a: u32, b: u32) -> u32 {
+    if a > b { a } else { b }
+}
 
 /// The timeout at this LSI frequency, ms (rounded down).
 pub const fn timeout_ms(lsi_hz: u32) -> u32 {
@@ -60,10 +75,8 @@ pub const LONGEST_TIMEOUT_MS: u32 = timeout_ms(LSI_MIN_HZ);
 const _: () = assert!(IWDG_PR <= 6 && IWDG_RELOAD <= 0x0FFF);
 const _: () = assert!(SHORTEST_TIMEOUT_MS >= 8_000);
 const _: () = assert!(SHORTEST_TIMEOUT_MS > WORST_UNFED_MS);
-// Even an x8 erase (4 s) after a calibration's four longest frames, with no
-// feed in between, would not fire it.
-const _: () =
-    assert!(MAX_SLEEP_MS + 4 * LONGEST_FRAME_MS + ERASE_128K_X8_MAX_MS < SHORTEST_TIMEOUT_MS);
+// Even an x8 erase (4 s, what embassy-stm32 would do) would not fire it.
+const _: () = assert!(ERASE_128K_X8_MAX_MS + SAVE_WORK_MS < SHORTEST_TIMEOUT_MS);
 
 #[cfg(test)]
 mod tests {
@@ -76,6 +89,7 @@ mod tests {
         assert_eq!(SHORTEST_TIMEOUT_MS, 8_170);
         assert_eq!(timeout_ms(LSI_TYP_HZ), 12_000);
         assert_eq!(LONGEST_TIMEOUT_MS, 22_588);
-        assert_eq!(WORST_UNFED_MS, 3_793);
+        // 0.5 s + 2 × 2 s + 0.643 s + 0.05 s.
+        assert_eq!(WORST_UNFED_MS, 5_193);
     }
 }

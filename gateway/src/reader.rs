@@ -27,7 +27,7 @@ pub const RETRY_INTERVAL: Duration = Duration::from_millis(500);
 /// behind its longest frame and a flash erase (3.4 s).
 pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS);
 /// Time a node has to answer a command from MQTT: the protocol's
-/// `REPLY_TIMEOUT_MS` (8 s), over the node's worst answer (5.955 s, a dark
+/// `REPLY_TIMEOUT_MS` (8 s), over the node's worst answer (5.829 s, a dark
 /// calibration behind the longest frame and an erasing save).
 pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS);
 

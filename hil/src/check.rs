@@ -142,14 +142,14 @@ fn check_replies(sc: &Scenario, o: &Outcome, fail: &mut Vec<String>) {
     let wants = sc
         .config
         .iter()
-        .map(|_| ("set_config".to_string(), Reply::Ack))
+        .map(|_| ("set_config".to_string(), Reply::Ack, None))
         .chain(
             sc.file
                 .commands
                 .iter()
-                .map(|c| (format!("{:?} at {} s", c.send, c.at_s), c.expect)),
+                .map(|c| (format!("{:?} at {} s", c.send, c.at_s), c.expect, c.refusal)),
         );
-    for ((what, want), &(id, _)) in wants.zip(o.sent.iter()) {
+    for ((what, want, refusal), &(id, _)) in wants.zip(o.sent.iter()) {
         let found = o
             .replies
             .iter()
@@ -166,6 +166,12 @@ fn check_replies(sc: &Scenario, o: &Outcome, fail: &mut Vec<String>) {
                 };
                 if got != want {
                     fail.push(format!("{what}: got {:?}, expected {want:?}", r.result));
+                } else if let (Some(refusal), Err(code)) = (refusal, &r.result)
+                    && refusal.code() != *code
+                {
+                    fail.push(format!(
+                        "{what}: refused with {code:?}, expected {refusal:?}"
+                    ));
                 }
             }
         }

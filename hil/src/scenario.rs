@@ -196,6 +196,39 @@ pub struct CommandSpec {
     /// The answer expected (default ack).
     #[serde(default)]
     pub expect: Reply,
+    /// With `expect = "error"`: the reason the error must give (a dark
+    /// calibration's refusal).
+    pub refusal: Option<Refusal>,
+}
+
+/// Why a dark calibration is refused, as a scenario names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Refusal {
+    /// The face is iced or wet (`ErrorCode::NotDry`).
+    NotDry,
+    /// A step in the currents (`CalibrationRefusal::Step`).
+    Step,
+    /// A trend (`CalibrationRefusal::Trend`).
+    Trend,
+    /// Too noisy for the time (`CalibrationRefusal::Noisy`).
+    Noisy,
+    /// A channel saturated (`CalibrationRefusal::Saturated`).
+    Saturated,
+}
+
+impl Refusal {
+    /// The error code the node sends for it.
+    pub fn code(self) -> fois_protocol::ErrorCode {
+        use fois_protocol::{CalibrationRefusal as R, ErrorCode};
+        match self {
+            Refusal::NotDry => ErrorCode::NotDry,
+            Refusal::Step => ErrorCode::CalibrationRefused(R::Step),
+            Refusal::Trend => ErrorCode::CalibrationRefused(R::Trend),
+            Refusal::Noisy => ErrorCode::CalibrationRefused(R::Noisy),
+            Refusal::Saturated => ErrorCode::CalibrationRefused(R::Saturated),
+        }
+    }
 }
 
 /// Run the scenario once per noise level and/or seed (every combination).
@@ -505,6 +538,11 @@ fn validate_commands(cmds: &[CommandSpec]) -> anyhow::Result<()> {
         ensure!(
             c.frame_period_ms.is_none() || c.send == Send::StartStream,
             "[[command]] #{}: frame_period_ms only goes with send = \"start_stream\"",
+            i + 1
+        );
+        anyhow::ensure!(
+            c.refusal.is_none() || c.expect == Reply::Error,
+            "[[command]] #{}: refusal only goes with expect = \"error\"",
             i + 1
         );
     }

@@ -6,19 +6,14 @@
 // A test crate: unwrap and expect are assertions here (helpers included).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use fois_hil::{Outcome, check, scenario};
+mod common;
+
+use fois_hil::Outcome;
 use fois_protocol::{DetectorState, EventKind, flags};
 
 /// Run one shipped scenario file; its own expectations must hold too.
 fn run(file: &str) -> Outcome {
-    let path = scenario::default_dir().join(file);
-    let mut scenarios = scenario::load(&path).expect("the scenario loads");
-    assert_eq!(scenarios.len(), 1, "{file}: one run");
-    let sc = scenarios.remove(0);
-    let o = fois_hil::run(&sc).expect("the scenario runs");
-    let failures = check::check(&sc, &o);
-    assert!(failures.is_empty(), "{file}: {}", failures.join("; "));
-    o
+    common::run_file(file).0
 }
 
 fn kinds(o: &Outcome) -> Vec<EventKind> {

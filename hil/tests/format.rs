@@ -74,6 +74,14 @@ fn bad_values_are_refused_with_the_reason() {
         ("[[command]]\nat_s = 1\nsend = \"press\"\n", "press"),
         ("[[command]]\nat_s = 900\nsend = \"button\"\n", "outside"),
         (
+            "[[command]]\nat_s = 1\nsend = \"button\"\nrefusal = \"step\"\n",
+            "refusal only goes with expect",
+        ),
+        (
+            "[[command]]\nat_s = 1\nsend = \"button\"\nexpect = \"error\"\nrefusal = \"cloudy\"\n",
+            "cloudy",
+        ),
+        (
             "[[overlay]]\nstart_s = 1\nduration_s = 5\nrepeat = 3\nambient_ua = [1.0, 1.0]\n",
             "period_s",
         ),

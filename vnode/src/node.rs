@@ -396,11 +396,16 @@ impl VirtualNode {
         wake_ms.saturating_mul(NS_PER_MS)
     }
 
-    /// Bytes from the host.
+    /// Bytes from the host. As the board's link task: one host frame (up to
+    /// its 0x00) at a time, and after each the main loop runs what came due
+    /// (a frame, a save), so a host flooding commands (a dark calibration
+    /// takes up to 2 s) cannot starve the measurement.
     pub fn handle_rx(&mut self, bytes: &[u8], tx: &mut impl FnMut(&[u8])) {
-        let now = self.clock.now_ms();
-        self.node_mut().handle_rx(bytes, now, tx);
-        self.after_commands(tx);
+        for piece in bytes.split_inclusive(|b| *b == 0) {
+            let now = self.clock.now_ms();
+            self.node_mut().handle_rx(piece, now, tx);
+            self.after_commands(tx);
+        }
     }
 
     /// The user button (then the main loop polls again, as on the board).

@@ -16,7 +16,9 @@
 //!   discovery checked by real Home Assistant releases (installed into
 //!   cached virtualenvs); `--if-changed`: only when its inputs changed since
 //!   the recorded pass (what `ci` runs).
-//! - `cargo xtask size` — cross-build the firmware and check its size budget.
+//! - `cargo xtask size` — cross-build the firmware's two link variants (the
+//!   ST-LINK's virtual COM port; `field-link`: RS-485 on USART6), lint the
+//!   field one on thumb, and check both against the size budget.
 //! - `cargo xtask qemu` — run the firmware logic under qemu-system-arm.
 //! - `cargo xtask fuzz [--runs N] [--target NAME]` — every cargo-fuzz target
 //!   (or one) for N executions (default 10⁷), installing the nightly
@@ -66,7 +68,7 @@ fn main() -> Result<()> {
             Some("--if-changed") => ha_check::if_changed(&root),
             Some(other) => bail!("usage: cargo xtask ha-check [--if-changed] (not `{other}`)"),
         },
-        "size" => firmware_size().map(|_| ()),
+        "size" => firmware_variants().map(|_| ()),
         "qemu" => qemu(true),
         "fuzz" => fuzz(&std::env::args().skip(2).collect::<Vec<_>>()),
         _ => {
@@ -82,7 +84,7 @@ fn main() -> Result<()> {
                  ha-check [--if-changed]  the gateway's Home Assistant discovery checked by Home Assistant\n         \
                  2024.1.6 and 2024.3.3 (installed into virtualenvs under ~/.cache/fois/home-assistant);\n         \
                  records a pass; --if-changed: only when its inputs changed since the recorded pass\n  \
-                 size   cross-build the firmware (release) and check flash <= 128 KiB, RAM <= 32 KiB\n  \
+                 size   cross-build both firmware link variants (release) and check flash <= 128 KiB, RAM <= 32 KiB\n  \
                  qemu   run the firmware logic tests on qemu-system-arm (mps2-an386)\n  \
                  fuzz   [--runs N] [--target NAME] run every fuzz target (or one) N times (default 10^7; installs nightly + cargo-fuzz)"
             );
@@ -166,9 +168,9 @@ fn ci() -> Result<()> {
         run("cargo", &["fw-clippy", "--", "-D", "warnings"])
     })?;
     step("tests", &mut || run("cargo", &["test", "--workspace"]))?;
-    let mut size = None;
-    step("firmware size", &mut || {
-        size = Some(firmware_size()?);
+    let mut sizes = Vec::new();
+    step("firmware size (both link variants)", &mut || {
+        sizes = firmware_variants()?;
         Ok(())
     })?;
     step("firmware on emulated Cortex-M4F", &mut || qemu(true))?;
@@ -196,9 +198,10 @@ fn ci() -> Result<()> {
     for (name, secs) in &steps {
         eprintln!("  {name:<34} {secs:>7.1} s");
     }
-    if let Some((flash, ram)) = size {
+    for (variant, flash, ram) in &sizes {
+        let (flash, ram) = (*flash, *ram);
         eprintln!(
-            "  firmware image: flash {flash} B ({:.1} KiB of {} KiB), static RAM {ram} B ({:.1} KiB of {} KiB)",
+            "  firmware image ({variant}): flash {flash} B ({:.1} KiB of {} KiB), static RAM {ram} B ({:.1} KiB of {} KiB)",
             flash as f64 / 1024.0,
             FLASH_BUDGET_BYTES / 1024,
             ram as f64 / 1024.0,
@@ -212,10 +215,40 @@ fn ci() -> Result<()> {
     Ok(())
 }
 
-/// Cross-build the release image and check it against the budget.
-/// Returns (flash bytes, static RAM bytes).
-fn firmware_size() -> Result<(u64, u64)> {
-    run("cargo", &["fw"])?;
+/// The board image's link variants: name and extra cargo arguments. The
+/// bench image (the default features) comes last, so the image left in
+/// `target/` is the default one.
+const FIRMWARE_VARIANTS: [(&str, &[&str]); 2] = [
+    ("field-link", &["--features", "field-link"]),
+    ("bench link", &[]),
+];
+
+/// Both link variants of the board image: the field link linted on its
+/// thumb target (the bench image is linted by `cargo fw-clippy` in CI's
+/// clippy step), each cross-built and checked against the size budget.
+/// Returns (variant, flash bytes, static RAM bytes) per variant.
+fn firmware_variants() -> Result<Vec<(&'static str, u64, u64)>> {
+    let mut sizes = Vec::new();
+    for (variant, args) in FIRMWARE_VARIANTS {
+        if !args.is_empty() {
+            let mut clippy = vec!["fw-clippy"];
+            clippy.extend_from_slice(args);
+            clippy.extend_from_slice(&["--", "-D", "warnings"]);
+            run("cargo", &clippy)?;
+        }
+        let (flash, ram) =
+            firmware_size(args).with_context(|| format!("firmware image ({variant})"))?;
+        sizes.push((variant, flash, ram));
+    }
+    Ok(sizes)
+}
+
+/// Cross-build the release image (with `args`, e.g. features) and check it
+/// against the budget. Returns (flash bytes, static RAM bytes).
+fn firmware_size(args: &[&str]) -> Result<(u64, u64)> {
+    let mut fw = vec!["fw"];
+    fw.extend_from_slice(args);
+    run("cargo", &fw)?;
     let elf = PathBuf::from(format!("target/{THUMB}/firmware/fois-node"));
     let sysroot = String::from_utf8(
         Command::new("rustc")

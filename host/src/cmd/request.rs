@@ -19,8 +19,8 @@ pub struct RequestArgs {
     #[command(flatten)]
     pub port: PortArgs,
     /// How long to wait for the node's answer, ms. The default covers the
-    /// node's worst case (5.955 s: a dark calibration of four longest frames
-    /// behind a save that erases a flash sector) with 2 s to spare.
+    /// node's worst case (5.83 s: a dark calibration of its longest averaging
+    /// time behind a save that erases a flash sector) with 2 s to spare.
     #[arg(long, default_value_t = fois_protocol::REPLY_TIMEOUT_MS, value_name = "MS",
           value_parser = clap::value_parser!(u64).range(1..))]
     pub timeout_ms: u64,

@@ -1,9 +1,9 @@
-//! The NUCLEO-F446RE board module: the only code that knows the STM32. It
-//! implements the library's seams with embassy-stm32 (ADC, flash as
-//! `NorFlash`), reads the chip's identity (unique id, factory calibration,
-//! reset reason), and owns the field-safety parts that need registers: the
-//! watchdog, the HSE-bypass probe, the brown-out level, the erase at x32.
-//! Porting to another STM32 means rewriting this file.
+//! The NUCLEO-F446RE board module: with `safety.rs` (watchdog, clock, brown-out,
+//! PVD, backup registers, panics) and `link.rs` (the host link) the only
+//! code that knows the STM32. It implements the library's seams with
+//! embassy-stm32 (ADC, flash as `NorFlash`, erased at x32) and reads the
+//! chip's identity (unique id, factory calibration, reset reason). Porting
+//! to another STM32 means rewriting these three files.
 
 use core::sync::atomic::{AtomicU16, Ordering};
 
@@ -12,13 +12,12 @@ use embassy_stm32::adc::{Adc, SampleTime, Temperature, VrefInt};
 use embassy_stm32::flash::{Blocking, Error as FlashError, Flash};
 use embassy_stm32::pac;
 use embassy_stm32::pac::flash::vals::Psize;
-use embassy_stm32::pac::iwdg::vals::{Key, Pr};
-use embassy_stm32::peripherals::{ADC1, IWDG, PA0, PA1, PA4};
-use embedded_hal::delay::DelayNs;
+use embassy_stm32::peripherals::{ADC1, PA0, PA1, PA4};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use fois_firmware::hal::{FactoryCal, PhotoAdc};
-use fois_firmware::watchdog;
 use fois_protocol::ResetReason;
+
+use crate::safety::Watchdog;
 
 /// Board name sent in `Hello`.
 pub const BOARD_NAME: &str = "NUCLEO-F446RE";
@@ -84,200 +83,113 @@ pub fn reset_reason_name(r: ResetReason) -> &'static str {
 }
 
 /// ADC1 with the node's channels: PA0, PA1 (phototransistors), PA4 (NTC),
-/// VREFINT and the temperature sensor, all single blocking conversions.
+/// VREFINT and the temperature sensor, single conversions. embassy-stm32
+/// 0.6's `blocking_read` powers the converter down and up around every
+/// conversion (ADON off, on, a 3 µs t_STAB wait, the sequence and sample
+/// time rewritten) — tens of µs per photo pair, which stretch the settle gap
+/// Δ of the synchronous detection and its flicker residual. So embassy sets
+/// the ADC up (clock, prescaler, pins in analog mode, VREFINT) and every
+/// conversion after that is ours, through the PAC, with the converter kept
+/// on: SQR3 ← channel, SWSTART, EOC — 56 + 12 ADC cycles = 8.5 µs at 8 MHz
+/// per channel (RM0390 §13, ADC: single conversions, channel-wise sampling time).
 pub struct BoardAdc {
-    adc: Adc<'static, ADC1>,
-    photo1: Peri<'static, PA0>,
-    photo2: Peri<'static, PA1>,
-    ntc: Peri<'static, PA4>,
-    vrefint: VrefInt,
-    temp: Temperature,
-}
-
-impl BoardAdc {
-    /// Take ADC1 and the pins; enables VREFINT and the temperature sensor.
-    pub fn new(
-        adc: Peri<'static, ADC1>,
-        photo1: Peri<'static, PA0>,
-        photo2: Peri<'static, PA1>,
-        ntc: Peri<'static, PA4>,
-    ) -> Self {
-        let adc = Adc::new(adc);
-        let vrefint = adc.enable_vrefint();
-        let temp = adc.enable_temperature();
-        // VREFINT and the sensor need 10 µs to start.
-        embassy_time::block_for(embassy_time::Duration::from_micros(20));
-        BoardAdc {
-            adc,
-            photo1,
-            photo2,
-            ntc,
-            vrefint,
-            temp,
-        }
-    }
+    /// Owns ADC1 (its clock and prescaler stay as embassy set them).
+    _adc: Adc<'static, ADC1>,
 }
 
 // ADC clock: PCLK2 16 MHz / 2 = 8 MHz. 56 cycles = 7 µs sampling: settles
 // sources up to 96 kΩ to ¼ LSB (RM0390 / datasheet eq. 1 with C_ADC = 7 pF,
-// R_ADC = 6 kΩ), which is why the config rule caps the load resistors at
-// fois_protocol::LOAD_R_MAX_OHM = 90 kΩ. The internal channels need ≥ 10 µs
+// R_ADC = 6 kΩ), beyond the datasheet's R_AIN limit of 50 kΩ at which the
+// config rule caps the load resistors (fois_protocol::LOAD_R_MAX_OHM). The
+// internal channels need ≥ 10 µs
 // (112 cycles).
 const PHOTO_SAMPLE: SampleTime = SampleTime::CYCLES56;
 const NTC_SAMPLE: SampleTime = SampleTime::CYCLES84;
 const INTERNAL_SAMPLE: SampleTime = SampleTime::CYCLES144;
+/// ADC1 channels (RM0390 §13, ADC; the F446's temperature sensor is on 18).
+const CH_PHOTO1: u8 = 0;
+const CH_PHOTO2: u8 = 1;
+const CH_NTC: u8 = 4;
+const CH_VREFINT: u8 = 17;
+const CH_TEMP: u8 = 18;
+/// Polls of EOC before a conversion counts as failed (code 0: the node
+/// then flags V_DDA or the NTC): ≥ 4 ms, a conversion takes ≤ 19 µs.
+const EOC_POLLS: u32 = 10_000;
+
+impl BoardAdc {
+    /// Take ADC1 and the pins; enable VREFINT and the temperature sensor;
+    /// set every channel's sample time once.
+    pub fn new(
+        adc: Peri<'static, ADC1>,
+        mut photo1: Peri<'static, PA0>,
+        mut photo2: Peri<'static, PA1>,
+        mut ntc: Peri<'static, PA4>,
+    ) -> Self {
+        let mut adc = Adc::new(adc);
+        let _vrefint: VrefInt = adc.enable_vrefint();
+        let _temp: Temperature = adc.enable_temperature();
+        // One embassy read per pin puts it in analog mode and leaves the
+        // converter powered (ADON); the pins are not touched again.
+        adc.blocking_read(&mut photo1, PHOTO_SAMPLE);
+        adc.blocking_read(&mut photo2, PHOTO_SAMPLE);
+        adc.blocking_read(&mut ntc, NTC_SAMPLE);
+        let r = pac::ADC1;
+        r.smpr2().modify(|w| {
+            w.set_smp(usize::from(CH_PHOTO1), PHOTO_SAMPLE);
+            w.set_smp(usize::from(CH_PHOTO2), PHOTO_SAMPLE);
+            w.set_smp(usize::from(CH_NTC), NTC_SAMPLE);
+        });
+        r.smpr1().modify(|w| {
+            w.set_smp(usize::from(CH_VREFINT - 10), INTERNAL_SAMPLE);
+            w.set_smp(usize::from(CH_TEMP - 10), INTERNAL_SAMPLE);
+        });
+        r.sqr1().modify(|w| w.set_l(0));
+        // VREFINT and the sensor need 10 µs to start.
+        embassy_time::block_for(embassy_time::Duration::from_micros(20));
+        BoardAdc { _adc: adc }
+    }
+
+    fn convert(channel: u8) -> u16 {
+        let r = pac::ADC1;
+        r.sqr3().write(|w| w.set_sq(0, channel));
+        r.sr().modify(|w| w.set_eoc(false));
+        r.cr2().modify(|w| w.set_swstart(true));
+        for _ in 0..EOC_POLLS {
+            if r.sr().read().eoc() {
+                return r.dr().read().data();
+            }
+        }
+        0
+    }
+
+    /// How long one `read_photo` takes, CPU cycles (the mean of 16, by the
+    /// DWT cycle counter; `None` if the core peripherals are taken): the
+    /// conversion part of the settle gap Δ, logged at boot.
+    pub fn measure_photo_pair_cycles(&mut self) -> Option<u32> {
+        let mut cp = cortex_m::Peripherals::take()?;
+        cp.DCB.enable_trace();
+        cp.DWT.enable_cycle_counter();
+        let start = cortex_m::peripheral::DWT::cycle_count();
+        for _ in 0..16 {
+            self.read_photo();
+        }
+        Some(cortex_m::peripheral::DWT::cycle_count().wrapping_sub(start) / 16)
+    }
+}
 
 impl PhotoAdc for BoardAdc {
     fn read_photo(&mut self) -> [u16; 2] {
-        [
-            self.adc.blocking_read(&mut self.photo1, PHOTO_SAMPLE),
-            self.adc.blocking_read(&mut self.photo2, PHOTO_SAMPLE),
-        ]
+        [Self::convert(CH_PHOTO1), Self::convert(CH_PHOTO2)]
     }
     fn read_ntc(&mut self) -> u16 {
-        self.adc.blocking_read(&mut self.ntc, NTC_SAMPLE)
+        Self::convert(CH_NTC)
     }
     fn read_vrefint(&mut self) -> u16 {
-        self.adc.blocking_read(&mut self.vrefint, INTERNAL_SAMPLE)
+        Self::convert(CH_VREFINT)
     }
     fn read_internal_temp(&mut self) -> u16 {
-        self.adc.blocking_read(&mut self.temp, INTERNAL_SAMPLE)
+        Self::convert(CH_TEMP)
     }
-}
-
-// ---- Watchdog ----
-
-/// The independent watchdog, programmed through the PAC with the prescaler
-/// and reload of `fois_firmware::watchdog` (timeout ≥ 8.17 s at the fastest
-/// LSI, see there). Zero-sized and `Copy`, so the flash erase and the
-/// settle waits can feed it too.
-#[derive(Clone, Copy)]
-pub struct Watchdog(());
-
-impl Watchdog {
-    /// Program and start the IWDG (it cannot be stopped again). In debug
-    /// builds it is frozen while a debugger halts the core
-    /// (DBGMCU_APB1_FZ.DBG_IWDG_STOP), so stepping through code does not
-    /// reset the chip; release images leave it running.
-    pub fn start(_iwdg: Peri<'static, IWDG>) -> Self {
-        if cfg!(debug_assertions) {
-            pac::DBGMCU.apb1fzr().modify(|w| w.set_iwdg(true));
-        }
-        let iwdg = pac::IWDG;
-        iwdg.kr().write(|w| w.set_key(Key::ENABLE));
-        iwdg.pr()
-            .write(|w| w.set_pr(Pr::from_bits(watchdog::IWDG_PR)));
-        iwdg.rlr().write(|w| w.set_rl(watchdog::IWDG_RELOAD));
-        iwdg.kr().write(|w| w.set_key(Key::START));
-        Watchdog(())
-    }
-
-    /// Reload the counter.
-    pub fn pet(self) {
-        pac::IWDG.kr().write(|w| w.set_key(Key::RESET));
-    }
-}
-
-/// Settle waits that feed the watchdog: a dark calibration (four frames of
-/// up to 0.64 s) or a long frame never starves it.
-pub struct FeedingDelay {
-    pub wdg: Watchdog,
-}
-
-impl DelayNs for FeedingDelay {
-    fn delay_ns(&mut self, ns: u32) {
-        self.wdg.pet();
-        embassy_time::Delay.delay_ns(ns);
-    }
-}
-
-// ---- Clock ----
-
-/// How long the 8 MHz from the ST-LINK (MCO, into PH0/OSC_IN through the
-/// NUCLEO's default solder bridges) may take to show HSERDY, in 1 ms steps.
-/// A bypass clock that is there is ready at once; ST's HAL waits 100 ms.
-const HSE_PROBE_MS: u32 = 100;
-
-/// Try the external clock (HSE bypass) with the chip still on HSI after
-/// reset. embassy-stm32 0.6 spins on HSERDY without a timeout, so a board
-/// without the ST-LINK clock (the ST-LINK part cut off, SB changed) would
-/// hang there: probe first, then choose the config.
-pub fn hse_bypass_present() -> bool {
-    let rcc = pac::RCC;
-    rcc.cr().modify(|w| w.set_hseon(false));
-    rcc.cr().modify(|w| w.set_hsebyp(true));
-    rcc.cr().modify(|w| w.set_hseon(true));
-    for _ in 0..HSE_PROBE_MS {
-        if rcc.cr().read().hserdy() {
-            return true;
-        }
-        // 16 000 cycles of the 16 MHz HSI = 1 ms.
-        cortex_m::asm::delay(16_000);
-    }
-    rcc.cr().modify(|w| w.set_hseon(false));
-    rcc.cr().modify(|w| w.set_hsebyp(false));
-    false
-}
-
-/// The clock config: SYSCLK 16 MHz either way (so the ADC clock, sample
-/// times and baud divider are the same). With the 8 MHz HSE: PLL 8 / 4 × 64
-/// / 8 = 16 MHz (VCO input 2 MHz, VCO 128 MHz, both in range); without it
-/// embassy's default, HSI 16 MHz (±1 % at 25 °C, −8 / +4.5 % over
-/// −40…105 °C, beyond the UART's ±3.5 %: hence the CLOCK_FALLBACK flag).
-pub fn clock_config(hse: bool) -> embassy_stm32::Config {
-    use embassy_stm32::rcc::{Hse, HseMode, Pll, PllMul, PllPDiv, PllPreDiv, PllSource, Sysclk};
-    let mut config = embassy_stm32::Config::default();
-    if hse {
-        config.rcc.hse = Some(Hse {
-            freq: embassy_stm32::time::Hertz(8_000_000),
-            mode: HseMode::Bypass,
-        });
-        config.rcc.pll_src = PllSource::HSE;
-        config.rcc.pll = Some(Pll {
-            prediv: PllPreDiv::DIV4,
-            mul: PllMul::MUL64,
-            divp: Some(PllPDiv::DIV8),
-            divq: None,
-            divr: None,
-        });
-        config.rcc.sys = Sysclk::PLL1_P;
-    }
-    config
-}
-
-// ---- Brown-out reset ----
-
-/// BOR level 3 (OPTCR.BOR_LEV = 0b00): reset below ≈ 2.7 V, so flash is
-/// only ever erased or programmed at x32 within its 2.7–3.6 V range and
-/// the analogue front end never runs on a sagging rail. The factory value
-/// is "off" (0b11: only the ≈ 1.7 V power-on reset).
-const BOR_LEVEL_3: u8 = 0b00;
-/// Program the option bytes only on a supply this healthy, mV.
-const BOR_PROGRAM_MIN_VDDA_MV: u16 = 3_000;
-
-/// Set the brown-out level once: the option bytes are written only when
-/// they differ (the first boot of a board; never at every boot), only on a
-/// healthy supply, with the watchdog fed first. Returns true if written
-/// (the level applies from the next reset). The write rewrites the whole
-/// option word; a power cut in those milliseconds could leave RDP at
-/// level 1 (read protection, recoverable by a probe's mass erase), which is
-/// why it happens at most once per board.
-pub fn ensure_bor_level(vdda_mv: u16, wdg: Watchdog) -> bool {
-    let flash = pac::FLASH;
-    if flash.optcr().read().bor_lev() == BOR_LEVEL_3 || vdda_mv < BOR_PROGRAM_MIN_VDDA_MV {
-        return false;
-    }
-    wdg.pet();
-    while flash.sr().read().bsy() {}
-    if flash.optcr().read().optlock() {
-        flash.optkeyr().write_value(0x0819_2A3B);
-        flash.optkeyr().write_value(0x4C5D_6E7F);
-    }
-    flash.optcr().modify(|w| w.set_bor_lev(BOR_LEVEL_3));
-    flash.optcr().modify(|w| w.set_optstrt(true));
-    while flash.sr().read().bsy() {}
-    flash.optcr().modify(|w| w.set_optlock(true));
-    true
 }
 
 // ---- Flash: the config store ----
@@ -288,8 +200,9 @@ const STORE_OFFSET: u32 = 0x0004_0000;
 const STORE_SECTOR_BYTES: u32 = fois_firmware::flash_store::BOARD_SECTOR_BYTES as u32;
 const STORE_FIRST_SECTOR: u8 = 6;
 const STORE_SECTORS: u32 = 2;
-/// x32 parallelism needs V_DD ≥ 2.7 V (RM0390, program/erase parallelism).
-const X32_MIN_VDDA_MV: u16 = 2_700;
+/// x32 parallelism needs V_DD ≥ 2.7 V (RM0390 §3.5, program/erase
+/// parallelism); the node starts a save only above it (`supply`).
+const X32_MIN_VDDA_MV: u16 = fois_firmware::supply::FLASH_WRITE_MIN_VDDA_MV;
 
 /// The V_DDA of the last frame, mV (0 before the first one): chooses the
 /// erase parallelism.
