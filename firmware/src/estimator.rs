@@ -156,6 +156,12 @@ pub struct EstimatorParams {
     /// hypotheses apart (default 3600: one accretion's deviations persist
     /// along it, so the evidence is one observation's worth per hour).
     pub gain_memory_s: f32,
+    /// Smallest relative gain spread within one gain hypothesis (default
+    /// 0.02): a calibrated gain's hypotheses lie close together, each with
+    /// at least this spread, so that none alone claims the ice is where the
+    /// table's narrowest states sit (thick rime reads like 2 mm of rime at
+    /// a few per cent more gain).
+    pub gain_within_min: f32,
 }
 
 impl Default for EstimatorParams {
@@ -175,6 +181,7 @@ impl Default for EstimatorParams {
             outlier_distance2: 50.0,
             update_period_s: 1.0,
             gain_memory_s: 3600.0,
+            gain_within_min: 0.02,
         }
     }
 }
@@ -221,6 +228,7 @@ impl EstimatorParams {
             outlier_distance2: within(self.outlier_distance2, 1.0, 1.0e6, d.outlier_distance2),
             update_period_s: within(self.update_period_s, 0.0, 60.0, d.update_period_s),
             gain_memory_s: within(self.gain_memory_s, 1.0, 1.0e7, d.gain_memory_s),
+            gain_within_min: within(self.gain_within_min, 0.0, 0.5, d.gain_within_min),
         }
     }
 }
@@ -522,6 +530,18 @@ impl Estimator {
         })
     }
 
+    /// Each hypothesis' own posterior (tests, plots).
+    pub fn hypothesis_posteriors(&self) -> [Option<Posterior>; GAINS] {
+        let shared = self.shared();
+        let mut out = [None; GAINS];
+        for (o, g) in out.iter_mut().zip(self.grids.iter()) {
+            *o = g
+                .summarise(&shared)
+                .and_then(|m| Moments::mixture(core::iter::once((1.0, m))));
+        }
+        out
+    }
+
     /// The weight of each gain hypothesis (sums to 1).
     pub fn gain_weights(&self) -> &[f32; GAINS] {
         &self.weights
@@ -700,7 +720,8 @@ impl Estimator {
     /// `gain_sd` and half the spacing to the neighbours.
     fn within_gain_sd(&self) -> f32 {
         let h = self.gain_step * (1.0 / 3.464_102); // spacing / √12
-        fast_math::sqrt(self.params.gain_sd * self.params.gain_sd + h * h)
+        let sd = fast_math::sqrt(self.params.gain_sd * self.params.gain_sd + h * h);
+        sd.max(self.params.gain_within_min)
     }
 
     /// The gain of hypothesis `j` now: its ln g and the temperature model.
