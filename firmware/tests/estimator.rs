@@ -8,8 +8,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use fois_firmware::estimator::{
-    Estimator, EstimatorParams, GAINS, Posterior, ROWS, STEP_MM, TableEntry, UNKNOWN_GAIN_SD,
-    Update, table,
+    Estimator, EstimatorParams, Posterior, ROWS, STEP_MM, TableEntry, Update, table,
 };
 use fois_protocol::Medium;
 use proptest::prelude::*;
