@@ -522,8 +522,9 @@ impl Estimator {
             m += w * l;
             m2 += w * l * l;
         }
-        let within = self.within_gain_sd();
-        let var = (m2 - m * m).max(0.0) + within * within;
+        // The spread of the weights, and the width of one hypothesis' cell.
+        let cell = self.gain_step * (1.0 / 3.464_102); // spacing / √12
+        let var = (m2 - m * m).max(0.0) + cell * cell;
         Some(Gain {
             gain: fast_math::exp(m) * self.compensation(),
             sigma: fast_math::sqrt(var),
