@@ -70,6 +70,13 @@ fn classes() -> Vec<Class> {
             }
             out.push(base(1.0, Some(0.8), None, false, "drift 1→0.8".into()));
             out.push(base(1.0, Some(1.2), None, false, "drift 1→1.2".into()));
+            out.push(base(
+                1.0,
+                None,
+                Some((1.0, 0.02)),
+                false,
+                "g 1.00 calibrated ±2 %".into(),
+            ));
             for g in [0.85, 1.15] {
                 out.push(base(
                     g,
