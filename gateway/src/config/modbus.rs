@@ -205,7 +205,10 @@ mod tests {
         };
         let on = "[modbus]\nenabled = true\n";
         // The section is checked even while it is off.
-        bad("[modbus]\nlisten = \"x\"\n[[node]]\nport = \"/a\"\n", "not an address");
+        bad(
+            "[modbus]\nlisten = \"x\"\n[[node]]\nport = \"/a\"\n",
+            "not an address",
+        );
         bad(
             &format!("{on}listen = \"localhost\"\n{NODES}"),
             "not an address and port",
