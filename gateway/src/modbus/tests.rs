@@ -196,3 +196,133 @@ fn the_faults_register_names_the_protocols_fault_bits() {
     }
     assert_eq!(what.matches(", ").count() + 1, n, "{what}");
 }
+
+mod answers {
+    use std::net::SocketAddr;
+    use std::time::{Duration, Instant};
+
+    use tokio::sync::mpsc;
+    use tokio_modbus::{ExceptionCode, Request, Response};
+
+    use super::super::server::Units;
+    use super::iced;
+    use crate::config::ModbusConfig;
+    use crate::driver::FrontEndCommand;
+    use crate::reader::NodeCommand;
+    use crate::snapshot::{Fleet, NodeSnapshot};
+
+    fn units(commands: bool) -> (Units, mpsc::UnboundedReceiver<FrontEndCommand>, Instant) {
+        let t0 = Instant::now();
+        let mut down = NodeSnapshot::new(1, Some("down".into()), "/dev/y".into());
+        down.link_up = false;
+        let fleet = Fleet::new(vec![iced(t0), down]);
+        let cfg = ModbusConfig {
+            listen: "127.0.0.1:5020".parse().unwrap(),
+            commands,
+            stale_after: Duration::from_secs(2),
+            max_clients: 4,
+            units: vec![5, 9],
+        };
+        let (tx, rx) = mpsc::unbounded_channel();
+        (Units::new(cfg, fleet, tx), rx, t0)
+    }
+
+    const PEER: SocketAddr =
+        SocketAddr::new(std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST), 4242);
+
+    #[test]
+    fn reads_of_either_function_give_the_same_registers_and_bad_ones_the_modbus_exception() {
+        let (u, _rx, t0) = units(false);
+        let now = t0 + Duration::from_millis(500);
+        let ask = |unit, r: Request<'static>| u.answer(unit, &r, now, PEER);
+        assert_eq!(
+            ask(5, Request::ReadInputRegisters(7, 5)),
+            Ok(Response::ReadInputRegisters(vec![0xFE00, 1250, 80, 3, 930]))
+        );
+        assert_eq!(
+            ask(5, Request::ReadHoldingRegisters(7, 5)),
+            Ok(Response::ReadHoldingRegisters(vec![
+                0xFE00, 1250, 80, 3, 930
+            ]))
+        );
+        assert_eq!(
+            ask(5, Request::ReadInputRegisters(0, 24)).map(|r| match r {
+                Response::ReadInputRegisters(v) => v.len(),
+                _ => 0,
+            }),
+            Ok(24)
+        );
+        assert_eq!(
+            ask(5, Request::ReadInputRegisters(23, 2)),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(
+            ask(5, Request::ReadHoldingRegisters(100, 1)),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(
+            ask(5, Request::ReadInputRegisters(0, 0)),
+            Err(ExceptionCode::IllegalDataValue)
+        );
+        assert_eq!(
+            ask(5, Request::ReadInputRegisters(0, 126)),
+            Err(ExceptionCode::IllegalDataValue)
+        );
+        assert_eq!(
+            ask(1, Request::ReadInputRegisters(0, 1)),
+            Err(ExceptionCode::GatewayPathUnavailable)
+        );
+        assert_eq!(
+            ask(5, Request::ReadCoils(0, 1)),
+            Err(ExceptionCode::IllegalFunction)
+        );
+        // Read-only: writes are an illegal function, even the ack register.
+        assert_eq!(
+            ask(5, Request::WriteSingleRegister(23, 1)),
+            Err(ExceptionCode::IllegalFunction)
+        );
+        assert_eq!(
+            ask(5, Request::WriteMultipleRegisters(23, vec![1].into())),
+            Err(ExceptionCode::IllegalFunction)
+        );
+    }
+
+    #[test]
+    fn with_commands_on_only_a_1_in_the_ack_register_of_a_linked_node_is_handed_to_the_node() {
+        let (u, mut rx, t0) = units(true);
+        let ask = |unit, r: Request<'static>| u.answer(unit, &r, t0, PEER);
+        assert_eq!(
+            ask(5, Request::WriteSingleRegister(22, 1)),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(
+            ask(5, Request::WriteMultipleRegisters(22, vec![0, 1].into())),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(
+            ask(5, Request::WriteSingleRegister(23, 2)),
+            Err(ExceptionCode::IllegalDataValue)
+        );
+        assert_eq!(
+            ask(9, Request::WriteSingleRegister(23, 1)),
+            Err(ExceptionCode::GatewayTargetDevice),
+            "the link is down"
+        );
+        assert!(rx.try_recv().is_err(), "nothing handed over yet");
+        assert_eq!(
+            ask(5, Request::WriteSingleRegister(23, 1)),
+            Ok(Response::WriteSingleRegister(23, 1))
+        );
+        assert_eq!(
+            ask(5, Request::WriteMultipleRegisters(23, vec![1].into())),
+            Ok(Response::WriteMultipleRegisters(23, 1))
+        );
+        let want = FrontEndCommand {
+            node: 0,
+            command: NodeCommand::AckAlarm,
+        };
+        assert_eq!(rx.try_recv(), Ok(want));
+        assert_eq!(rx.try_recv(), Ok(want));
+        assert!(rx.try_recv().is_err());
+    }
+}
