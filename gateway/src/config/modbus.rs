@@ -232,4 +232,33 @@ mod tests {
             "Modbus unit 0 is outside",
         );
     }
+
+    #[test]
+    fn the_packaged_example_with_its_modbus_lines_uncommented_is_the_default() {
+        let example = include_str!("../../debian/gateway.toml");
+        let mut in_section = false;
+        let text: String = example
+            .lines()
+            .map(|l| {
+                if l == "#[modbus]" {
+                    in_section = true;
+                } else if l.is_empty() {
+                    in_section = false;
+                }
+                if in_section || l.starts_with("#modbus_unit") {
+                    format!("{}\n", &l[1..])
+                } else {
+                    format!("{l}\n")
+                }
+            })
+            .collect();
+        let m = resolve(&text).unwrap().expect("enabled");
+        assert_eq!(m.listen, DEFAULT_LISTEN.parse().unwrap());
+        assert!(!m.commands);
+        assert_eq!(m.stale_after.as_secs_f64(), DEFAULT_STALE_AFTER_S);
+        assert_eq!(m.max_clients, DEFAULT_MAX_CLIENTS);
+        assert_eq!(m.units, vec![1]);
+        // As shipped, commented: off.
+        assert_eq!(resolve(example).unwrap(), None);
+    }
 }
