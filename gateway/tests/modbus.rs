@@ -119,10 +119,7 @@ fn assert_matches(r: &[u16], n: &NodeSnapshot) {
     assert_eq!(r.len(), 24);
     let scaled = |x: f64, k: f64| (x * k).round() as i64;
     assert_eq!(r[1], 2, "ice");
-    assert_eq!(
-        u16::try_from(r[2]).unwrap(),
-        m.flags & fois_protocol::flags::FAULT_MASK
-    );
+    assert_eq!(r[2], m.flags & fois_protocol::flags::FAULT_MASK, "faults");
     assert_eq!(
         i64::from(i32_at(r, 3)),
         scaled(m.i1_ua, 1000.0),

@@ -37,11 +37,9 @@ pub fn python() -> PathBuf {
         .unwrap_or_else(|| root().join("target/pymodbus-venv/bin/python"));
     let req = requirement();
     let version = req.trim_start_matches("pymodbus==");
-    let fix = format!(
-        "make it with `cargo xtask tools` (CI's \"system tools\" step), or by hand: \
-         `python3 -m venv target/pymodbus-venv && target/pymodbus-venv/bin/pip install -r \
-         gateway/tests/modbus/requirements.txt` (Debian: apt-get install python3-venv)"
-    );
+    let fix = "make it with `cargo xtask tools` (CI's \"system tools\" step), or by hand: \
+               `python3 -m venv target/pymodbus-venv && target/pymodbus-venv/bin/pip install -r \
+               gateway/tests/modbus/requirements.txt` (Debian: apt-get install python3-venv)";
     let out = Command::new(&python)
         .args(["-c", "import pymodbus; print(pymodbus.__version__)"])
         .output()
