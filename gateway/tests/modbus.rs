@@ -289,13 +289,21 @@ fn scada_reads_fresh_values_then_a_stale_node_and_bad_requests_get_exceptions_an
 #[test]
 fn with_commands_on_writing_1_to_the_ack_register_acknowledges_the_nodes_alarm() {
     let node = iced_node();
-    let mut gw = Gateway::start(&[(&node.path, "n1")], "commands = true\n");
+    let mut gw = Gateway::start(&[(&node.path, "n1")], "commands = true\nmax_clients = 2\n");
     let client = Client::new(gw.port);
     gw.wait(0, "the alarm", Duration::from_secs(30), |n| {
         n.reading.as_ref().is_some_and(|m| m.alarm)
     });
     let r = client.read(1, 4, 0, 1).unwrap();
     assert_eq!(r[0] & (status::ALARM | status::ALARM_ACKED), status::ALARM);
+    // `max_clients = 2`: of 3 clients connected at once, one is closed at
+    // once (its first read gets no answer); the two others get all theirs.
+    let p = client.run("poll", &["1".into(), "3".into(), "5".into()]);
+    assert_eq!(
+        (p["answers"].as_u64(), p["failed"].as_u64()),
+        (Some(10), Some(1)),
+        "{p}"
+    );
     assert_eq!(
         client.write(1, 22, 1, 6),
         Err(2),

@@ -5,11 +5,14 @@ Each command prints one JSON object on stdout:
   read HOST PORT UNIT FC ADDRESS COUNT     {"registers": [...]} or {"exception": CODE}
   write HOST PORT UNIT ADDRESS VALUE FC    {"ok": true} or {"exception": CODE}   (FC 6 or 16)
   watch HOST PORT UNIT SECONDS PERIOD      {"samples": [{"t": s, "registers": [...]}, ...]}
-  poll HOST PORT UNITS CLIENTS ROUNDS      {"clients": N, "answers": N, "failures": [...],
-                                            "seconds": s, "latency_ms": {"median": .., "max": ..}}
+  poll HOST PORT UNITS CLIENTS ROUNDS      {"clients": N, "answers": N, "failed": N,
+                                            "failures": [first 10], "seconds": s,
+                                            "latency_ms": {"median": .., "max": ..}}
 
 `poll` runs CLIENTS threads, each with its own connection, each reading
-all 24 registers of every unit in UNITS (comma-separated) ROUNDS times.
+all 24 registers of every unit in UNITS (comma-separated) ROUNDS times;
+a client whose request gets no answer at all (its connection closed)
+counts one failure and stops.
 """
 
 import json
@@ -18,6 +21,7 @@ import threading
 import time
 
 from pymodbus.client import ModbusTcpClient
+from pymodbus.exceptions import ModbusException
 
 REGISTERS = 24
 
@@ -31,7 +35,11 @@ def connect(host, port):
 
 def read(c, unit, fc, address, count):
     f = c.read_input_registers if fc == 4 else c.read_holding_registers
-    rr = f(address, count=count, device_id=unit)
+    try:
+        rr = f(address, count=count, device_id=unit)
+    except ModbusException as e:
+        # No answer at all (the connection closed, a time-out).
+        return {"error": str(e)}
     if rr.isError():
         return {"exception": rr.exception_code}
     return {"registers": list(rr.registers)}
@@ -70,7 +78,7 @@ def main(argv):
         units = [int(u) for u in argv[3].split(",")]
         clients, rounds = int(argv[4]), int(argv[5])
         lock = threading.Lock()
-        answers, failures, latencies = [0], [], []
+        answers, failures, latencies, failed = [0], [], [], [0]
         start = threading.Barrier(clients)
 
         def client(k):
@@ -96,7 +104,11 @@ def main(argv):
                         if "registers" in r and len(r["registers"]) == REGISTERS:
                             answers[0] += 1
                         else:
+                            failed[0] += 1
                             failures.append(f"client {k} unit {u}: {r}")
+                    if "error" in r:
+                        c.close()  # no connection: this client stops
+                        return
             c.close()
 
         threads = [threading.Thread(target=client, args=(k,)) for k in range(clients)]
@@ -110,6 +122,7 @@ def main(argv):
         out = {
             "clients": clients,
             "answers": answers[0],
+            "failed": failed[0],
             "failures": failures[:10],
             "seconds": seconds,
             "latency_ms": {
