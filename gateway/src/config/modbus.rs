@@ -17,7 +17,7 @@ pub const DEFAULT_LISTEN: &str = "127.0.0.1:5020";
 /// measurement, s: above the reader's silence timeout (8 s), so a node
 /// that is being reconnected turns stale only when it stays away.
 pub const DEFAULT_STALE_AFTER_S: f64 = 10.0;
-/// At most this many Modbus clients at once [default]; more are refused
+/// At most this many Modbus clients at once, by default; more are refused
 /// (their connection closed at once).
 pub const DEFAULT_MAX_CLIENTS: usize = 64;
 /// The largest unit id a node can have (Modbus: 1–247; 0 is broadcast,
