@@ -2,14 +2,16 @@
 //!
 //! - `cargo xtask ci`   — every check the README promises, in order: the
 //!   system tools the tests need (installed if missing, before anything is
-//!   compiled: [`tools`]), format, the crate rules of ARCHITECTURE.md
+//!   compiled: [`tools`]; with the gateway Modbus tests' pymodbus
+//!   virtualenv), format, the crate rules of ARCHITECTURE.md
 //!   ([`crates`]), clippy (host crates, and the firmware on its thumb
 //!   target), the whole test suite, the firmware's release cross-build with
 //!   its size budget, the firmware logic on an emulated Cortex-M4F, the
 //!   fuzz crates' build, the gateway's Debian package ([`package`]), and
 //!   the Home Assistant check when its inputs changed since its recorded
 //!   pass ([`ha_check`]).
-//! - `cargo xtask tools` — only the system tools.
+//! - `cargo xtask tools` — only the system tools (and the pymodbus
+//!   virtualenv `target/pymodbus-venv`).
 //! - `cargo xtask crates` — only the crate rules.
 //! - `cargo xtask deb` — build the gateway's Debian package and check it.
 //! - `cargo xtask ha-check [--if-changed]` — the gateway's Home Assistant
