@@ -6,12 +6,14 @@
 //! - [`model`]: the ray tracer; [`accretion_curve`] gives one physical accretion, currents I1(d), I2(d) in µA.
 //! - [`analytic`]: the conventional overlap model (thesis §2.1, §3.3).
 //! - [`montecarlo`]: mean μ(d), covariance Σ(d), fits and the Cramér–Rao bound (§5.4).
+//! - [`gain`]: the same bound with the gain an unknown nuisance parameter.
 //! - [`geometry`], [`consts`]: the sensor face, every constant once.
 //! - [`table`]: the node estimator's response table (μ, Σ per medium, fixed point, Rust source).
 
 pub mod analytic;
 mod bubbles;
 pub mod consts;
+pub mod gain;
 pub mod geometry;
 mod kernels;
 pub mod laws;
