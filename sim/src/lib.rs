@@ -7,6 +7,7 @@
 //! - [`analytic`]: the conventional overlap model (thesis §2.1, §3.3).
 //! - [`montecarlo`]: mean μ(d), covariance Σ(d), fits and the Cramér–Rao bound (§5.4).
 //! - [`gain`]: the same bound with the gain an unknown nuisance parameter.
+//! - [`streams`]: the random-stream layout: every draw's stream, keyed by (seed, run).
 //! - [`geometry`], [`consts`]: the sensor face, every constant once.
 //! - [`table`]: the node estimator's response table (μ, Σ per medium, fixed point, Rust source).
 
@@ -19,6 +20,7 @@ mod kernels;
 pub mod laws;
 pub mod model;
 pub mod montecarlo;
+pub mod streams;
 pub mod table;
 
 pub use analytic::analytic_curve;

@@ -1,14 +1,17 @@
 //! The sensor model and the ray tracer of one accretion (thesis §3.2, §5.3).
 
 use glam::{DVec2, DVec3};
-use rand_core::Rng;
 use rand_pcg::Pcg32;
 
-use crate::bubbles::{BubbleLanes, BubbleRay, CounterStream, GapSampler, land_scattered};
+use crate::bubbles::{BubbleLanes, BubbleRay, GapSampler, land_scattered};
 use crate::consts::*;
 use crate::geometry::Geometry;
 use crate::kernels::{DiffuseLanes, DiffuseRay, reflect_diffuse, specular_slots};
 use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
+use crate::streams::{
+    CounterStream, STREAM_ACCRETION, accretion_key, bubble_stream, diffuse_stream, fill_u32,
+    geometric_gap, mix64, std_normal, uniform, uniform32, unit_circle_unnormalised,
+};
 
 /// The medium that accretes on the face (thesis §3.4, §5.2.3, §5.3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -304,57 +307,12 @@ pub struct SensorModel {
     dense: Option<GapSampler>,
 }
 
-/// Uniform f64 in [0, 1).
-#[inline]
-fn uniform(rng: &mut Pcg32) -> f64 {
-    (rng.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
-}
-
-/// Uniform in (0, 1].
-#[inline]
-fn uniform_open0(rng: &mut Pcg32) -> f64 {
-    1.0 - uniform(rng)
-}
-
-/// Uniform in [0, 1) with 32 random bits (one PCG output): enough for angles and positions.
-#[inline]
-fn uniform32(rng: &mut Pcg32) -> f64 {
-    rng.next_u32() as f64 * (1.0 / 4_294_967_296.0)
-}
-
-/// Standard normal by Box–Muller.
-fn std_normal(rng: &mut Pcg32) -> f64 {
-    let u1 = uniform_open0(rng);
-    let u2 = uniform(rng);
-    (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-}
-
-/// SplitMix64 finaliser: spreads (seed, run) into a PCG state.
-#[inline]
-pub(crate) fn mix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// The PCG state of accretion `run` of `seed`.
-#[inline]
-pub(crate) fn accretion_key(seed: u64, run: u64) -> u64 {
-    mix64(mix64(seed) ^ run.wrapping_mul(0xD6E8_FEB8_6659_FD93))
-}
-
 /// Most bubble layers one ray walks through (20 000 × 0.1 mm = 2 m of ice along z).
 const MAX_LAYERS_PER_RAY: u32 = 20_000;
 
 /// Above this P_B the bubbles are walked by `bubbles::GapSampler` from counter-based
 /// streams; at or below it by `geometric_gap` (one `ln` per bubble) from a PCG stream.
 const DENSE_ABOVE: f64 = 0.02;
-
-/// Stream ids: 0 = accretion (slopes, PCG); 2 + 2r = bubbles of ray r (a counter-based
-/// stream for dense bubbles, see bubbles.rs; PCG for sparse ones); 3 + 2r = diffuse of ray r
-/// (PCG).
-const STREAM_ACCRETION: u64 = 0;
 
 /// The number of bubble layers a ray meets within the output thicknesses: the first layer j
 /// whose q(j) (its thickness in output steps, non-decreasing in j) lies beyond the last
@@ -391,20 +349,6 @@ fn ceil_index(q: f64) -> usize {
     let t = q as i64; // toward zero: the ceiling for q ≤ 0, the floor for q > 0
     let t = if (t as f64) < q { t + 1 } else { t };
     t.max(0) as usize
-}
-
-/// Geometric number of failures before the first success, P(success) = p.
-#[inline]
-fn geometric_gap(rng: &mut Pcg32, ln_q: f64) -> u32 {
-    if ln_q == f64::NEG_INFINITY {
-        return 0;
-    }
-    let g = (uniform_open0(rng).ln() / ln_q).floor();
-    if g >= (u32::MAX / 2) as f64 {
-        u32::MAX / 2
-    } else {
-        g as u32
-    }
 }
 
 impl SensorModel {
@@ -558,6 +502,7 @@ impl SensorModel {
         let mut frozen_by = vec![0u32; nt];
         let mut diffuse_draws: Vec<u32> = Vec::with_capacity(nt);
         let mut diffuse_out = DiffuseLanes::default();
+        let mut diffuse_bubbles: Vec<usize> = Vec::with_capacity(nt);
         for (r, ray) in self.rays.iter().enumerate() {
             if sensor_a {
                 for l in leak.iter_mut().take(first_wet) {
@@ -571,7 +516,6 @@ impl SensorModel {
                 continue;
             }
             let slope_xy = DVec2::new(v.x, v.y) / v.z;
-            let mut dif = Pcg32::new(key, 3 + 2 * r as u64);
             // Pass 1, bubbles: layer j (z from jΔ to (j+1)Δ, bubble at its middle) is frozen
             // in once the local surface above the bubble is at least (j+1)Δ high, i.e. from
             // the mean thickness d_j = (j+1)Δ − off(z_b), where off is the plane's local
@@ -611,7 +555,7 @@ impl SensorModel {
             if let Some(gaps) = &self.dense {
                 // Dense bubbles (rime): the walk draws one geometric gap per bubble from a
                 // counter-based stream, then lands all scattered rays at once (bubbles.rs).
-                lanes.walk(CounterStream::new(key, 2 + 2 * r as u64), gaps, j_end);
+                lanes.walk(CounterStream::new(key, bubble_stream(r)), gaps, j_end);
                 land_scattered(&bray, &bundles, &mut lanes);
                 let count = lanes.len();
                 // Forward flux after n bubbles: Φ·F^n (F = FORWARD_FRACTION).
@@ -638,7 +582,7 @@ impl SensorModel {
                 // Sparse bubbles (glazed): geometric gaps between bubbles by inversion
                 // (one `ln` per bubble), P_B per layer; each bubble's scattered ray is
                 // culled before its azimuth is drawn when it cannot reach the face.
-                let mut bub = Pcg32::new(key, 2 + 2 * r as u64);
+                let mut bub = Pcg32::new(key, bubble_stream(r));
                 let mut j: u32 = if p.p_bubble > 0.0 {
                     geometric_gap(&mut bub, ln_q)
                 } else {
@@ -695,8 +639,8 @@ impl SensorModel {
                 let i0 = (first_wet..nt)
                     .find(|&i| self.thick[i] + a > 0.0)
                     .unwrap_or(nt);
-                diffuse_draws.clear();
-                diffuse_draws.extend((i0..nt).map(|_| dif.next_u32()));
+                diffuse_draws.resize(nt - i0, 0);
+                fill_u32(key, diffuse_stream(r), &mut diffuse_draws);
                 let dray = DiffuseRay {
                     v,
                     normal,
@@ -708,6 +652,7 @@ impl SensorModel {
                     n_medium: n_med,
                     n_air: N_AIR,
                     n_fibre: N_FIBRE,
+                    alpha_per_mm: alpha,
                 };
                 reflect_diffuse(
                     &dray,
@@ -716,25 +661,30 @@ impl SensorModel {
                     &diffuse_draws,
                     &mut diffuse_out,
                 );
-                let mut n_bub = frozen_before(&frozen_by[first_wet..i0]);
-                for (n, i) in (i0..nt).enumerate() {
-                    n_bub = n_bub.max(frozen_by[i] as usize);
-                    let k = diffuse_out.slot[n] as usize;
-                    if k < 2 {
-                        let fwd = fwd_after[n_bub];
-                        let couple = match cfg.coupling {
-                            Coupling::ThesisLiteral => diffuse_out.couple[n],
-                            Coupling::AcceptanceCone => {
-                                if self.in_acceptance_cone(DVec3::from(diffuse_out.dir[n])) {
-                                    diffuse_out.couple[n]
-                                } else {
-                                    0.0
-                                }
-                            }
-                        };
-                        let att = (-alpha * diffuse_out.path_mm[n]).exp();
-                        refl[i][k] += fwd * diffuse_out.reflectance[n] * couple * att;
+                // The bubbles frozen in up to each landed thickness: a running maximum
+                // (`frozen_by`), needed only when the ray met bubbles.
+                let n_bub0 = frozen_before(&frozen_by[first_wet..i0]);
+                if had_bubbles {
+                    diffuse_bubbles.clear();
+                    diffuse_bubbles.extend(frozen_by[i0..nt].iter().scan(n_bub0, |m, &f| {
+                        *m = (*m).max(f as usize);
+                        Some(*m)
+                    }));
+                }
+                let cone = cfg.coupling == Coupling::AcceptanceCone;
+                let d = &diffuse_out;
+                for (&n, &w) in d.landed.iter().zip(&d.weight) {
+                    let n = n as usize;
+                    let dir = DVec3::new(d.dir[0][n], d.dir[1][n], d.dir[2][n]);
+                    if cone && !self.in_acceptance_cone(dir) {
+                        continue;
                     }
+                    let fwd = if had_bubbles {
+                        fwd_after[diffuse_bubbles[n]]
+                    } else {
+                        fwd_after[n_bub0]
+                    };
+                    refl[i0 + n][d.slot[n] as usize] += fwd * w;
                 }
             } else if let Some((rfl, rd)) = reflect_setup(v, normal, n_med) {
                 // Specular reflection, fixed per accretion: the landing point moves on a
@@ -876,76 +826,10 @@ fn reflect_setup(v: DVec3, nrm: DVec3, n_med: f64) -> Option<(f64, DVec3)> {
     Some((fr_dielectric(cos_i, n_med, N_AIR), rd))
 }
 
-/// A uniformly distributed point on the unit circle, by rejection (no trigonometry).
-#[cfg(test)]
-fn unit_circle(rng: &mut Pcg32) -> (f64, f64) {
-    let (a, b, q) = unit_circle_unnormalised(rng);
-    let s = q.sqrt().recip();
-    (a * s, b * s)
-}
-
-/// The draws of a uniform point on the unit circle by rejection: (a, b, q = a² + b²) with
-/// 0 < q ≤ 1; the point is (a, b)/√q.
-#[inline]
-fn unit_circle_unnormalised(rng: &mut Pcg32) -> (f64, f64, f64) {
-    loop {
-        let a = 2.0 * uniform32(rng) - 1.0;
-        let b = 2.0 * uniform32(rng) - 1.0;
-        let q = a * a + b * b;
-        if q > 1e-12 && q <= 1.0 {
-            return (a, b, q);
-        }
-    }
-}
-
 /// One physical accretion of `cfg`, deterministic in (seed, run).
 ///
 /// # Panics
 /// If `cfg.validate()` fails.
 pub fn accretion_curve(cfg: &SimConfig, seed: u64, run: u64) -> Curve {
     SensorModel::new(cfg).accretion(seed, run)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn small_sin_cos_matches_libm() {
-        use crate::kernels::small_sin_cos;
-        for k in -530..=530 {
-            let x = k as f64 * 1e-3;
-            let (s, c) = small_sin_cos(x);
-            assert!((s - x.sin()).abs() < 1e-13, "{x}");
-            assert!((c - x.cos()).abs() < 1e-13, "{x}");
-        }
-    }
-
-    #[test]
-    fn geometric_gap_has_mean_q_over_p() {
-        let p: f64 = 0.0015;
-        let ln_q = (1.0 - p).ln();
-        let mut rng = Pcg32::new(1, 1);
-        let n = 20_000;
-        let mean = (0..n)
-            .map(|_| geometric_gap(&mut rng, ln_q) as f64)
-            .sum::<f64>()
-            / n as f64;
-        let want = (1.0 - p) / p; // 665.7
-        assert!((mean - want).abs() < 0.03 * want, "{mean}");
-    }
-
-    #[test]
-    fn unit_circle_is_uniform_and_unit() {
-        let mut rng = Pcg32::new(2, 3);
-        let mut quad = [0usize; 4];
-        for _ in 0..40_000 {
-            let (c, s) = unit_circle(&mut rng);
-            assert!((c * c + s * s - 1.0).abs() < 1e-12);
-            quad[(c < 0.0) as usize * 2 + (s < 0.0) as usize] += 1;
-        }
-        for q in quad {
-            assert!((q as f64 - 10_000.0).abs() < 400.0, "{quad:?}");
-        }
-    }
 }
