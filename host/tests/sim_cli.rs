@@ -328,6 +328,32 @@ fn help_explains_units_and_defaults() {
 }
 
 #[test]
+fn bench_reports_ray_evaluations_per_thread_for_each_medium() {
+    let o = foisctl(&["sim", "bench", "--runs", "4", "--threads", "2"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout);
+    for medium in ["rime", "glazed", "water"] {
+        let head = format!("{medium} ice, thesis-ch5: 2553 rays × 151 thicknesses = 385503");
+        assert!(out.contains(&head), "{out}");
+    }
+    // Three media, each with its one-thread and per-thread figures.
+    assert_eq!(out.matches(" per thread").count(), 3, "{out}");
+    let rates: Vec<f64> = out
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("1 thread:"))
+        .map(|l| l.split_whitespace().next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(rates.len(), 3);
+    assert!(rates.iter().all(|&r| r.is_finite() && r > 0.0), "{rates:?}");
+    let o = foisctl(&["sim", "bench", "--runs", "2", "--ice", "water"]);
+    assert!(o.status.success());
+    assert_eq!(
+        String::from_utf8_lossy(&o.stdout).matches(" ice, ").count(),
+        1
+    );
+}
+
+#[test]
 fn table_writes_the_firmwares_checked_in_table() {
     let out = tmp("table.rs");
     let o = foisctl(&[
