@@ -3,6 +3,7 @@
 //! ## Modules
 //!
 //! - [`laws`]: Snell, Fresnel, Beer–Lambert, fibre acceptance (thesis §3.1).
+//! - [`config`]: the configuration ([`SimConfig`], [`IceKind`], …); [`curve`]: the output ([`Curve`]).
 //! - [`model`]: the ray tracer; [`accretion_curve`] gives one physical accretion, currents I1(d), I2(d) in µA.
 //! - [`analytic`]: the conventional overlap model (thesis §2.1, §3.3).
 //! - [`montecarlo`]: mean μ(d), covariance Σ(d), fits and the Cramér–Rao bound (§5.4).
@@ -13,7 +14,9 @@
 
 pub mod analytic;
 mod bubbles;
+pub mod config;
 pub mod consts;
+pub mod curve;
 pub mod gain;
 pub mod geometry;
 mod kernels;
