@@ -88,6 +88,43 @@ pub(crate) struct DiffuseRay {
     pub alpha_per_mm: f64,
 }
 
+impl DiffuseRay {
+    /// The largest h0 = d + a at which a diffusely reflected ray can still land within
+    /// `reach_mm` of the ray's entry point, whatever its δ_R (∞ when no bound holds). Beyond
+    /// it the lanes need not be traced: their slot would be 2.
+    ///
+    /// The horizontal distance D from the entry point to the landing point is the length of
+    /// v·t_up + r·t_down (the z parts cancel), with t_up = h0/den and the angle between v and
+    /// −r twice the angle α between v and the facet normal; over t_down ≥ 0 that length is at
+    /// least t_up·sin 2α (2α ≤ 90°) or t_up. α is at least α_min, the smallest angle between
+    /// v and the normal turned by any φ = δ_R/2 in ±δ_max/2 about y: v·n(φ) = A cos φ +
+    /// B sin φ + C, whose maximum over the interval is closed-form. A relative margin of 10⁻⁶
+    /// covers the kernel's rounding (≈ 10⁻¹⁵).
+    pub(crate) fn h0_cutoff_mm(&self, reach_mm: f64) -> f64 {
+        let (v, n) = (self.v, self.normal);
+        let (a, b, c) = (v.x * n.x + v.z * n.z, v.x * n.z - v.z * n.x, v.y * n.y);
+        let half = 0.5 * self.diffuse_max_rad;
+        let peak = b.atan2(a);
+        let best = if peak.abs() <= half {
+            a.hypot(b)
+        } else {
+            let (s, co) = half.sin_cos();
+            (a * co + b * s).max(a * co - b * s)
+        };
+        let cos_min = (best + c).clamp(-1.0, 1.0);
+        // sin 2α_min = 2 cos α sin α for α_min < 45°, else the bound is 1.
+        let g = if cos_min > std::f64::consts::FRAC_1_SQRT_2 {
+            2.0 * cos_min * (1.0 - cos_min * cos_min).max(0.0).sqrt()
+        } else {
+            1.0
+        };
+        if g < 1e-6 {
+            return f64::INFINITY;
+        }
+        reach_mm * self.den / g * (1.0 + 1e-6) + 1e-9
+    }
+}
+
 /// Per thickness, the diffusely reflected ray: outputs of [`reflect_diffuse`].
 #[derive(Clone, Debug, Default)]
 pub(crate) struct DiffuseLanes {
@@ -492,6 +529,41 @@ mod tests {
         }
         // The cases land on the bundles often enough to mean something.
         assert!(landed > 5_000, "{landed}");
+    }
+
+    #[test]
+    fn no_ray_lands_beyond_the_cutoff() {
+        let bundles = Geometry::ThesisCh5.bundles();
+        let (mut beyond, mut cut) = (0, 0);
+        for seed in 0..400 {
+            let (ray, _, draws) = case(seed);
+            // Thicknesses to 40 mm; every landing point within 12 mm of the entry point
+            // counts, not only the bundles.
+            let thick: Vec<f64> = (0..151).map(|i| i as f64 * 0.27).collect();
+            let reach = 12.0;
+            let h0_max = ray.h0_cutoff_mm(reach);
+            let mut out = DiffuseLanes::default();
+            reflect_diffuse(&ray, &bundles, &thick, &draws, &mut out);
+            for k in 0..thick.len() {
+                let h0 = thick[k] + ray.a;
+                if h0 <= h0_max || h0 <= 0.0 {
+                    continue;
+                }
+                beyond += 1;
+                let t_up = h0 / ray.den;
+                let t_down = ray.v.z * t_up / -out.dir[2][k];
+                let dx = ray.v.x * t_up + out.dir[0][k] * t_down;
+                let dy = ray.v.y * t_up + out.dir[1][k] * t_down;
+                assert!(
+                    t_down < 0.0 || dx.hypot(dy) > reach,
+                    "{seed} {k}: lands {} mm away beyond the cutoff {h0_max} (h0 {h0})",
+                    dx.hypot(dy)
+                );
+            }
+            cut += usize::from(h0_max.is_finite());
+        }
+        // The bound cuts most rays, and many lanes lie beyond it.
+        assert!(cut > 300 && beyond > 10_000, "{cut} {beyond}");
     }
 
     #[test]

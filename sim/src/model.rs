@@ -229,6 +229,10 @@ impl SensorModel {
         );
         let first_wet = self.thick.iter().position(|&d| d > 0.0).unwrap_or(nt);
         let inv_step = 1.0 / cfg.step_mm;
+        // The circle around the bundles (0 ≤ x ≤ B + R, |y| ≤ R): a reflection that lands
+        // farther than `face_radius` from `face_centre` misses them.
+        let face_centre = DVec2::new(0.5 * x_hi, 0.0);
+        let face_radius = face_centre.x.hypot(y_hi);
 
         // Per ray: the forward flux after n bubbles (fwd_after[n]) and, at each thickness
         // index where bubbles are frozen in, how many are frozen in up to it (`frozen_by`,
@@ -376,8 +380,6 @@ impl SensorModel {
                 let i0 = (first_wet..nt)
                     .find(|&i| self.thick[i] + a > 0.0)
                     .unwrap_or(nt);
-                diffuse_draws.resize(nt - i0, 0);
-                fill_u32(key, diffuse_stream(r), &mut diffuse_draws);
                 let dray = DiffuseRay {
                     v,
                     normal,
@@ -391,10 +393,18 @@ impl SensorModel {
                     n_fibre: N_FIBRE,
                     alpha_per_mm: alpha,
                 };
+                // Beyond a thickness that depends on the ray no diffuse angle brings the
+                // reflection back onto the face: those thicknesses are not traced, nor their
+                // angles drawn (the draws are the stream's first ones, in order).
+                let reach = (ray.p0 - face_centre).length() + face_radius;
+                let h0_max = dray.h0_cutoff_mm(reach);
+                let i_end = i0 + self.thick[i0..nt].partition_point(|&d| d + a <= h0_max);
+                diffuse_draws.resize(i_end - i0, 0);
+                fill_u32(key, diffuse_stream(r), &mut diffuse_draws);
                 reflect_diffuse(
                     &dray,
                     &bundles,
-                    &self.thick[i0..nt],
+                    &self.thick[i0..i_end],
                     &diffuse_draws,
                     &mut diffuse_out,
                 );
@@ -403,7 +413,7 @@ impl SensorModel {
                 let n_bub0 = frozen_before(&frozen_by[first_wet..i0]);
                 if had_bubbles {
                     diffuse_bubbles.clear();
-                    diffuse_bubbles.extend(frozen_by[i0..nt].iter().scan(n_bub0, |m, &f| {
+                    diffuse_bubbles.extend(frozen_by[i0..i_end].iter().scan(n_bub0, |m, &f| {
                         *m = (*m).max(f as usize);
                         Some(*m)
                     }));
