@@ -531,6 +531,8 @@ mod tests {
         assert!(landed > 5_000, "{landed}");
     }
 
+    // One index addresses the thicknesses and the kernel's outputs.
+    #[allow(clippy::needless_range_loop)]
     #[test]
     fn no_ray_lands_beyond_the_cutoff() {
         let bundles = Geometry::ThesisCh5.bundles();
