@@ -103,12 +103,12 @@ impl DiffuseRay {
     pub(crate) fn h0_cutoff_mm(&self, reach_mm: f64) -> f64 {
         let (v, n) = (self.v, self.normal);
         let (a, b, c) = (v.x * n.x + v.z * n.z, v.x * n.z - v.z * n.x, v.y * n.y);
-        let half = 0.5 * self.diffuse_max_rad;
-        let peak = b.atan2(a);
-        let best = if peak.abs() <= half {
+        let (s, co) = (0.5 * self.diffuse_max_rad).sin_cos();
+        // The peak of A cos φ + B sin φ, at φ = atan2(B, A), lies within ±φ_max iff A > 0 and
+        // |B| ≤ A tan φ_max (φ_max ≤ 30°).
+        let best = if a > 0.0 && b.abs() * co <= a * s {
             a.hypot(b)
         } else {
-            let (s, co) = half.sin_cos();
             (a * co + b * s).max(a * co - b * s)
         };
         let cos_min = (best + c).clamp(-1.0, 1.0);
