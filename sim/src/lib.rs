@@ -4,7 +4,7 @@
 //!
 //! - [`laws`]: Snell, Fresnel, Beer–Lambert, fibre acceptance (thesis §3.1).
 //! - [`config`]: the configuration ([`SimConfig`], [`IceKind`], …); [`curve`]: the output ([`Curve`]).
-//! - [`model`]: the ray tracer; [`accretion_curve`] gives one physical accretion, currents I1(d), I2(d) in µA.
+//! - [`model`]: the sensor and its ray tracer (the phases of one accretion in `tracer.rs`); [`accretion_curve`] gives one physical accretion, currents I1(d), I2(d) in µA.
 //! - [`analytic`]: the conventional overlap model (thesis §2.1, §3.3).
 //! - [`montecarlo`]: mean μ(d), covariance Σ(d), fits and the Cramér–Rao bound (§5.4).
 //! - [`gain`]: the same bound with the gain an unknown nuisance parameter.
@@ -25,6 +25,7 @@ pub mod model;
 pub mod montecarlo;
 pub mod streams;
 pub mod table;
+mod tracer;
 
 pub use analytic::analytic_curve;
 pub use geometry::{Geometry, Region};
