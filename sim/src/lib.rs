@@ -17,6 +17,7 @@ mod bubbles;
 pub mod config;
 pub mod consts;
 pub mod curve;
+mod diffuse;
 pub mod gain;
 pub mod geometry;
 mod kernels;

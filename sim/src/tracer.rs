@@ -18,8 +18,9 @@ use crate::bubbles::{BubbleLanes, BubbleRay, GapSampler, land_scattered};
 use crate::config::{Coupling, DiffuseFresnel, SensorKind};
 use crate::consts::*;
 use crate::curve::{Curve, CurvePoint};
+use crate::diffuse::{DiffuseLanes, DiffuseRay, reflect_diffuse};
 use crate::geometry::Bundles;
-use crate::kernels::{DiffuseLanes, DiffuseRay, reflect_diffuse, specular_slots};
+use crate::kernels::specular_slots;
 use crate::laws::{fr_dielectric, reflect};
 use crate::model::{SensorModel, SourceRay};
 use crate::streams::{
