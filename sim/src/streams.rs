@@ -5,12 +5,12 @@
 //! | stream | id | generator | draws |
 //! |---|---|---|---|
 //! | the sensor's fibre angles | `fibre_seed`, stream 1 | PCG32 | θ_f (Box–Muller), azimuth, once per sensor |
-//! | accretion (seed, run) | [`STREAM_ACCRETION`] = 0 | PCG32 keyed by [`accretion_key`] | surface slopes δ_S,x, δ_S,y |
-//! | bubbles of ray r, dense (rime) | [`bubble_stream`] = 2 + 2r | [`CounterStream`] | gap of bubble n from word 2⌊n/2⌋, its angles from word 2n + 1 |
-//! | bubbles of ray r, sparse (glazed) | 2 + 2r | PCG32 | gap ([`geometric_gap`]), cos θ_B, azimuth by rejection |
-//! | diffuse angles of ray r | [`diffuse_stream`] = 3 + 2r | PCG32, filled in blocks ([`fill_u32`]) | one δ_R per thickness |
+//! | accretion (seed, run) | `STREAM_ACCRETION` = 0 | PCG32 keyed by `accretion_key` | surface slopes δ_S,x, δ_S,y |
+//! | bubbles of ray r, dense (rime) | `bubble_stream` = 2 + 2r | `CounterStream` | gap of bubble n from word 2⌊n/2⌋, its angles from word 2n + 1 |
+//! | bubbles of ray r, sparse (glazed) | 2 + 2r | PCG32 | gap (`geometric_gap`), cos θ_B, azimuth by rejection |
+//! | diffuse angles of ray r | `diffuse_stream` = 3 + 2r | PCG32, filled in blocks (`fill_u32`) | one δ_R per thickness |
 //!
-//! PCG32 is `rand_pcg::Pcg32` (XSH RR 64/32); [`fill_u32`] produces exactly its outputs four
+//! PCG32 is `rand_pcg::Pcg32` (XSH RR 64/32); `fill_u32` produces exactly its outputs four
 //! at a time. The hardware-in-loop suite's lossy link draws from [`SplitMix64`].
 
 use rand_core::Rng;
