@@ -33,6 +33,9 @@ pub(crate) struct DiffuseRay {
     pub n_fibre: f64,
     /// Absorption coefficient of the ice, 1/mm (Beer–Lambert, eq. 3.15).
     pub alpha_per_mm: f64,
+    /// Keep the x and y of every reflected direction (`DiffuseLanes::dir`; the acceptance
+    /// cone needs them), not only z.
+    pub keep_dir: bool,
 }
 
 impl DiffuseRay {
@@ -78,7 +81,7 @@ pub(crate) struct DiffuseLanes {
     /// 0 or 1 for the bundle the reflected ray lands on, 2 for none (also when it does not
     /// meet the surface from below or does not come back down).
     pub slot: Vec<u32>,
-    /// The reflected direction (x, y and z apart).
+    /// The reflected direction (x, y and z apart; x and y only with `DiffuseRay::keep_dir`).
     pub dir: [Vec<f64>; 3],
     /// Cosine of the angle of incidence of the Fresnel reflectance.
     cos_fresnel: Vec<f64>,
@@ -198,8 +201,10 @@ fn diffuse_landing(
         slot[k] = if meets { bundle } else { 2 };
         cos_fresnel[k] = if ray.facet_fresnel { cos_i } else { cos_mean };
         path[k] = t_up + t_down;
-        dir_x[k] = rd_x;
-        dir_y[k] = rd_y;
+        if ray.keep_dir {
+            dir_x[k] = rd_x;
+            dir_y[k] = rd_y;
+        }
         dir_z[k] = rd_z;
     }
 }
@@ -334,6 +339,7 @@ mod tests {
             n_air: 1.00028,
             n_fibre: 1.581,
             alpha_per_mm: 0.012,
+            keep_dir: true,
         };
         let thick: Vec<f64> = (0..151).map(|i| i as f64 * 0.1).collect();
         let draws: Vec<u32> = (0..151)

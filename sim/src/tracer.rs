@@ -334,6 +334,7 @@ impl<'m> Accretion<'m> {
             n_air: N_AIR,
             n_fibre: N_FIBRE,
             alpha_per_mm: ALPHA_PER_MM,
+            keep_dir: cfg.coupling == Coupling::AcceptanceCone,
         };
         // Beyond a thickness that depends on the ray no diffuse angle brings the reflection
         // back onto the face: those thicknesses are not traced, nor their angles drawn (the
@@ -365,8 +366,7 @@ impl<'m> Accretion<'m> {
         let d = &self.diffuse_out;
         for (&n, &w) in d.landed.iter().zip(&d.weight) {
             let n = n as usize;
-            let dir = DVec3::new(d.dir[0][n], d.dir[1][n], d.dir[2][n]);
-            if cone && !m.in_acceptance_cone(dir) {
+            if cone && !m.in_acceptance_cone(DVec3::new(d.dir[0][n], d.dir[1][n], d.dir[2][n])) {
                 continue;
             }
             let fwd = if had_bubbles {
