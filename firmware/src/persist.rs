@@ -144,6 +144,20 @@ pub fn decode(bytes: &[u8]) -> Result<Record, LoadError> {
 mod tests {
     use super::*;
 
+    /// A record of layout `version` with this body, as the firmware of that
+    /// layout wrote it (erased flash after it); and where its CRC starts.
+    fn framed(version: u16, body: &impl Serialize) -> ([u8; 128], usize) {
+        let mut buf = [0xFFu8; 128];
+        let body_len = postcard::to_slice(body, &mut buf[HEADER..]).unwrap().len();
+        buf[..4].copy_from_slice(&MAGIC);
+        buf[4..6].copy_from_slice(&version.to_le_bytes());
+        buf[6..8].copy_from_slice(&(body_len as u16).to_le_bytes());
+        let end = HEADER + body_len;
+        let crc = CRC.checksum(&buf[..end]).to_le_bytes();
+        buf[end..end + CRC_LEN].copy_from_slice(&crc);
+        (buf, end)
+    }
+
     fn sample() -> Record {
         Record {
             config: Config {
@@ -228,14 +242,7 @@ mod tests {
                 i2_na: -7,
             }),
         };
-        let mut buf = [0xFFu8; 128];
-        let body_len = postcard::to_slice(&old, &mut buf[HEADER..]).unwrap().len();
-        buf[..4].copy_from_slice(&MAGIC);
-        buf[4..6].copy_from_slice(&1u16.to_le_bytes());
-        buf[6..8].copy_from_slice(&(body_len as u16).to_le_bytes());
-        let end = HEADER + body_len;
-        let crc = CRC.checksum(&buf[..end]).to_le_bytes();
-        buf[end..end + CRC_LEN].copy_from_slice(&crc);
+        let (mut buf, end) = framed(1, &old);
         // The bytes of a version-1 record, as that firmware wrote them.
         let golden: [u8; 35] = [
             0x46, 0x4f, 0x49, 0x53, 0x01, 0x00, 0x17, 0x00, 0x64, 0x08, 0xc8, 0x01, 0x90, 0x4e,
@@ -271,14 +278,7 @@ mod tests {
                 i2_na: -7,
             }),
         };
-        let mut buf = [0xFFu8; 128];
-        let body_len = postcard::to_slice(&old, &mut buf[HEADER..]).unwrap().len();
-        buf[..4].copy_from_slice(&MAGIC);
-        buf[4..6].copy_from_slice(&2u16.to_le_bytes());
-        buf[6..8].copy_from_slice(&(body_len as u16).to_le_bytes());
-        let end = HEADER + body_len;
-        let crc = CRC.checksum(&buf[..end]).to_le_bytes();
-        buf[end..end + CRC_LEN].copy_from_slice(&crc);
+        let (buf, end) = framed(2, &old);
         // The bytes of a version-2 record, as that firmware wrote them.
         let golden: &[u8] = &GOLDEN_V2;
         assert_eq!(&buf[..end + CRC_LEN], golden);
