@@ -1,8 +1,10 @@
 //! What the sensor face sees over (virtual) time: a timeline of segments,
 //! each with its cover (dry face, or a medium accreting at a rate), air
-//! temperature, ambient light (DC + 100 Hz flicker), LED output factor and
-//! ADC noise. The photocurrents come from the simulator's curve of the
-//! segment's medium at the current thickness.
+//! temperature, ambient light (DC + 100 Hz flicker), LED output factor, the
+//! optics' temperature coefficient and self-heating, the face's transmission
+//! (fouling) and ADC noise. The photocurrents come from the simulator's
+//! curve of the segment's medium at the current thickness, times the
+//! optical gain ([`crate::optics`]).
 //!
 //! Thickness is continuous across segments (a water film that freezes keeps
 //! its thickness), is 0 on a `Dry` segment, may be set at a segment's start
@@ -13,6 +15,8 @@ use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
 use fois_sim::{Curve, Geometry, IceKind, SensorKind, SimConfig, accretion_curve};
+
+use crate::optics::{OpticalGain, temperature_factor};
 
 /// Largest thickness the curves cover, mm.
 pub const MAX_THICKNESS_MM: f64 = 15.0;
@@ -118,6 +122,18 @@ pub struct Segment {
     pub led_factor: f64,
     /// LED output factor at the end (`None`: constant); linear ramp.
     pub led_factor_end: Option<f64>,
+    /// Net temperature coefficient κ of the optical gain, 1/K (LED output ×
+    /// phototransistor responsivity): the signal scales with
+    /// exp(κ·(T_optics − 25 °C)) ([`crate::optics`]). 0: none.
+    pub gain_tempco_per_k: f64,
+    /// The optoelectronics' (and the MCU die's) temperature above the air,
+    /// K: the enclosure's self-heating. T_optics = air + this.
+    pub optics_above_air_k: f64,
+    /// Transmission of the face at the start (1 = clean; fouling < 1): the
+    /// LED-induced signal scales with its square, ambient light with it.
+    pub face_transmission: f64,
+    /// Transmission at the end (`None`: constant); linear ramp.
+    pub face_transmission_end: Option<f64>,
     /// ADC noise, rms LSB (Gaussian, per conversion).
     pub adc_noise_lsb: f64,
     /// The NTC's wiring (fault injection: unplugged or shorted).
@@ -140,6 +156,10 @@ impl Segment {
             flicker_hz: 100.0,
             led_factor: 1.0,
             led_factor_end: None,
+            gain_tempco_per_k: 0.0,
+            optics_above_air_k: 0.0,
+            face_transmission: 1.0,
+            face_transmission_end: None,
             adc_noise_lsb: 1.0,
             ntc: NtcWiring::Connected,
         }
@@ -191,6 +211,22 @@ impl Segment {
     pub fn led_ramp(mut self, start: f64, end: f64) -> Self {
         self.led_factor = start;
         self.led_factor_end = Some(end);
+        self
+    }
+    /// The optical gain's net temperature coefficient κ, 1/K.
+    pub fn gain_tempco(mut self, per_k: f64) -> Self {
+        self.gain_tempco_per_k = per_k;
+        self
+    }
+    /// The optics' self-heating above the air, K.
+    pub fn optics_above_air(mut self, k: f64) -> Self {
+        self.optics_above_air_k = k;
+        self
+    }
+    /// Face transmission ramping from `start` to `end` (fouling).
+    pub fn transmission_ramp(mut self, start: f64, end: f64) -> Self {
+        self.face_transmission = start;
+        self.face_transmission_end = Some(end);
         self
     }
     /// ADC noise, rms LSB.
@@ -290,12 +326,19 @@ pub struct Truth {
     pub thickness_mm: f64,
     /// Air temperature, °C.
     pub air_temp_c: f64,
-    /// LED-induced photocurrent per channel (sim curve × LED factor), µA.
+    /// The optoelectronics' temperature (air + self-heating): what the
+    /// MCU's internal sensor reads, °C.
+    pub optics_temp_c: f64,
+    /// LED-induced photocurrent per channel (sim curve × optical gain), µA.
     pub led_signal_ua: [f64; 2],
-    /// Ambient photocurrent per channel at this instant (DC + flicker ≥ 0), µA.
+    /// Ambient photocurrent per channel at this instant ((DC + flicker ≥ 0)
+    /// × face transmission), µA.
     pub ambient_ua: [f64; 2],
     /// LED output factor.
     pub led_factor: f64,
+    /// The optical gain's factors (LED, temperature, face transmission);
+    /// `gain.signal_gain()` is the true relative gain g the node estimates.
+    pub gain: OpticalGain,
     /// ADC noise, rms LSB.
     pub adc_noise_lsb: f64,
     /// The NTC's wiring.
@@ -401,17 +444,30 @@ impl Environment {
             }
         };
         let led_factor = lerp(seg.led_factor, seg.led_factor_end, w).max(0.0);
+        let air_temp_c = lerp(seg.air_temp_c, seg.air_temp_end_c, w);
+        let optics_temp_c = air_temp_c + seg.optics_above_air_k;
+        let gain = OpticalGain {
+            led_factor,
+            temperature_factor: temperature_factor(seg.gain_tempco_per_k, optics_temp_c),
+            face_transmission: lerp(seg.face_transmission, seg.face_transmission_end, w)
+                .clamp(0.0, 1.0),
+        };
         let phase = (2.0 * PI * seg.flicker_hz * t_s).sin();
-        let ambient_ua = [0, 1].map(|k| (seg.ambient_ua[k] + seg.flicker_ua[k] * phase).max(0.0));
+        let ambient_ua = [0, 1].map(|k| {
+            (seg.ambient_ua[k] + seg.flicker_ua[k] * phase).max(0.0) * gain.ambient_gain()
+        });
+        let signal_gain = gain.signal_gain();
         Truth {
             t_s,
             segment: i,
             cover: seg.cover,
             thickness_mm,
-            air_temp_c: lerp(seg.air_temp_c, seg.air_temp_end_c, w),
-            led_signal_ua: optical.map(|x| x * led_factor),
+            air_temp_c,
+            optics_temp_c,
+            led_signal_ua: optical.map(|x| x * signal_gain),
             ambient_ua,
             led_factor,
+            gain,
             adc_noise_lsb: seg.adc_noise_lsb.max(0.0),
             ntc: seg.ntc,
         }
@@ -501,5 +557,46 @@ mod tests {
         let t = env.truth(100_000_000_000);
         assert!((t.led_factor - 0.7).abs() < 1e-12);
         assert!((t.led_signal_ua[0] - 0.7 * 10.5).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_optical_gain_follows_led_temperature_and_fouling() {
+        // κ = −0.6 %/K, air −25 → −5 °C over 100 s with the optics 3 K
+        // above it, face transmission 1.0 → 0.8, LED 0.9, 10 µA of sun.
+        let tl = Timeline::constant(
+            Segment::new(100.0, Cover::Rime)
+                .thickness(5.0)
+                .temp_ramp(-25.0, -5.0)
+                .gain_tempco(-0.006)
+                .optics_above_air(3.0)
+                .transmission_ramp(1.0, 0.8)
+                .led(0.9)
+                .ambient([10.0, 0.0]),
+        );
+        let env = Environment::with_curves(tl, [(Cover::Rime, line_curve())], [0.0; 2]);
+        let t = env.truth(0);
+        assert_eq!((t.air_temp_c, t.optics_temp_c), (-25.0, -22.0));
+        // exp(−0.006 × (−22 − 25)) = exp(0.282) = 1.325 78; × 0.9 = 1.193 20.
+        assert!((t.gain.temperature_factor - 1.325_779).abs() < 1e-6);
+        assert!((t.gain.signal_gain() - 1.193_201).abs() < 1e-6);
+        // The curve reads 10.5 µA at 5 mm.
+        assert!((t.led_signal_ua[0] - 12.528_609).abs() < 1e-5);
+        assert_eq!(t.ambient_ua, [10.0, 0.0]);
+        // Halfway: optics at −12 °C, exp(0.222) = 1.248 57; t = 0.9, so the
+        // signal loses 0.81 and the sun 0.9.
+        let t = env.truth(50_000_000_000);
+        assert!((t.gain.face_transmission - 0.9).abs() < 1e-12);
+        assert!((t.gain.signal_gain() - 0.910_209).abs() < 1e-6);
+        assert!((t.led_signal_ua[0] - 9.557_190).abs() < 1e-5);
+        assert!((t.ambient_ua[0] - 9.0).abs() < 1e-12);
+        // The defaults leave everything as it was: gain = LED factor.
+        let plain = Environment::with_curves(
+            Timeline::constant(Segment::new(10.0, Cover::Rime).thickness(5.0).temp(-40.0)),
+            [(Cover::Rime, line_curve())],
+            [0.0; 2],
+        );
+        let t = plain.truth(0);
+        assert_eq!((t.optics_temp_c, t.gain.signal_gain()), (-40.0, 1.0));
+        assert_eq!(t.led_signal_ua[0], 10.5);
     }
 }
