@@ -299,6 +299,10 @@ pub struct Expect {
     pub min_saturated_frames: Option<u64>,
     /// At least this many measurements decoded.
     pub min_measurements: Option<u64>,
+    /// No frame with at least this much ice (mm) is *confidently thin*: its
+    /// estimate + 2σ below half the true thickness (needs `accuracy =
+    /// true`, whose runs record the estimates).
+    pub not_confidently_thin_from_mm: Option<f64>,
 }
 
 /// A scenario ready to run: one file, or one level of a sweep.
@@ -424,6 +428,10 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
     let config = build_config(&file.config)?;
     validate_commands(&file.commands)?;
     validate_expect(&file.expect)?;
+    ensure!(
+        file.accuracy || file.expect.not_confidently_thin_from_mm.is_none(),
+        "[expect] not_confidently_thin_from_mm needs accuracy = true (the estimates are recorded only then)"
+    );
     if let Some(l) = &file.link {
         for (k, p) in [
             ("corrupt_probability", l.corrupt_probability),
@@ -673,6 +681,11 @@ fn apply_overlays(
             piece.led_factor_end = seg
                 .led_factor_end
                 .map(|_| lerp(seg.led_factor, seg.led_factor_end, frac(b)));
+            piece.face_transmission =
+                lerp(seg.face_transmission, seg.face_transmission_end, frac(a));
+            piece.face_transmission_end = seg
+                .face_transmission_end
+                .map(|_| lerp(seg.face_transmission, seg.face_transmission_end, frac(b)));
             if k > 0 {
                 piece.start_thickness_mm = None;
             }
