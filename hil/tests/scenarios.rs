@@ -37,7 +37,8 @@ fn every_scenario_meets_its_expectations() {
 
 /// The ice estimator's goals on the accuracy scenarios (3 seeds, 1 Hz in
 /// CI): those met on these seeds are asserted; the misses (rime 10 mm, the
-/// unknown LED −30 %, glazed) are printed, not asserted (hil/README.md).
+/// unknown LED −30 %, glazed, the gain scenarios' thickness) are printed,
+/// not asserted (hil/README.md).
 fn accuracy_goals(outcomes: &[run::Outcome]) {
     let rows = accuracy::rows(outcomes);
     let crlb = accuracy::crlb_rows(64);
@@ -68,4 +69,38 @@ fn accuracy_goals(outcomes: &[run::Outcome]) {
     let w = row("accuracy-water");
     assert!(w.warm_water_called_ice.1 > 10_000, "{w:?}");
     assert_eq!(w.warm_water_called_ice.0, 0, "{w:?}");
+    gain_truth(&rows);
+}
+
+/// The gain scenarios put the intended true gain on the face, first and
+/// last frame with ice: LED factor × exp(κ·(T − 25 °C)) × t².
+fn gain_truth(rows: &[accuracy::AccuracyRow]) {
+    let tempco = |t_c: f64| (-0.006 * (t_c - 25.0)).exp();
+    // Rime starts at 60 s; the first frame with ice is ~1 s later, the
+    // last at the end: ramps are within 0.01 of their ends there.
+    let want: [(&str, f64, f64); 11] = [
+        ("accuracy-rime-gain-070", 0.70, 0.70),
+        ("accuracy-rime-gain-085", 0.85, 0.85),
+        ("accuracy-rime-gain-115", 1.15, 1.15),
+        ("accuracy-rime-gain-130", 1.30, 1.30),
+        ("accuracy-glazed-gain-085", 0.85, 0.85),
+        ("accuracy-glazed-gain-115", 1.15, 1.15),
+        ("accuracy-rime-led-drift", 1.0, 0.70),
+        ("accuracy-rime-temp-swing", tempco(-25.0), tempco(-2.0)),
+        ("accuracy-rime-temp-swing-told", tempco(-25.0), tempco(-2.0)),
+        ("accuracy-rime-reboot", 1.0, 1.0),
+        ("accuracy-rime-fouling", 1.0, 0.64),
+    ];
+    for (name, first, last) in want {
+        let r = rows
+            .iter()
+            .find(|r| r.name == name)
+            .unwrap_or_else(|| panic!("no accuracy row {name}"));
+        assert_eq!(r.runs, 3, "{name}");
+        let (a, b) = r.true_gain.unwrap();
+        assert!(
+            (a - first).abs() < 0.01 && (b - last).abs() < 0.01,
+            "{name}: true gain {a:.4} → {b:.4}, want {first:.4} → {last:.4}"
+        );
+    }
 }
