@@ -178,9 +178,8 @@ fn row(name: &str, runs: &[&Outcome]) -> AccuracyRow {
             (a + o.warm_water_called_ice, b + o.warm_water_frames)
         }),
         true_gain: runs.first().and_then(|o| {
-            let mut ice = o.estimates.iter().filter(on_face);
-            let first = ice.next()?;
-            Some((first.true_gain, ice.last().unwrap_or(first).true_gain))
+            let ice: Vec<&EstSample> = o.estimates.iter().filter(on_face).collect();
+            Some((ice.first()?.true_gain, ice.last()?.true_gain))
         }),
         gain: gain_stat(runs),
         confidently_thin: runs
@@ -396,7 +395,7 @@ mod tests {
         assert_eq!(r.true_gain, Some((1.0, 1.0)));
         // 5 mm read as 5.0 ± 0.1: not thin (1 frame from 4 mm).
         assert_eq!(r.confidently_thin, (0, 1));
-        let t = table(&[r.clone()], &[]);
+        let t = table(std::slice::from_ref(r), &[]);
         assert!(
             t.lines()
                 .nth(2)
@@ -438,7 +437,7 @@ mod tests {
         assert_eq!(g.within_2sigma, 0.75);
         // 2.0 + 0.8 < 3.0: seed 2's 6 mm frame is confidently thin.
         assert_eq!(r.confidently_thin, (1, 2));
-        let t = table(&[r.clone()], &[]);
+        let t = table(std::slice::from_ref(r), &[]);
         assert!(
             t.contains("| 1.00 → 0.80 | 0.840 (σ 0.015) | 0.052 | 75.0 % | 1 of 2 |"),
             "{t}"
