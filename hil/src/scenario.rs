@@ -330,13 +330,17 @@ pub struct Scenario {
     pub sweep_lsb: Option<f64>,
 }
 
-/// The accuracy scenarios (`accuracy = true`) on `seeds` seeds 101, 102, …
-/// instead of their files' (one run per seed, named `NAME@seedK`) and at
-/// `frame_ms` frames; every other scenario unchanged. `None`: as the files
-/// say.
+/// The first seed [`for_accuracy`] uses by default.
+pub const ACCURACY_FIRST_SEED: u64 = 101;
+
+/// The accuracy scenarios (`accuracy = true`) on `seeds` seeds
+/// `first_seed`, `first_seed` + 1, … instead of their files' (one run per
+/// seed, named `NAME@seedK`) and at `frame_ms` frames; every other scenario
+/// unchanged. `None`: as the files say.
 pub fn for_accuracy(
     scenarios: Vec<Scenario>,
     seeds: Option<u64>,
+    first_seed: u64,
     frame_ms: Option<u32>,
 ) -> Vec<Scenario> {
     let mut out: Vec<Scenario> = Vec::new();
@@ -366,7 +370,7 @@ pub fn for_accuracy(
         {
             continue; // this file's seeds are already expanded
         }
-        for k in 101..101 + n {
+        for k in first_seed..first_seed.saturating_add(n) {
             let mut s = sc.clone();
             s.seed = k;
             s.name = format!("{base}@seed{k}");

@@ -231,3 +231,28 @@ fn an_overlay_splits_a_fouling_ramp_and_the_thin_check_needs_accuracy() {
     let runs = scenario::parse(Path::new("ok.toml"), &ok).unwrap();
     assert_eq!(runs[0].file.expect.not_confidently_thin_from_mm, Some(4.0));
 }
+
+#[test]
+fn the_report_reseeds_accuracy_runs_from_a_given_first_seed() {
+    let acc = format!("accuracy = true\n{BASE}[sweep]\nseed = [21, 22]\n");
+    let mut all = scenario::parse(Path::new("acc.toml"), &acc).unwrap();
+    all.extend(scenario::parse(Path::new("plain.toml"), BASE).unwrap());
+    let out = scenario::for_accuracy(all, Some(3), 231, Some(100));
+    let got: Vec<(String, u64, Option<u32>)> = out
+        .iter()
+        .map(|s| {
+            (
+                s.name.clone(),
+                s.seed,
+                s.config.as_ref().map(|c| c.frame_period_ms),
+            )
+        })
+        .collect();
+    let want: Vec<(String, u64, Option<u32>)> = vec![
+        ("acc@seed231".into(), 231, Some(100)),
+        ("acc@seed232".into(), 232, Some(100)),
+        ("acc@seed233".into(), 233, Some(100)),
+        ("plain".into(), 1, None),
+    ];
+    assert_eq!(got, want);
+}
