@@ -56,9 +56,12 @@
 //! Frames without currents (saturated, invalid, an outlier that fits no
 //! state) still predict and forget: the estimate widens instead of freezing.
 
-mod fast_math;
+pub(crate) mod fast_math;
+mod grid;
 #[rustfmt::skip]
 pub mod table;
+
+use grid::{Grid, Moments, Shared};
 
 use fois_protocol::{IceEstimate, Medium};
 
@@ -93,9 +96,6 @@ pub const STEP_MM: f32 = table::STEP_UM as f32 / 1000.0;
 pub const MEDIA: [Medium; 3] = [Medium::Water, Medium::Glazed, Medium::Rime];
 /// Prior probability of the dry face; the three media share the rest.
 const PRIOR_DRY: f32 = 0.25;
-/// Most lattice sub-steps of one prediction (a frame period of up to ~2 h at
-/// the default rates keeps its full movement; longer ones move less).
-const MAX_SUBSTEPS: u32 = 512;
 /// Largest Δt one step accepts, s (longer gaps count as this).
 const MAX_DT_S: f32 = 86_400.0;
 /// Largest |current| that counts as a measurement, µA (far beyond the
@@ -148,6 +148,20 @@ pub struct EstimatorParams {
     /// distance from every state fits no state and is skipped (default 50:
     /// p ≈ 10⁻¹¹ for a correct model).
     pub outlier_distance2: f32,
+    /// The filter updates once per this period on the robust mean of the
+    /// frames gathered in it, s (default 1.0: ten frames at 10 Hz; the
+    /// alarm rule still runs every frame).
+    pub update_period_s: f32,
+    /// Memory of the gain's evidence, s of frames that tell the gain
+    /// hypotheses apart (default 3600: one accretion's deviations persist
+    /// along it, so the evidence is one observation's worth per hour).
+    pub gain_memory_s: f32,
+    /// Smallest relative gain spread within one gain hypothesis (default
+    /// 0.02): a calibrated gain's hypotheses lie close together, each with
+    /// at least this spread, so that none alone claims the ice is where the
+    /// table's narrowest states sit (thick rime reads like 2 mm of rime at
+    /// a few per cent more gain).
+    pub gain_within_min: f32,
 }
 
 impl Default for EstimatorParams {
@@ -165,6 +179,9 @@ impl Default for EstimatorParams {
             temp_scale_c: 0.5,
             water_scale_mm: 1.0,
             outlier_distance2: 50.0,
+            update_period_s: 1.0,
+            gain_memory_s: 3600.0,
+            gain_within_min: 0.02,
         }
     }
 }
@@ -209,6 +226,9 @@ impl EstimatorParams {
             temp_scale_c: within(self.temp_scale_c, 0.01, 20.0, d.temp_scale_c),
             water_scale_mm: within(self.water_scale_mm, 0.01, 1_000.0, d.water_scale_mm),
             outlier_distance2: within(self.outlier_distance2, 1.0, 1.0e6, d.outlier_distance2),
+            update_period_s: within(self.update_period_s, 0.0, 60.0, d.update_period_s),
+            gain_memory_s: within(self.gain_memory_s, 1.0, 1.0e7, d.gain_memory_s),
+            gain_within_min: within(self.gain_within_min, 0.0, 0.5, d.gain_within_min),
         }
     }
 }
@@ -285,132 +305,73 @@ fn softplus(x: f32) -> f32 {
     }
 }
 
-/// Covariance C = Σ + R + g²μμᵀ of a state, nA² (c₁₁, c₁₂, c₂₂), and μ, nA.
-#[inline(always)]
-fn covariance(e: &TableEntry, r_na2: [f32; 2], g2: f32) -> ([f32; 2], [f32; 3]) {
-    let mu = [f32::from(e.mu_na[0]), f32::from(e.mu_na[1])];
-    let s1 = f32::from(e.sd_na[0]);
-    let s2 = f32::from(e.sd_na[1]);
-    let rho = f32::from(e.rho_q15) * (1.0 / 32767.0);
-    let c11 = s1 * s1 + r_na2[0] + g2 * mu[0] * mu[0];
-    let c22 = s2 * s2 + r_na2[1] + g2 * mu[1] * mu[1];
-    let c12 = rho * s1 * s2 + g2 * mu[0] * mu[1];
-    (mu, [c11, c12, c22])
+/// Gain hypotheses of the bank.
+pub const GAINS: usize = 7;
+/// Widest spacing of the hypotheses in ln g (a factor 1.165: seven of them
+/// span 0.63 … 1.58 around gain 1).
+const GAIN_STEP_MAX: f32 = 0.153;
+/// Narrowest spacing in ln g (a calibrated gain).
+const GAIN_STEP_MIN: f32 = 0.01;
+/// Prior standard deviation of ln g when nothing is known (a new or
+/// uncalibrated node: LED brightness groups, the face's coupling).
+pub const UNKNOWN_GAIN_SD: f32 = 0.3;
+/// Spread of the hypotheses' predictive likelihoods (nats) from which a
+/// frame counts fully for the gain: below it the frame says little about
+/// the gain (a dry face: nothing at all) and the gain's memory runs slower.
+const GAIN_INFO_NATS: f32 = 1.0;
+/// Most frames averaged into one update.
+pub const MAX_PENDING: usize = 16;
+/// Reference temperature of the optical gain (the table's), °C.
+pub const GAIN_REF_TEMP_C: f32 = 25.0;
+/// Largest temperature coefficient of the gain the filter applies, 1/K.
+const MAX_TEMPCO_PER_K: f32 = 0.05;
+
+/// The sensor's relative optical gain as the estimator knows it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Gain {
+    /// Gain relative to the response table's (1 = as simulated), at the
+    /// optoelectronics' temperature now (the temperature compensation
+    /// included).
+    pub gain: f32,
+    /// Relative standard deviation (of ln g).
+    pub sigma: f32,
 }
 
-/// det C, never below r₁r₂ (|ρ| < 1 and R > 0 make it so; rounding may not).
-#[inline(always)]
-fn det(c: [f32; 3], r_na2: [f32; 2]) -> f32 {
-    let d = c[0] * c[2] - c[1] * c[1];
-    let floor = r_na2[0] * r_na2[1];
-    if d > floor { d } else { floor }
-}
-
-/// Squared Mahalanobis distance of `x` from N(μ, C), nA.
-#[inline(always)]
-fn distance2(x: [f32; 2], mu: [f32; 2], c: [f32; 3], det: f32) -> f32 {
-    let e1 = x[0] - mu[0];
-    let e2 = x[1] - mu[1];
-    (c[2] * e1 * e1 - 2.0 * c[1] * e1 * e2 + c[0] * e2 * e2) / det
-}
-
-/// What stays fixed between frames for a given set of parameters: the
-/// measurement noise and gain terms, and ½ ln det C of every state.
-#[derive(Debug, Clone)]
-struct Model {
-    r_na2: [f32; 2],
-    g2: f32,
-    half_ln_det_dry: f32,
-    half_ln_det: [[f32; ROWS]; 3],
-}
-
-impl Model {
-    #[inline(never)]
-    fn new(p: &EstimatorParams) -> Self {
-        let r_na2 = [
-            (p.noise_ua[0] * 1000.0) * (p.noise_ua[0] * 1000.0),
-            (p.noise_ua[1] * 1000.0) * (p.noise_ua[1] * 1000.0),
-        ];
-        let g2 = p.gain_sd * p.gain_sd;
-        let mut half_ln_det = [[0.0; ROWS]; 3];
-        for (k, row) in half_ln_det.iter_mut().enumerate() {
-            for (h, e) in row.iter_mut().zip(table_of(k).iter()) {
-                let (_, c) = covariance(e, r_na2, g2);
-                *h = 0.5 * fast_math::ln(det(c, r_na2));
-            }
-        }
-        Model {
-            r_na2,
-            g2,
-            half_ln_det_dry: 0.5 * fast_math::ln(r_na2[0] * r_na2[1]),
-            half_ln_det,
-        }
-    }
-
-    /// ln N(x; μ, C) + ln 2π of row `i` of medium `k`, and the squared distance.
-    #[inline(always)]
-    fn log_lik(&self, x: [f32; 2], e: &TableEntry, half_ln_det: f32) -> (f32, f32) {
-        let (mu, c) = covariance(e, self.r_na2, self.g2);
-        let q = distance2(x, mu, c, det(c, self.r_na2));
-        (-0.5 * q - half_ln_det, q)
-    }
-
-    /// `f(state, ln L, q)` for every state (dry first, then each medium's
-    /// rows; `state` indexes like [`Estimator::state_mut`]). Not inlined: the
-    /// rare paths (first frame, states out of reach) share this one loop.
-    #[inline(never)]
-    fn for_each(&self, x: [f32; 2], f: &mut dyn FnMut(usize, f32, f32)) {
-        let (l, q) = self.log_lik_dry(x);
-        f(0, l, q);
-        for k in 0..3 {
-            for (i, (e, &h)) in table_of(k)
-                .iter()
-                .zip(self.half_ln_det[k].iter())
-                .enumerate()
-            {
-                let (l, q) = self.log_lik(x, e, h);
-                f(1 + k * ROWS + i, l, q);
-            }
-        }
-    }
-
-    /// The same for the dry face: N(0, R).
-    fn log_lik_dry(&self, x: [f32; 2]) -> (f32, f32) {
-        let q = x[0] * x[0] / self.r_na2[0] + x[1] * x[1] / self.r_na2[1];
-        (-0.5 * q - self.half_ln_det_dry, q)
-    }
-}
-
-/// A state whose probability falls below this (relative to the most likely
-/// one, e^−27.6) is ruled out: set to exactly zero, it returns only through
-/// the transitions from a live neighbour, or when the currents fit nothing
-/// else ([`REBIRTH_NATS`]). Without the cut, the forgetting would lift any
-/// leak, however small, back to the level its likelihood allows within a
-/// few τ — thick clear ice (which reads almost like a dry face) would seep
-/// through thin water states into the posterior of a clean dry face.
-const PRUNE: f32 = 1e-12;
-
-/// Log-probability given back to states the filter had ruled out when the
-/// currents fit only those (relative to the best state), nats: such a state
-/// is then unlikely but reachable, and the evidence decides within ~τ.
-const REBIRTH_NATS: f32 = 25.0;
-
-/// The grid Bayes filter: one `f32` per state (~0.9 KiB) and ½ ln det C per
-/// state (~0.9 KiB).
+/// The estimator: a bank of [`GAINS`] grid filters, one per hypothesis of
+/// the optical gain, weighted by how well each foresaw the currents.
 #[derive(Debug, Clone)]
 pub struct Estimator {
     params: EstimatorParams,
-    model: Model,
-    /// Probability of each state, unnormalised (the largest is 1).
-    dry: f32,
-    cells: [[f32; ROWS]; 3],
+    grids: [Grid; GAINS],
+    /// ln g of each hypothesis (before the temperature compensation).
+    ln_gains: [f32; GAINS],
+    /// Spacing of the hypotheses in ln g.
+    gain_step: f32,
+    /// Prior of ln g: mean and standard deviation.
+    prior: (f32, f32),
+    /// Forgetful mean of each hypothesis' ln predictive likelihood.
+    evidence: [f32; GAINS],
+    /// False until the first frame with currents gave evidence.
+    evidence_started: bool,
+    /// Temperature coefficient of the gain, 1/K, and its standard deviation.
+    tempco_per_k: f32,
+    tempco_sd_per_k: f32,
+    /// Temperature of the optoelectronics (the MCU's die), °C.
+    optics_temp_c: Option<f32>,
     /// ln of the normalising sum of the water prior exp(−d/scale).
     water_log_norm: f32,
-    initialised: bool,
     /// Air temperature of the last frame, °C (`None`: no NTC).
     air_temp_c: Option<f32>,
+    /// Frames waiting for the next update (currents in nA).
+    pending: [[f32; 2]; MAX_PENDING],
+    pending_n: usize,
+    /// Frames since the last update that read far below zero.
+    pending_negative: usize,
+    /// Time since the last update, s.
+    pending_dt_s: f32,
     update: Update,
     posterior: Option<Posterior>,
+    weights: [f32; GAINS],
 }
 
 impl Default for Estimator {
@@ -420,7 +381,8 @@ impl Default for Estimator {
 }
 
 impl Estimator {
-    /// A filter with these settings (sanitised), waiting for its first frame.
+    /// A filter with these settings (sanitised), waiting for its first
+    /// frame, its gain unknown (1 ± [`UNKNOWN_GAIN_SD`]).
     #[inline(never)]
     pub fn new(params: EstimatorParams) -> Self {
         let params = params.sanitized();
@@ -428,17 +390,29 @@ impl Estimator {
         for i in 0..ROWS {
             sum += fast_math::exp(-row_mm(i) / params.water_scale_mm);
         }
-        Estimator {
-            model: Model::new(&params),
+        let mut est = Estimator {
             params,
-            dry: 0.0,
-            cells: [[0.0; ROWS]; 3],
+            grids: [const { Grid::new() }; GAINS],
+            ln_gains: [0.0; GAINS],
+            gain_step: GAIN_STEP_MAX,
+            prior: (0.0, UNKNOWN_GAIN_SD),
+            evidence: [0.0; GAINS],
+            evidence_started: false,
+            tempco_per_k: 0.0,
+            tempco_sd_per_k: 0.0,
+            optics_temp_c: None,
             water_log_norm: fast_math::ln(if sum > 0.0 { sum } else { 1.0 }),
-            initialised: false,
             air_temp_c: None,
+            pending: [[0.0; 2]; MAX_PENDING],
+            pending_n: 0,
+            pending_negative: 0,
+            pending_dt_s: 0.0,
             update: Update::Waiting,
             posterior: None,
-        }
+            weights: [0.0; GAINS],
+        };
+        est.set_gain_prior(1.0, UNKNOWN_GAIN_SD);
+        est
     }
 
     /// The settings in force.
@@ -446,26 +420,143 @@ impl Estimator {
         &self.params
     }
 
-    /// Forget everything: the next valid frame starts afresh.
+    /// Forget the face: the next valid frame starts afresh. The gain prior
+    /// stays; what the frames had taught about the gain is forgotten.
     pub fn reset(&mut self) {
-        self.dry = 0.0;
-        self.cells = [[0.0; ROWS]; 3];
-        self.initialised = false;
+        for g in self.grids.iter_mut() {
+            g.reset();
+        }
+        self.evidence = [0.0; GAINS];
+        self.evidence_started = false;
         self.air_temp_c = None;
+        self.clear_pending();
         self.update = Update::Waiting;
         self.posterior = None;
+        self.weights = self.prior_weights();
     }
 
     /// The face is known to be clean and dry (a dark calibration has just
     /// been taken on it): all probability on *dry*. Ice must then grow
     /// through thin layers, which the currents show, before the filter can
     /// believe in a thick one (thick clear ice reads almost like a dry face).
+    /// The gain's evidence stays.
     pub fn set_dry(&mut self) {
-        self.dry = 1.0;
-        self.cells = [[0.0; ROWS]; 3];
-        self.initialised = true;
+        for g in self.grids.iter_mut() {
+            g.set_dry();
+        }
+        self.clear_pending();
         self.update = Update::Initialised;
-        let _ = self.summarise();
+        self.summarise();
+    }
+
+    /// Set the gain's prior: `gain` relative to the table (at
+    /// [`GAIN_REF_TEMP_C`]) with relative standard deviation `sd` (0.02 for a
+    /// calibrated gain, [`UNKNOWN_GAIN_SD`] for none). The hypotheses are
+    /// centred on it, spaced by its standard deviation (within
+    /// 0.01 … 0.153 in ln g); what the frames had taught about the gain is
+    /// forgotten. Values out of range (gain outside 0.1 … 10, NaN) leave
+    /// the prior unknown.
+    pub fn set_gain_prior(&mut self, gain: f32, sd: f32) {
+        let (mean, sd) = if gain.is_finite() && (0.1..=10.0).contains(&gain) {
+            (fast_math::ln(gain), within(sd, 0.001, 1.0, UNKNOWN_GAIN_SD))
+        } else {
+            (0.0, UNKNOWN_GAIN_SD)
+        };
+        self.prior = (mean, sd);
+        self.gain_step = sd.clamp(GAIN_STEP_MIN, GAIN_STEP_MAX);
+        let mid = (GAINS / 2) as f32;
+        for (j, l) in self.ln_gains.iter_mut().enumerate() {
+            *l = mean + (j as f32 - mid) * self.gain_step;
+        }
+        self.evidence = [0.0; GAINS];
+        self.evidence_started = false;
+        self.weights = self.prior_weights();
+        if self.posterior.is_some() {
+            self.summarise();
+        }
+    }
+
+    /// Forget the gain: back to the unknown prior 1 ± [`UNKNOWN_GAIN_SD`].
+    pub fn reset_gain(&mut self) {
+        self.set_gain_prior(1.0, UNKNOWN_GAIN_SD);
+    }
+
+    /// The gain's prior (gain at [`GAIN_REF_TEMP_C`], relative sd).
+    pub fn gain_prior(&self) -> (f32, f32) {
+        (fast_math::exp(self.prior.0), self.prior.1)
+    }
+
+    /// The temperature model of the gain: g(T) = g₂₅ · exp(κ (T − 25 °C))
+    /// with κ = `tempco_ppm_per_k` · 10⁻⁶ (clamped to ±5 %/K) applied to
+    /// the currents, and its uncertainty (documentation of the residual the
+    /// gain state absorbs).
+    pub fn set_temperature_model(&mut self, tempco_ppm_per_k: i32, sd_ppm_per_k: u32) {
+        self.tempco_per_k =
+            (tempco_ppm_per_k as f32 * 1e-6).clamp(-MAX_TEMPCO_PER_K, MAX_TEMPCO_PER_K);
+        self.tempco_sd_per_k = (sd_ppm_per_k as f32 * 1e-6).min(MAX_TEMPCO_PER_K);
+    }
+
+    /// The temperature of the optoelectronics (LED, phototransistors: the
+    /// MCU's die sensor beside them), °C; `None` keeps the last one.
+    pub fn set_optics_temp_c(&mut self, t_c: Option<f32>) {
+        if let Some(t) = t_c.filter(|t| t.is_finite()) {
+            self.optics_temp_c = Some(t.clamp(-60.0, 150.0));
+        }
+    }
+
+    /// The gain factor the temperature model applies now: exp(κ (T − 25 °C))
+    /// (1 without a temperature).
+    pub fn compensation(&self) -> f32 {
+        match self.optics_temp_c {
+            Some(t) => fast_math::exp(self.tempco_per_k * (t - GAIN_REF_TEMP_C)),
+            None => 1.0,
+        }
+    }
+
+    /// The gain estimate (the mixture of the hypotheses, at the
+    /// temperature now); `None` before the first valid frame.
+    pub fn gain(&self) -> Option<Gain> {
+        self.posterior?;
+        let (mut m, mut m2) = (0.0f32, 0.0f32);
+        for (w, l) in self.weights.iter().zip(self.ln_gains) {
+            m += w * l;
+            m2 += w * l * l;
+        }
+        // The spread of the weights, and the width of one hypothesis' cell.
+        let cell = self.gain_step * (1.0 / 3.464_102); // spacing / √12
+        let var = (m2 - m * m).max(0.0) + cell * cell;
+        Some(Gain {
+            gain: fast_math::exp(m) * self.compensation(),
+            sigma: fast_math::sqrt(var),
+        })
+    }
+
+    /// Each hypothesis' own posterior (tests, plots).
+    pub fn hypothesis_posteriors(&self) -> [Option<Posterior>; GAINS] {
+        let shared = self.shared();
+        let mut out = [None; GAINS];
+        for (o, g) in out.iter_mut().zip(self.grids.iter()) {
+            *o = g
+                .summarise(&shared)
+                .and_then(|m| Moments::mixture(core::iter::once((1.0, m))));
+        }
+        out
+    }
+
+    /// The weight of each gain hypothesis (sums to 1).
+    pub fn gain_weights(&self) -> &[f32; GAINS] {
+        &self.weights
+    }
+
+    /// The gain hypotheses (at [`GAIN_REF_TEMP_C`]).
+    pub fn gain_hypotheses(&self) -> [f32; GAINS] {
+        self.ln_gains.map(fast_math::exp)
+    }
+
+    /// Weight of the two outermost hypotheses: near 1, the gain may lie
+    /// beyond the range the bank covers.
+    pub fn gain_outside(&self) -> f32 {
+        self.weights.first().copied().unwrap_or(0.0) + self.weights.last().copied().unwrap_or(0.0)
     }
 
     /// What the last step did.
@@ -483,16 +574,26 @@ impl Estimator {
         self.posterior.map(|p| p.ice_estimate())
     }
 
-    /// The filtered optical evidence of every state, unnormalised, before
-    /// the prior and the temperature: (dry, [medium][row]) (tests, plots).
+    /// The filtered optical evidence of every state of the most likely gain
+    /// hypothesis, unnormalised, before the prior and the temperature:
+    /// (dry, [medium][row]) (tests, plots).
     pub fn cells(&self) -> (f32, &[[f32; ROWS]; 3]) {
-        (self.dry, &self.cells)
+        let mut best = 0;
+        for (j, w) in self.weights.iter().enumerate() {
+            if *w > self.weights.get(best).copied().unwrap_or(0.0) {
+                best = j;
+            }
+        }
+        let g = self.grids.get(best).unwrap_or(&self.grids[0]);
+        (g.dry, &g.cells)
     }
 
     /// One frame: `dt_s` since the previous frame, the baseline-corrected
     /// currents in µA (`None` for an invalid or saturated frame) and the air
-    /// temperature in °C (`None` when the NTC has failed). Returns the
-    /// estimate after the frame (`None` until the first valid frame).
+    /// temperature in °C (`None` when the NTC has failed). Frames are
+    /// gathered and the filter updates once per `update_period_s` on their
+    /// robust mean (the first valid frame at once). Returns the estimate
+    /// after the frame (`None` until the first valid frame).
     pub fn step(
         &mut self,
         dt_s: f32,
@@ -511,219 +612,83 @@ impl Estimator {
         // take it): e.g. a baseline taken with ice on the face.
         let r = self.params.noise_ua;
         let negative = x.is_some_and(|x| x[0] < -6000.0 * r[0] || x[1] < -6000.0 * r[1]);
-        if !self.initialised {
-            return if negative {
-                self.initialise(None)
-            } else {
-                self.initialise(x)
+        if !self.grids.iter().any(|g| g.initialised) {
+            self.clear_pending();
+            let x = if negative { None } else { x };
+            return match x {
+                Some(x) => self.initialise(x),
+                None => {
+                    self.update = Update::Waiting;
+                    None
+                }
             };
         }
-        if negative {
-            self.predict(dt_s);
-            let alpha = fast_math::exp(-dt_s / self.params.forget_time_s);
-            let (mut best_q, mut max) = (f32::INFINITY, f32::NEG_INFINITY);
-            self.dry = tempered(self.dry, alpha, 0.0, None, &mut best_q, &mut max);
-            for c in self.cells.iter_mut().flatten() {
-                *c = tempered(*c, alpha, 0.0, None, &mut best_q, &mut max);
-            }
-            self.update = Update::Outlier;
-            return self.exponentiate(max);
-        }
-        self.predict(dt_s);
-
-        // Tempered update: ℓ = α ln p̂ + (1 − α) ln L, and the largest ℓ.
-        let alpha = fast_math::exp(-dt_s / self.params.forget_time_s);
-        let w = 1.0 - alpha;
-        let m = &self.model;
-        let mut best_q = f32::INFINITY;
-        let mut max = f32::NEG_INFINITY;
-        let dry_l = x.map(|x| m.log_lik_dry(x));
-        self.dry = tempered(self.dry, alpha, w, dry_l, &mut best_q, &mut max);
-        for k in 0..3 {
-            let (cells, table, h) = (&mut self.cells[k], table_of(k), &m.half_ln_det[k]);
-            for ((c, e), &h) in cells.iter_mut().zip(table.iter()).zip(h.iter()) {
-                let l = if *c > 0.0 {
-                    x.map(|x| m.log_lik(x, e, h))
-                } else {
-                    None
-                };
-                *c = tempered(*c, alpha, w, l, &mut best_q, &mut max);
-            }
-        }
-        self.update = Update::NoCurrents;
-        if let Some(x) = x {
-            self.update = Update::Measured;
-            if best_q > self.params.outlier_distance2 {
-                max = self.not_reachable(x, w, max);
-            }
-        }
-        self.exponentiate(max)
-    }
-
-    /// State `s` (0 dry, then medium k row i at 1 + k·ROWS + i).
-    fn state_mut(&mut self, s: usize) -> Option<&mut f32> {
-        match s.checked_sub(1) {
-            None => Some(&mut self.dry),
-            Some(j) => self.cells.get_mut(j / ROWS)?.get_mut(j % ROWS),
-        }
-    }
-
-    /// The first frame with currents that fit some state sets the posterior
-    /// with full weight.
-    #[inline(never)]
-    fn initialise(&mut self, x: Option<[f32; 2]>) -> Option<IceEstimate> {
-        let Some(x) = x else {
-            self.update = Update::Waiting;
-            return None;
-        };
-        let mut best_q = f32::INFINITY;
-        let mut max = f32::NEG_INFINITY;
-        self.model.for_each(x, &mut |_, l, q| {
-            best_q = best_q.min(q);
-            max = max.max(l);
-        });
-        if best_q.is_nan() || best_q > self.params.outlier_distance2 {
-            self.reset();
-            return None;
-        }
-        let mut values = [0.0f32; 1 + 3 * ROWS];
-        self.model.for_each(x, &mut |s, l, _| {
-            if let Some(v) = values.get_mut(s) {
-                *v = l;
-            }
-        });
-        for (s, v) in values.iter().enumerate() {
-            if let Some(c) = self.state_mut(s) {
-                *c = *v;
-            }
-        }
-        self.initialised = true;
-        self.update = Update::Initialised;
-        self.exponentiate(max)
-    }
-
-    /// The currents fit no state the filter holds possible. If they fit
-    /// states it had ruled out, those come back with a small probability
-    /// (the face changed in a way the transitions do not model: cleaned,
-    /// a chunk fell off, …); if they fit no state at all, the frame is an
-    /// outlier and its evidence is taken back. Returns the new largest ℓ.
-    #[inline(never)]
-    fn not_reachable(&mut self, x: [f32; 2], w: f32, max: f32) -> f32 {
-        let limit = self.params.outlier_distance2;
-        let mut fits = false;
-        self.model.for_each(x, &mut |_, _, q| fits |= q <= limit);
-        if !fits {
-            self.update = Update::Outlier;
-        }
-        let floor = max - REBIRTH_NATS;
-        let mut values = [0.0f32; 1 + 3 * ROWS];
-        self.model.for_each(x, &mut |s, l, q| {
-            if let Some(v) = values.get_mut(s) {
-                // Reseed: a state out of reach that fits; outlier: take
-                // back the frame's evidence (NaN marks "unchanged").
-                *v = if fits {
-                    if q <= limit { floor + w * l } else { f32::NAN }
-                } else {
-                    -w * l
-                };
-            }
-        });
-        let mut new_max = f32::NEG_INFINITY;
-        for (s, v) in values.iter().enumerate() {
-            if let Some(c) = self.state_mut(s) {
-                if fits {
-                    if *c == f32::NEG_INFINITY && !v.is_nan() {
-                        *c = *v;
-                    }
-                } else if *c > f32::NEG_INFINITY {
-                    *c += *v;
+        self.pending_dt_s += dt_s;
+        match x {
+            Some(_) if negative => self.pending_negative += 1,
+            Some(x) => {
+                if let Some(slot) = self.pending.get_mut(self.pending_n) {
+                    *slot = x;
+                    self.pending_n += 1;
                 }
-                new_max = new_max.max(*c);
+            }
+            None => {}
+        }
+        if self.pending_dt_s + 1e-4 >= self.params.update_period_s || self.pending_n >= MAX_PENDING
+        {
+            self.run_update();
+        }
+        self.estimate()
+    }
+
+    fn clear_pending(&mut self) {
+        self.pending_n = 0;
+        self.pending_negative = 0;
+        self.pending_dt_s = 0.0;
+    }
+
+    /// The robust mean of the pending frames, nA: the median per channel,
+    /// frames further from it than max(6σ of the noise, 10 % of the median)
+    /// dropped (a spike, a flicker burst), the mean of the rest.
+    fn pending_mean(&self) -> Option<[f32; 2]> {
+        let frames = self.pending.get(..self.pending_n)?;
+        if frames.is_empty() {
+            return None;
+        }
+        let mut median = [0.0f32; 2];
+        for (ch, m) in median.iter_mut().enumerate() {
+            let mut v = [0.0f32; MAX_PENDING];
+            for (a, f) in v.iter_mut().zip(frames) {
+                *a = f[ch];
+            }
+            let v = v.get_mut(..frames.len())?;
+            v.sort_unstable_by(f32::total_cmp);
+            *m = *v.get(v.len() / 2)?;
+        }
+        let r = self.params.noise_ua;
+        let tol = [
+            (6000.0 * r[0]).max(0.1 * median[0].abs()),
+            (6000.0 * r[1]).max(0.1 * median[1].abs()),
+        ];
+        let (mut sum, mut n) = ([0.0f32; 2], 0.0f32);
+        for f in frames {
+            if (f[0] - median[0]).abs() <= tol[0] && (f[1] - median[1]).abs() <= tol[1] {
+                sum[0] += f[0];
+                sum[1] += f[1];
+                n += 1.0;
             }
         }
-        new_max
-    }
-
-    /// Transitions over `dt_s`: growth / shrinkage (lattice walk), change of
-    /// medium, shedding; one pass over the rows per sub-step. Probability is
-    /// conserved.
-    fn predict(&mut self, dt_s: f32) {
-        if dt_s <= 0.0 {
-            return;
-        }
-        let p = self.params;
-        // Mean displacement of a rate uniform in [0, r_max] over Δt, in rows.
-        let rows_per_s = 1.0 / (3600.0 * 2.0 * STEP_MM);
-        let up = p.max_growth_mm_per_h * rows_per_s * dt_s;
-        let down = p.max_shrink_mm_per_h * rows_per_s * dt_s;
-        let n = fast_math::ceil((up + down) / 0.5).clamp(1.0, MAX_SUBSTEPS as f32);
-        let u = (up / n).min(0.25);
-        let v = (down / n).min(0.25);
-        let shed = fast_math::one_minus_exp_neg(p.shed_per_h * dt_s / 3600.0 / n);
-        let switch = fast_math::one_minus_exp_neg(p.switch_per_h * dt_s / 3600.0 / n);
-        for _ in 0..n as u32 {
-            self.substep(u, v, shed, switch);
+        if n > 0.0 {
+            Some([sum[0] / n, sum[1] / n])
+        } else {
+            Some(median)
         }
     }
 
-    /// One lattice step: each row moves up with probability `u`, down with
-    /// `v` (dry is row −1 of every medium: a third of its upward flow starts
-    /// each medium; the top row keeps what would grow beyond it); then each
-    /// row changes medium with probability `switch` (shared by the two
-    /// others) and sheds with probability `shed`.
-    fn substep(&mut self, u: f32, v: f32, shed: f32, switch: f32) {
-        let keep = (1.0 - shed) * (1.0 - switch);
-        let share = (1.0 - shed) * switch * 0.5;
-        let from_dry = u * self.dry * (1.0 / 3.0);
-        let mut below = [from_dry; 3]; // what flows up into the current row
-        let mut to_dry = 0.0;
-        for i in 0..ROWS {
-            let mut new = [0.0f32; 3];
-            for k in 0..3 {
-                let cells = &self.cells[k];
-                let here = cells[i];
-                let (above, out_up) = match cells.get(i + 1) {
-                    Some(&a) => (a, u * here),
-                    None => (0.0, 0.0),
-                };
-                new[k] = here - out_up - v * here + below[k] + v * above;
-                below[k] = u * here;
-            }
-            if i == 0 {
-                to_dry = v * (self.cells[0][0] + self.cells[1][0] + self.cells[2][0]);
-            }
-            let [a, b, c] = new;
-            self.cells[0][i] = a * keep + (b + c) * share;
-            self.cells[1][i] = b * keep + (a + c) * share;
-            self.cells[2][i] = c * keep + (a + b) * share;
-            to_dry += (a + b + c) * shed;
-        }
-        self.dry += to_dry - u * self.dry;
-    }
-
-    /// p = exp(ℓ − max) for every state (the largest becomes 1), and the
-    /// output posterior from it. A state that cannot be normalised (never
-    /// expected) restarts the filter rather than report nonsense.
-    fn exponentiate(&mut self, max: f32) -> Option<IceEstimate> {
-        if !max.is_finite() {
-            return self.restart();
-        }
-        let prune = |p: f32| if p < PRUNE { 0.0 } else { p };
-        self.dry = prune(fast_math::exp(self.dry - max));
-        for c in self.cells.iter_mut().flatten() {
-            *c = prune(fast_math::exp_inline(*c - max));
-        }
-        self.summarise()
-    }
-
-    /// The output posterior: the filtered optical evidence times the static
-    /// knowledge of this frame, the prior π and the temperature factors.
-    /// They act at once (a film at +5 °C is never ice, not after τ) and do
-    /// not accumulate from frame to frame (the air temperature persists just
-    /// like the optical deviations do).
-    #[inline(never)]
-    fn summarise(&mut self) -> Option<IceEstimate> {
-        let p = self.params;
+    /// The shared factors of this update: noise, the within-hypothesis gain
+    /// spread, prior × temperature per medium.
+    fn shared(&self) -> Shared {
+        let p = &self.params;
         let (ln_water_t, ln_ice_t) = match self.air_temp_c {
             Some(t) => (
                 -softplus(-(t - p.water_min_c) / p.temp_scale_c),
@@ -735,88 +700,206 @@ impl Estimator {
         // thickness for ice, ∝ exp(−d / scale) for water.
         let medium = (1.0 - PRIOR_DRY) / 3.0;
         let ice_row = medium / ROWS as f32;
-        let water_ratio = fast_math::exp(-STEP_MM / p.water_scale_mm);
-        let factor = [
-            medium * fast_math::exp(ln_water_t - self.water_log_norm),
-            ice_row * fast_math::exp(ln_ice_t),
-            ice_row * fast_math::exp(ln_ice_t),
-        ];
-        let dry = self.dry * PRIOR_DRY;
-        let mut total = dry;
-        let mut p_medium = [dry, 0.0, 0.0, 0.0];
-        let (mut m1, mut m2) = (0.0f32, 0.0f32);
-        for (k, (cells, f)) in self.cells.iter().zip(factor).enumerate() {
-            let mut row_factor = if k == 0 { water_ratio } else { 1.0 };
-            let step = row_factor;
-            let (mut pk, mut s1, mut s2) = (0.0f32, 0.0f32, 0.0f32);
-            let mut d = STEP_MM;
-            for &c in cells.iter() {
-                let q = c * row_factor;
-                row_factor *= step;
-                pk += q;
-                s1 += q * d;
-                s2 += q * d * d;
-                d += STEP_MM;
-            }
-            if let Some(slot) = p_medium.get_mut(k + 1) {
-                *slot = pk * f;
-            }
-            total += pk * f;
-            m1 += s1 * f;
-            m2 += s2 * f;
+        let within = self.within_gain_sd();
+        Shared {
+            r_na2: [
+                (p.noise_ua[0] * 1000.0) * (p.noise_ua[0] * 1000.0),
+                (p.noise_ua[1] * 1000.0) * (p.noise_ua[1] * 1000.0),
+            ],
+            g2: within * within,
+            dry_factor: PRIOR_DRY,
+            factor: [
+                medium * fast_math::exp(ln_water_t - self.water_log_norm),
+                ice_row * fast_math::exp(ln_ice_t),
+                ice_row * fast_math::exp(ln_ice_t),
+            ],
+            row_ratio: [fast_math::exp(-STEP_MM / p.water_scale_mm), 1.0, 1.0],
         }
-        if !(total.is_finite() && total > 0.0) {
-            return self.restart();
-        }
-        let inv = 1.0 / total;
-        for pm in p_medium.iter_mut() {
-            *pm *= inv;
-        }
-        let (m1, m2) = (m1 * inv, m2 * inv);
-        let var = (m2 - m1 * m1).max(0.0) + (1.0 - p_medium[0]) * STEP_MM * STEP_MM / 12.0;
-        let post = Posterior {
-            thickness_mm: m1,
-            sigma_mm: fast_math::sqrt(var),
-            p_medium,
-        };
-        self.posterior = Some(post);
-        Some(post.ice_estimate())
     }
 
-    fn restart(&mut self) -> Option<IceEstimate> {
-        let update = self.update;
-        self.reset();
-        self.update = update;
-        None
+    /// Gain spread within one hypothesis (ln g): the calibration's
+    /// `gain_sd` and half the spacing to the neighbours.
+    fn within_gain_sd(&self) -> f32 {
+        let h = self.gain_step * (1.0 / 3.464_102); // spacing / √12
+        let sd = fast_math::sqrt(self.params.gain_sd * self.params.gain_sd + h * h);
+        sd.max(self.params.gain_within_min)
+    }
+
+    /// The gain of hypothesis `j` now: its ln g and the temperature model.
+    fn gains_now(&self) -> [f32; GAINS] {
+        let c = self.compensation();
+        self.ln_gains.map(|l| fast_math::exp(l) * c)
+    }
+
+    fn prior_weights(&self) -> [f32; GAINS] {
+        let (m, sd) = self.prior;
+        let mut w = self.ln_gains.map(|l| {
+            let z = (l - m) / sd;
+            fast_math::exp(-0.5 * z * z)
+        });
+        normalise(&mut w);
+        w
+    }
+
+    /// The first frame with currents that fit some state sets every grid
+    /// with full weight.
+    #[inline(never)]
+    fn initialise(&mut self, x: [f32; 2]) -> Option<IceEstimate> {
+        let shared = self.shared();
+        let gains = self.gains_now();
+        let mut ln_z = [f32::NEG_INFINITY; GAINS];
+        let mut any = false;
+        for ((g, gain), z) in self.grids.iter_mut().zip(gains).zip(ln_z.iter_mut()) {
+            let s = g.initialise(x, gain, &self.params, &shared);
+            if let Some(l) = s.ln_z {
+                *z = l;
+                any = true;
+            }
+        }
+        if !any {
+            self.reset();
+            return None;
+        }
+        self.learn_gain(0.0, &ln_z);
+        self.update = Update::Initialised;
+        self.summarise();
+        self.estimate()
+    }
+
+    /// Predict over the pending time and update every grid with the pending
+    /// frames' robust mean.
+    #[inline(never)]
+    fn run_update(&mut self) {
+        let dt_s = self.pending_dt_s;
+        let x = self.pending_mean();
+        let negative = x.is_none() && self.pending_negative > 0;
+        self.clear_pending();
+        let shared = self.shared();
+        let gains = self.gains_now();
+        if negative {
+            for g in self.grids.iter_mut() {
+                g.forget(dt_s, &self.params);
+            }
+            self.update = Update::Outlier;
+            self.summarise();
+            return;
+        }
+        let mut ln_z = [f32::NEG_INFINITY; GAINS];
+        let mut all_have = x.is_some();
+        let mut updates = [Update::NoCurrents; GAINS];
+        for (j, (g, gain)) in self.grids.iter_mut().zip(gains).enumerate() {
+            let s = if g.initialised {
+                g.update(dt_s, x, gain, &self.params, &shared)
+            } else {
+                match x {
+                    Some(x) => g.initialise(x, gain, &self.params, &shared),
+                    None => grid::Step {
+                        update: Update::Waiting,
+                        ln_z: None,
+                        best_q: f32::INFINITY,
+                    },
+                }
+            };
+            if let Some(u) = updates.get_mut(j) {
+                *u = s.update;
+            }
+            match (s.ln_z, ln_z.get_mut(j)) {
+                (Some(l), Some(z)) => *z = l,
+                _ => all_have = false,
+            }
+        }
+        // What the bank did: measured if the likely hypotheses measured.
+        let mut best = 0;
+        for (j, w) in self.weights.iter().enumerate() {
+            if *w > self.weights.get(best).copied().unwrap_or(0.0) {
+                best = j;
+            }
+        }
+        self.update = updates.get(best).copied().unwrap_or(Update::NoCurrents);
+        if self.update == Update::Waiting {
+            self.update = Update::NoCurrents;
+        }
+        if all_have {
+            self.learn_gain(dt_s, &ln_z);
+        }
+        self.summarise();
+    }
+
+    /// Each hypothesis' evidence: the forgetful mean of its ln predictive
+    /// likelihood, with memory `gain_memory_s` counted in frames that tell
+    /// the hypotheses apart (a dry face tells nothing: the learned gain
+    /// stays). The first frame counts fully.
+    fn learn_gain(&mut self, dt_s: f32, ln_z: &[f32; GAINS]) {
+        let mut hi = f32::NEG_INFINITY;
+        let mut lo = f32::INFINITY;
+        for &l in ln_z {
+            hi = hi.max(l);
+            lo = lo.min(l);
+        }
+        if !hi.is_finite() {
+            return;
+        }
+        // A hypothesis that foresaw nothing keeps a floor (it can return).
+        let floor = hi - 50.0;
+        if !self.evidence_started {
+            for (e, &l) in self.evidence.iter_mut().zip(ln_z) {
+                *e = l.max(floor);
+            }
+            self.evidence_started = true;
+        } else {
+            let info = ((hi - lo.max(floor)) / GAIN_INFO_NATS).min(1.0);
+            let a = fast_math::one_minus_exp_neg(dt_s * info / self.params.gain_memory_s);
+            for (e, &l) in self.evidence.iter_mut().zip(ln_z) {
+                *e += a * (l.max(floor) - *e);
+            }
+        }
+        let prior = self.prior_weights();
+        let mut max = f32::NEG_INFINITY;
+        for &e in &self.evidence {
+            max = max.max(e);
+        }
+        for ((w, p), e) in self.weights.iter_mut().zip(prior).zip(self.evidence) {
+            *w = p * fast_math::exp(e - max);
+        }
+        if !normalise(&mut self.weights) {
+            self.weights = prior;
+        }
+    }
+
+    /// The output posterior: the weighted mixture of the grids'.
+    fn summarise(&mut self) {
+        let shared = self.shared();
+        let mut parts = [None; GAINS];
+        for (p, g) in parts.iter_mut().zip(self.grids.iter()) {
+            *p = g.summarise(&shared);
+        }
+        let post = Moments::mixture(
+            parts
+                .iter()
+                .zip(self.weights)
+                .filter_map(|(m, w)| m.map(|m| (w, m))),
+        );
+        if post.is_none() {
+            // A state that cannot be normalised (never expected) restarts
+            // the filter rather than report nonsense.
+            let update = self.update;
+            self.reset();
+            self.update = update;
+        }
+        self.posterior = post;
     }
 }
 
-/// One state's tempered update: α ln p̂ + (1 − α) ln L (ln L = 0 without
-/// currents), −∞ where p̂ = 0 (a state no transition reaches stays
-/// impossible). Tracks the best fit and the largest ℓ.
-#[inline(always)]
-fn tempered(
-    pred: f32,
-    alpha: f32,
-    w: f32,
-    lik: Option<(f32, f32)>,
-    best_q: &mut f32,
-    max: &mut f32,
-) -> f32 {
-    if pred.is_nan() || pred <= 0.0 {
-        return f32::NEG_INFINITY;
+/// Scale `w` to sum 1; false if it cannot be.
+fn normalise(w: &mut [f32]) -> bool {
+    let s: f32 = w.iter().sum();
+    if !(s.is_finite() && s > 0.0) {
+        return false;
     }
-    let mut l = alpha * fast_math::ln_inline(pred);
-    if let Some((ln_l, q)) = lik {
-        l += w * ln_l;
-        if q < *best_q {
-            *best_q = q;
-        }
+    for x in w.iter_mut() {
+        *x /= s;
     }
-    if l > *max {
-        *max = l;
-    }
-    l
+    true
 }
 
 /// Thickness of row `i`, mm.

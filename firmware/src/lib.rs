@@ -16,7 +16,9 @@
 //! - [`watchdog`]: the IWDG prescaler, reload and timeout arithmetic the board
 //!   programs; [`reply_time`]: the worst time to answer a command (the
 //!   host's timeout).
-//! - [`estimator`]: ice thickness ± σ and medium (grid Bayes filter on the simulator's table).
+//! - [`estimator`]: ice thickness ± σ, medium and the sensor's optical gain (a bank of grid Bayes
+//!   filters over gain hypotheses, on the simulator's table); [`gain_cal`]: the gain's
+//!   calibration against a target, its kept prior, its saves and the out-of-band flag.
 //! - `sim_board` (feature `sim-board`): a scripted simulated board for tests.
 
 #![cfg_attr(not(test), no_std)]
@@ -27,6 +29,7 @@ pub mod dispatch;
 pub mod estimator;
 pub mod field_link;
 pub mod flash_store;
+pub mod gain_cal;
 pub mod hal;
 pub mod measure;
 pub mod node;

@@ -6,14 +6,15 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use fois_protocol::{
     Ack, AckResult, Baseline, Command, Config, ConfigV1, DetectorState, DeviceFrame, DeviceMsg,
-    ErrorCode, ErrorReply, Event, EventKind, FrameDecoder, Hello, HostFrame, MAX_FRAME,
-    Measurement, MeasurementV3, PROTOCOL_VERSION, encode, flags,
+    ErrorCode, ErrorReply, Event, EventKind, FrameDecoder, GainEstimate, GainTarget, Hello,
+    HostFrame, MAX_FRAME, Measurement, MeasurementV3, PROTOCOL_VERSION, encode, flags,
 };
 
 use crate::boot::RuleSnapshot;
 use crate::dark_cal;
 use crate::dispatch::{self, BUTTON_ID};
 use crate::estimator::{Estimator, EstimatorParams};
+use crate::gain_cal;
 use crate::hal::{BoardInfo, PhotoAdc, Storage};
 use crate::measure::{self, Currents};
 use crate::ntc::{self, NtcReading};
@@ -63,6 +64,9 @@ pub struct FrameValues {
     pub currents: Currents,
     /// Air temperature, 0.01 °C.
     pub temperature_centi_c: i16,
+    /// Temperature of the optoelectronics (the MCU's internal sensor: the
+    /// LED and the phototransistors sit beside it), 0.01 °C.
+    pub optics_centi_c: i16,
     /// V_DDA, mV (as measured).
     pub vdda_mv: u16,
     /// Measurement flags (validity, NTC, V_DDA); node flags are added later.
@@ -112,6 +116,14 @@ where
     last: Option<Measurement>,
     estimator: Estimator,
     last_frame_ms: Option<u64>,
+    /// The learned gain as stored (at the temperature model's reference).
+    gain_kept: Option<GainEstimate>,
+    /// The last gain calibration against a target.
+    gain_calibration: Option<GainEstimate>,
+    /// `GAIN_OUT_OF_BAND` is raised (with hysteresis).
+    gain_out_of_band: bool,
+    /// When the learned gain was last considered for a save, ms.
+    gain_checked_ms: u64,
 }
 
 impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
@@ -146,9 +158,9 @@ where
             Err(LoadError::Empty) => (None, false),
             Err(_) => (None, true),
         };
-        let (config, baseline) = match &stored {
-            Some(r) => (r.config.clone(), r.baseline),
-            None => (Config::default(), None),
+        let (config, baseline, gain_kept, gain_calibration) = match &stored {
+            Some(r) => (r.config.clone(), r.baseline, r.gain, r.gain_calibration),
+            None => (Config::default(), None, None, None),
         };
         let info = BoardInfo {
             cal: info.cal.or_typical(),
@@ -183,7 +195,12 @@ where
             last: None,
             estimator: Estimator::default(),
             last_frame_ms: None,
+            gain_kept,
+            gain_calibration,
+            gain_out_of_band: false,
+            gain_checked_ms: 0,
         };
+        node.start_estimator();
         let _ = node.led.set_low();
         node.drive_outputs();
         node
@@ -217,6 +234,7 @@ where
         let valid = values.flags & flags::INVALID_MASK == 0;
         let air_known = values.flags & (flags::NTC_OPEN | flags::NTC_SHORT) == 0;
         let estimate = self.estimate(now_ms, &values, rise1, valid);
+        self.track_gain(now_ms);
         let transition = self.rule.step(
             &self.config,
             RuleInput {
@@ -243,7 +261,7 @@ where
             let msg = MeasurementV3 {
                 measurement: m.clone(),
                 estimate,
-                gain: None,
+                gain: self.gain_estimate(),
             };
             self.send(DeviceMsg::MeasurementV3(msg), tx);
         }
@@ -431,9 +449,23 @@ where
     }
 
     /// Set the estimator's settings (library settings, not part of the
-    /// protocol `Config`); the filter starts afresh.
+    /// protocol `Config`); the filter starts afresh (with the kept gain).
     pub fn set_estimator_params(&mut self, params: EstimatorParams) {
         self.estimator = Estimator::new(params);
+        self.start_estimator();
+    }
+
+    /// The optical gain estimate as the protocol carries it (at the optics'
+    /// temperature now), once the estimator has one.
+    pub fn gain_estimate(&self) -> Option<GainEstimate> {
+        self.estimator
+            .gain()
+            .map(|g| gain_cal::to_estimate(g.gain, g.sigma))
+    }
+
+    /// The learned gain as kept in the store (`None`: none kept).
+    pub fn gain_kept(&self) -> Option<GainEstimate> {
+        self.gain_kept
     }
 
     /// Frames sent so far (the next frame's sequence number).
@@ -486,7 +518,70 @@ where
         let currents_ua = valid.then_some([rise1_na as f32 * 1e-3, rise2_na as f32 * 1e-3]);
         let ntc_ok = values.flags & (flags::NTC_OPEN | flags::NTC_SHORT) == 0;
         let air_temp_c = ntc_ok.then_some(f32::from(values.temperature_centi_c) * 0.01);
+        self.estimator
+            .set_optics_temp_c(Some(f32::from(values.optics_centi_c) * 0.01));
         self.estimator.step(dt_s, currents_ua, air_temp_c)
+    }
+
+    /// The estimator's temperature model from the config, and its gain
+    /// prior: the kept learned gain (widened), else the last calibration,
+    /// else unknown.
+    fn start_estimator(&mut self) {
+        self.estimator.set_temperature_model(
+            self.config.gain_tempco_ppm_per_k,
+            self.config.gain_tempco_sd_ppm_per_k,
+        );
+        // A kept gain that is the calibration itself is not widened.
+        let kept = self
+            .gain_kept
+            .filter(|k| Some(*k) != self.gain_calibration)
+            .as_ref()
+            .and_then(gain_cal::from_estimate);
+        let calibrated = self
+            .gain_calibration
+            .as_ref()
+            .and_then(gain_cal::from_estimate);
+        match (kept, calibrated) {
+            (Some((g, sd)), _) => {
+                let (g, sd) = gain_cal::prior_from_kept(g, sd);
+                self.estimator.set_gain_prior(g, sd);
+            }
+            (None, Some((g, sd))) => self.estimator.set_gain_prior(g, sd),
+            (None, None) => self.estimator.reset_gain(),
+        }
+    }
+
+    /// After each frame: the out-of-band flag, and once an hour (not in the
+    /// first hour after boot) whether the learned gain is worth keeping.
+    fn track_gain(&mut self, now_ms: u64) {
+        let Some(g) = self.estimator.gain() else {
+            return;
+        };
+        let band = (
+            f32::from(self.config.gain_low_permille) * 1e-3,
+            f32::from(self.config.gain_high_permille) * 1e-3,
+        );
+        self.gain_out_of_band = gain_cal::out_of_band(self.gain_out_of_band, g.gain, g.sigma, band);
+        if now_ms
+            < self
+                .gain_checked_ms
+                .saturating_add(gain_cal::SAVE_GAIN_INTERVAL_MS)
+        {
+            return;
+        }
+        self.gain_checked_ms = now_ms;
+        // Kept at the reference temperature: the compensation taken out.
+        let at_ref = g.gain / self.estimator.compensation();
+        // A kept gain that is the calibration itself is not widened.
+        let kept = self
+            .gain_kept
+            .filter(|k| Some(*k) != self.gain_calibration)
+            .as_ref()
+            .and_then(gain_cal::from_estimate);
+        if gain_cal::worth_saving((at_ref, g.sigma), kept) {
+            self.gain_kept = Some(gain_cal::to_estimate(at_ref, g.sigma));
+            self.changed(now_ms);
+        }
     }
 
     fn node_flags(&self) -> u16 {
@@ -509,6 +604,9 @@ where
         }
         if self.rule.acked() {
             f |= flags::ALARM_ACKED;
+        }
+        if self.gain_out_of_band {
+            f |= flags::GAIN_OUT_OF_BAND;
         }
         f
     }
@@ -553,6 +651,8 @@ where
         if acq.saturated[1] {
             flags |= flags::SATURATED_CH2;
         }
+        let optics_centi_c =
+            vref::internal_temp_centi_c(&cal, self.adc.read_internal_temp(), conv_mv);
         let temperature_centi_c = match ntc::temperature(self.adc.read_ntc()) {
             NtcReading::Ok(t) => t,
             fault => {
@@ -561,13 +661,13 @@ where
                 } else {
                     flags::NTC_SHORT
                 };
-                let code = self.adc.read_internal_temp();
-                vref::internal_temp_centi_c(&cal, code, conv_mv)
+                optics_centi_c
             }
         };
         FrameValues {
             currents,
             temperature_centi_c,
+            optics_centi_c,
             vdda_mv,
             flags,
         }
@@ -604,9 +704,14 @@ where
             Command::SetConfigV3(cfg) => self
                 .set_config(cfg, now_ms)
                 .map(|()| AckResult::ConfigV3(self.config.clone())),
-            // The gain state lives in the gain-tracking estimator; until this
-            // node has one it cannot calibrate or forget a gain.
-            Command::CalibrateGain(_) | Command::ResetGain => Err(ErrorCode::UnknownCommand),
+            Command::CalibrateGain(target) => self.calibrate_gain(target, now_ms),
+            Command::ResetGain => {
+                self.gain_kept = None;
+                self.gain_calibration = None;
+                self.estimator.reset_gain();
+                self.changed(now_ms);
+                Ok(AckResult::GainReset)
+            }
             Command::StartStream { frame_period_ms } => {
                 match dispatch::stream_period(&self.config, frame_period_ms) {
                     Ok(period) => {
@@ -644,6 +749,10 @@ where
     fn set_config(&mut self, cfg: Config, now_ms: u64) -> Result<(), ErrorCode> {
         cfg.validate().map_err(ErrorCode::InvalidConfig)?;
         self.config = cfg;
+        self.estimator.set_temperature_model(
+            self.config.gain_tempco_ppm_per_k,
+            self.config.gain_tempco_sd_ppm_per_k,
+        );
         self.config_defaulted = false;
         // A StartStream rate that no longer fits the new K × settle is dropped.
         if let Some(p) = self.stream_period_ms
@@ -673,10 +782,42 @@ where
         .map_err(ErrorCode::CalibrationRefused)?
         .baseline;
         self.baseline = Some(baseline);
-        // A clean, dry face: the estimator starts from "dry".
+        // A clean, dry face: the estimator starts from "dry", and the
+        // learned gain (which may hold the dirt just cleaned off) returns to
+        // the last calibration, or to unknown.
+        self.gain_kept = self.gain_calibration;
+        self.start_estimator();
         self.estimator.set_dry();
         self.changed(now_ms);
         Ok(AckResult::DarkCalibrated(baseline))
+    }
+
+    /// A gain calibration: the target is on the face; average
+    /// [`gain_cal::GAIN_CAL_FRAMES`] frames (baseline-corrected), fit the
+    /// gain, make it the estimator's prior and keep it.
+    fn calibrate_gain(&mut self, target: GainTarget, now_ms: u64) -> Result<AckResult, ErrorCode> {
+        let mut frames = [None; gain_cal::GAIN_CAL_FRAMES];
+        let base = self.baseline.unwrap_or_default();
+        let mut optics_c = 0.0f32;
+        for f in frames.iter_mut() {
+            let v = self.measure_frame();
+            optics_c += f32::from(v.optics_centi_c) * 0.01 / gain_cal::GAIN_CAL_FRAMES as f32;
+            if v.flags & flags::INVALID_MASK == 0 {
+                *f = Some([
+                    v.currents.net_na[0].saturating_sub(base.i1_na),
+                    v.currents.net_na[1].saturating_sub(base.i2_na),
+                ]);
+            }
+        }
+        self.estimator.set_optics_temp_c(Some(optics_c));
+        let c = gain_cal::calibrate(&frames, target, self.estimator.compensation())
+            .map_err(ErrorCode::CalibrationRefused)?;
+        let kept = gain_cal::to_estimate(c.gain, c.sd);
+        self.gain_calibration = Some(kept);
+        self.gain_kept = Some(kept);
+        self.estimator.set_gain_prior(c.gain, c.sd);
+        self.changed(now_ms);
+        Ok(AckResult::GainCalibrated(kept))
     }
 
     /// The record the node would store now.
@@ -684,6 +825,8 @@ where
         Record {
             config: self.config.clone(),
             baseline: self.baseline,
+            gain: self.gain_kept,
+            gain_calibration: self.gain_calibration,
         }
     }
 

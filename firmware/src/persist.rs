@@ -1,4 +1,5 @@
-//! The persisted record: config + dark baseline, with a version and a CRC.
+//! The persisted record: config, dark baseline and the optical gain (the
+//! learned estimate and the last calibration), with a version and a CRC.
 //!
 //! ```text
 //! | magic "FOIS" 4 B | version u16 LE | length u16 LE | postcard(Record) | CRC-32 u32 LE |
@@ -9,16 +10,16 @@
 //! [`Config::validate`] is *corrupt*: defaults and `CONFIG_DEFAULTED`.
 
 use fois_protocol::framing::CRC;
-use fois_protocol::{Baseline, Config, ConfigV1};
+use fois_protocol::{Baseline, Config, ConfigV1, GainEstimate};
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// First four bytes of a record.
 pub const MAGIC: [u8; 4] = *b"FOIS";
 /// Record layout version; bump when [`Record`] changes shape. A record of
-/// a version this firmware knows ([`RecordV1`]) is read and upgraded; any
-/// other is refused (defaults + fault), never misread.
-pub const RECORD_VERSION: u16 = 2;
+/// a version this firmware knows ([`RecordV1`], [`RecordV2`]) is read and
+/// upgraded; any other is refused (defaults + fault), never misread.
+pub const RECORD_VERSION: u16 = 3;
 const HEADER: usize = 8;
 const CRC_LEN: usize = 4;
 /// The largest record, bytes.
@@ -27,6 +28,22 @@ pub const MAX_RECORD: usize = HEADER + Record::POSTCARD_MAX_SIZE + CRC_LEN;
 /// What is kept across resets.
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
 pub struct Record {
+    /// The config in force.
+    pub config: Config,
+    /// The dark baseline, once calibrated.
+    pub baseline: Option<Baseline>,
+    /// Layout 3: the optical gain the estimator learned (at the temperature
+    /// model's reference temperature; σ absolute), the prior after a reset.
+    pub gain: Option<GainEstimate>,
+    /// Layout 3: the last gain calibration against a target (same form);
+    /// a dark calibration returns the learned gain to it.
+    pub gain_calibration: Option<GainEstimate>,
+}
+
+/// The record of layout version 2 (firmware of protocol version 3 before
+/// the gain was kept): config and baseline. Read and upgraded (no gain).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RecordV2 {
     /// The config in force.
     pub config: Config,
     /// The dark baseline, once calibrated.
@@ -99,10 +116,21 @@ pub fn decode(bytes: &[u8]) -> Result<Record, LoadError> {
             Ok((r, [])) => r,
             _ => return Err(LoadError::Corrupt),
         },
+        2 => match postcard::take_from_bytes::<RecordV2>(body) {
+            Ok((r, [])) => Record {
+                config: r.config,
+                baseline: r.baseline,
+                gain: None,
+                gain_calibration: None,
+            },
+            _ => return Err(LoadError::Corrupt),
+        },
         1 => match postcard::take_from_bytes::<RecordV1>(body) {
             Ok((r, [])) => Record {
                 config: Config::from(r.config),
                 baseline: r.baseline,
+                gain: None,
+                gain_calibration: None,
             },
             _ => return Err(LoadError::Corrupt),
         },
@@ -125,6 +153,14 @@ mod tests {
             baseline: Some(Baseline {
                 i1_na: -40,
                 i2_na: 12,
+            }),
+            gain: Some(GainEstimate {
+                gain_ppm: 870_000,
+                sigma_ppm: 26_100,
+            }),
+            gain_calibration: Some(GainEstimate {
+                gain_ppm: 850_000,
+                sigma_ppm: 17_000,
             }),
         }
     }
@@ -170,6 +206,8 @@ mod tests {
                 ..Config::default()
             },
             baseline: None,
+            gain: None,
+            gain_calibration: None,
         };
         let n = encode(&bad, &mut buf);
         assert_eq!(decode(&buf[..n]), Err(LoadError::Corrupt));
@@ -210,10 +248,49 @@ mod tests {
         assert_eq!(read.config.gain_tempco_sd_ppm_per_k, 4_000);
         assert_eq!(read.config.gain_low_permille, 600);
         assert_eq!(read.baseline, old.baseline);
-        // A version-1 record's body does not pass for a version-2 one.
+        // A version-1 record's body does not pass for a newer one.
         buf[4..6].copy_from_slice(&RECORD_VERSION.to_le_bytes());
         let crc = CRC.checksum(&buf[..end]).to_le_bytes();
         buf[end..end + CRC_LEN].copy_from_slice(&crc);
         assert_eq!(decode(&buf), Err(LoadError::Corrupt));
     }
+
+    /// A record written before the gain was kept (layout version 2: the
+    /// version-3 config and the baseline) is read and upgraded with no gain:
+    /// the estimator starts from the unknown prior.
+    #[test]
+    fn layout_version_2_is_upgraded() {
+        let old = RecordV2 {
+            config: Config {
+                onset_rise_na: 1_500,
+                gain_tempco_ppm_per_k: -4_000,
+                ..Config::default()
+            },
+            baseline: Some(Baseline {
+                i1_na: 310,
+                i2_na: -7,
+            }),
+        };
+        let mut buf = [0xFFu8; 128];
+        let body_len = postcard::to_slice(&old, &mut buf[HEADER..]).unwrap().len();
+        buf[..4].copy_from_slice(&MAGIC);
+        buf[4..6].copy_from_slice(&2u16.to_le_bytes());
+        buf[6..8].copy_from_slice(&(body_len as u16).to_le_bytes());
+        let end = HEADER + body_len;
+        let crc = CRC.checksum(&buf[..end]).to_le_bytes();
+        buf[end..end + CRC_LEN].copy_from_slice(&crc);
+        // The bytes of a version-2 record, as that firmware wrote them.
+        let golden: &[u8] = &GOLDEN_V2;
+        assert_eq!(&buf[..end + CRC_LEN], golden);
+        let read = decode(&buf).unwrap();
+        assert_eq!(read.config, old.config);
+        assert_eq!(read.baseline, old.baseline);
+        assert_eq!((read.gain, read.gain_calibration), (None, None));
+    }
+
+    const GOLDEN_V2: [u8; 43] = [
+        0x46, 0x4f, 0x49, 0x53, 0x02, 0x00, 0x1f, 0x00, 0x64, 0x08, 0xc8, 0x01, 0x90, 0x4e, 0x90,
+        0x4e, 0xdc, 0x0b, 0x1e, 0xc8, 0x01, 0xac, 0x02, 0x64, 0xf4, 0x03, 0x01, 0xbf, 0x3e, 0xa0,
+        0x1f, 0xd8, 0x04, 0xdc, 0x0b, 0x01, 0xec, 0x04, 0x0d, 0x79, 0x6b, 0x3d, 0x21,
+    ];
 }

@@ -6,6 +6,10 @@
 //! (`cargo test -p fois-firmware --test estimator_accuracy -- --nocapture`)
 //! and the larger sweep is `examples/estimator_eval.rs`.
 //!
+//! The node's gain is calibrated here (1 ± 1 %: the table's physics); the
+//! last test runs it with the gain unknown (the bank of gain hypotheses),
+//! and `examples/gain_eval.rs` sweeps gains, drifts and priors.
+//!
 //! Frames come at 1 Hz here (10 Hz in the example): the errors that matter
 //! persist for a whole accretion, so the frame rate barely changes the
 //! figures, and the test stays fast.
@@ -27,7 +31,21 @@ fn crlb() -> &'static [(f64, f64)] {
     CRLB.get_or_init(|| rime_crlb(128, 4242))
 }
 
+/// A calibrated node's gain prior.
+const CALIBRATED: Option<(f32, f32)> = Some((1.0, 0.01));
+
 fn class(kind: IceKind, rate: f64, temp_c: f64, max_mm: f64) -> Stats {
+    class_with(kind, rate, temp_c, max_mm, 1.0, CALIBRATED)
+}
+
+fn class_with(
+    kind: IceKind,
+    rate: f64,
+    temp_c: f64,
+    max_mm: f64,
+    gain: f64,
+    prior: Option<(f32, f32)>,
+) -> Stats {
     let mut st = Stats::new();
     for seed in SEEDS {
         let mut run = Run::new(
@@ -38,6 +56,8 @@ fn class(kind: IceKind, rate: f64, temp_c: f64, max_mm: f64) -> Stats {
             ],
         );
         run.frame_s = 1.0;
+        run.led = gain;
+        run.gain_prior = prior;
         st.add(&simulate(&run, EstimatorParams::default()), 0.05);
     }
     st
@@ -122,6 +142,7 @@ fn water_at_plus_5_c_is_never_ice_and_water_that_freezes_becomes_glaze() {
     for seed in SEEDS {
         let mut run = freeze_run(seed);
         run.frame_s = 1.0;
+        run.gain_prior = CALIBRATED;
         let frames = simulate(&run, EstimatorParams::default());
         for f in &frames {
             let Some(e) = f.est else { continue };
@@ -157,4 +178,27 @@ fn water_at_plus_5_c_is_never_ice_and_water_that_freezes_becomes_glaze() {
     // is ½ and falls): 97.5 % with these seeds. Glaze or rime: a film under
     // 1.3 mm is too thin to tell (the glaze share is only reported).
     assert!(ice >= 0.95, "frozen film called ice in {ice:.3}");
+}
+
+#[test]
+fn with_the_gain_unknown_sigma_stays_honest() {
+    // The gain the node is not told: 15 % more light than the table's, a
+    // new node (unknown prior). Rime's currents at 5 mm are those of 10 mm
+    // at 0.86× the gain; σ must say so, never "thin" with confidence.
+    let crlb = crlb();
+    for (kind, temp) in [(IceKind::Rime, -8.0), (IceKind::Glazed, -5.0)] {
+        let st = class_with(kind, 2.0, temp, 11.0, 1.15, None);
+        print(&format!("{kind:?}, 2 mm/h, gain 1.15 unknown"), &st, crlb);
+        assert!(
+            st.calibration() >= 0.95,
+            "{kind:?}: calibration {}",
+            st.calibration()
+        );
+        if kind == IceKind::Rime {
+            let (_, rms, _, _) = st.at(10.0).expect("frames at 10 mm");
+            assert!(rms <= 1.5, "10 mm: rms {rms:.3}");
+            let (_, rms, _, _) = st.at(2.0).expect("frames at 2 mm");
+            assert!(rms <= 1.0, "2 mm: rms {rms:.3}");
+        }
+    }
 }

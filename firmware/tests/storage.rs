@@ -60,6 +60,8 @@ fn record(k: u32) -> Record {
             i1_na: -(k as i32),
             i2_na: k as i32 * 3,
         }),
+        gain: None,
+        gain_calibration: None,
     }
 }
 
@@ -88,6 +90,8 @@ fn save_through_node<const P: usize>(
     let saved = Record {
         config: node.config().clone(),
         baseline: node.baseline(),
+        gain: node.gain_kept(),
+        gain_calibration: None,
     };
     // Straight to the due time: one poll, one save.
     if let Some(due) = node.save_due_ms() {
@@ -180,6 +184,8 @@ fn a_damaged_store_is_defaults_with_the_flag() {
                     ..Config::default()
                 },
                 baseline: None,
+                gain: None,
+                gain_calibration: None,
             };
             encoded(&bad)
         },

@@ -39,6 +39,8 @@ fn record_bytes(config: &Config) -> Vec<u8> {
         &Record {
             config: config.clone(),
             baseline: None,
+            gain: None,
+            gain_calibration: None,
         },
         &mut out,
     );

@@ -186,6 +186,11 @@ fn t_persist() -> TestResult {
             i1_na: 12,
             i2_na: -3,
         }),
+        gain: Some(fois_protocol::GainEstimate {
+            gain_ppm: 870_000,
+            sigma_ppm: 26_100,
+        }),
+        gain_calibration: None,
     };
     let mut buf = [0u8; persist::MAX_RECORD];
     let n = persist::encode(&rec, &mut buf);
@@ -231,6 +236,8 @@ fn t_flash_store() -> TestResult {
                 ..Config::default()
             },
             baseline: None,
+            gain: None,
+            gain_calibration: None,
         };
         let mut b = [0u8; persist::MAX_RECORD];
         let n = persist::encode(&rec, &mut b);

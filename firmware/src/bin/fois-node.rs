@@ -170,7 +170,12 @@ mod app {
         // After a watchdog, software, pin or panic reset: the alarm (and its
         // acknowledgement) as before the reset, at once.
         node.resume_rule(RuleSnapshot::resume(safety::rule_words(), power_on));
-        *NODE.lock().await = Some(node);
+        // Moved in without an await: a node held across one would live in
+        // this task's future as well as in NODE (7 KiB of static RAM twice).
+        match NODE.try_lock() {
+            Ok(mut slot) => *slot = Some(node),
+            Err(_) => defmt::panic!("the node's mutex is taken before the node exists"),
+        }
 
         #[cfg(not(feature = "field-link"))]
         let link = link::bench(p.USART2, p.PA3, p.PA2);

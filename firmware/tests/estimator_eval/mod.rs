@@ -7,7 +7,7 @@
 //! `examples/estimator_eval.rs`.
 #![allow(dead_code)]
 
-use fois_firmware::estimator::{Estimator, EstimatorParams, Posterior};
+use fois_firmware::estimator::{Estimator, EstimatorParams, Gain, Posterior};
 use fois_protocol::Medium;
 use fois_sim::{Curve, Geometry, IceKind, SensorKind, SimConfig, accretion_curve};
 use rand_core::Rng;
@@ -52,8 +52,13 @@ pub struct Run {
     pub segments: Vec<Segment>,
     /// Accretion seed (run 0 of it), one curve per medium.
     pub seed: u64,
-    /// LED output relative to what the table assumes (0.7 = −30 %).
+    /// LED output relative to what the table assumes (0.7 = −30 %): the
+    /// sensor's optical gain at the start.
     pub led: f64,
+    /// The gain at the end of the run (linear drift); `None`: constant.
+    pub led_end: Option<f64>,
+    /// The estimator's gain prior (gain, relative sd); `None`: unknown.
+    pub gain_prior: Option<(f32, f32)>,
     /// Frame period, s.
     pub frame_s: f64,
     /// White noise per frame and channel, µA (rms).
@@ -71,6 +76,8 @@ impl Run {
             segments,
             seed,
             led: 1.0,
+            led_end: None,
+            gain_prior: None,
             frame_s: 0.1,
             noise_ua: 0.04,
             offset_ua: 0.05,
@@ -88,6 +95,10 @@ pub struct FrameRecord {
     pub temp_c: f64,
     pub currents_ua: [f64; 2],
     pub est: Option<Posterior>,
+    /// The true optical gain of the frame.
+    pub gain: f64,
+    /// The estimator's gain after the frame.
+    pub est_gain: Option<Gain>,
 }
 
 pub fn medium_of(kind: Option<IceKind>) -> Medium {
@@ -130,6 +141,10 @@ pub fn simulate(run: &Run, params: EstimatorParams) -> Vec<FrameRecord> {
         gaussian(&mut rng) * run.offset_ua,
     ];
     let mut est = Estimator::new(params);
+    if let Some((g, sd)) = run.gain_prior {
+        est.set_gain_prior(g, sd);
+    }
+    let total_s: f64 = run.segments.iter().map(|s| s.duration_s).sum();
     let mut out = Vec::new();
     let mut d = 0.0f64;
     let mut t = 0.0f64;
@@ -149,8 +164,12 @@ pub fn simulate(run: &Run, params: EstimatorParams) -> Vec<FrameRecord> {
                     [a, b]
                 }
             };
-            let x = [0, 1]
-                .map(|ch| signal[ch] * run.led + offset[ch] + run.noise_ua * gaussian(&mut rng));
+            let gain = match run.led_end {
+                Some(end) => run.led + (end - run.led) * (t / total_s.max(1e-9)),
+                None => run.led,
+            };
+            let x =
+                [0, 1].map(|ch| signal[ch] * gain + offset[ch] + run.noise_ua * gaussian(&mut rng));
             let temp_in = if run.ntc_failed {
                 None
             } else {
@@ -169,6 +188,8 @@ pub fn simulate(run: &Run, params: EstimatorParams) -> Vec<FrameRecord> {
                 temp_c: temp,
                 currents_ua: x,
                 est: est.posterior(),
+                gain,
+                est_gain: est.gain(),
             });
             t += run.frame_s;
             if seg.cover.is_some() {
