@@ -10,11 +10,14 @@
 //!   temperature coefficient κ of the LED's output and the phototransistors'
 //!   responsivity (per K; a 940 nm LED loses ~0.3–0.6 %/K as it warms, so κ
 //!   is negative and the gain *rises* in the cold). This is the law the
-//!   node's gain estimator compensates with (config
-//!   `gain_tempco_ppm_per_k`, referred to 25 °C, T_optics read from the
-//!   MCU's internal temperature sensor): one form, here for the hardware
-//!   and there for the model, so a scenario that tells the node the true κ
-//!   leaves it nothing to absorb;
+//!   node's gain estimator compensates with (its temperature model,
+//!   g(T) = g₂₅·exp(κ·(T − 25 °C)) with κ from the config's
+//!   `gain_tempco_ppm_per_k` and T from the MCU's internal temperature
+//!   sensor: `fois_firmware::estimator::Estimator::set_temperature_model`
+//!   and `compensation`), referred to the firmware's own reference temperature
+//!   [`GAIN_REFERENCE_TEMP_C`]: one form, here for the hardware and there
+//!   for the model, so a scenario that tells the node the true κ leaves it
+//!   nothing to absorb;
 //! - **t** is the transmission of a fouled face (dust, salt, a film of
 //!   grime; 1 = clean): the LED's light crosses the face twice (out to the
 //!   ice and back to the receiving bundles), so the LED-induced signal
@@ -27,9 +30,10 @@
 //! internal sensor reads exactly this (the ADC's `read_internal_temp`), so
 //! the node sees the temperature that sets the gain.
 
-/// Temperature at which the temperature factor is 1, °C (the response
-/// table's and the node's compensation reference).
-pub const GAIN_REFERENCE_TEMP_C: f64 = 25.0;
+/// Temperature at which the temperature factor is 1, °C: the response
+/// table's and the node's compensation reference, the firmware's
+/// `estimator::GAIN_REF_TEMP_C`.
+pub const GAIN_REFERENCE_TEMP_C: f64 = fois_firmware::estimator::GAIN_REF_TEMP_C as f64;
 
 /// exp(κ·(T_optics − 25 °C)): the optical gain's temperature factor for a
 /// net coefficient `tempco_per_k` (κ, 1/K) at `optics_temp_c`.
