@@ -205,13 +205,17 @@ impl Grid {
         let w = 1.0 - alpha;
         let mut best_q = f32::INFINITY;
         let mut max = f32::NEG_INFINITY;
-        let (mut z, mut zn) = (LogSum::new(), 0.0f32);
+        // Σ p̂·F·L in linear terms relative to the largest ln L any state can
+        // have (det C ≥ r₁r₂), so no term overflows; one that underflows is
+        // a state whose fit is hopeless.
+        let l_ref = -0.5 * fast_math::ln(s.r_na2[0] * s.r_na2[1]);
+        let (mut z, mut zn) = (0.0f32, 0.0f32);
         let dry_l = x.map(|x| log_lik_dry(x, s));
         if let Some((l, _)) = dry_l
             && self.dry > 0.0
         {
             let f = self.dry * s.dry_factor;
-            z.add(l + fast_math::ln(f));
+            z += f * fast_math::exp(l - l_ref);
             zn += f;
         }
         self.dry = tempered(self.dry, alpha, w, dry_l, &mut best_q, &mut max);
@@ -226,10 +230,8 @@ impl Grid {
                 };
                 if let Some((l, _)) = l {
                     let f = *c * f_row;
-                    if f > 0.0 {
-                        z.add(l + fast_math::ln_inline(f));
-                        zn += f;
-                    }
+                    z += f * fast_math::exp_inline(l - l_ref);
+                    zn += f;
                 }
                 f_row *= s.row_ratio[k];
                 *c = tempered(*c, alpha, w, l, &mut best_q, &mut max);
@@ -239,8 +241,11 @@ impl Grid {
         let mut ln_z = None;
         if let Some(x) = x {
             update = Update::Measured;
-            if zn > 0.0 {
-                ln_z = Some(z.ln() - fast_math::ln(zn));
+            if zn > 0.0 && z > 0.0 {
+                ln_z = Some(l_ref + fast_math::ln(z) - fast_math::ln(zn));
+            } else if zn > 0.0 {
+                // Every state's fit underflowed: hopeless for this gain.
+                ln_z = Some(l_ref - 100.0);
             }
             if best_q > p.outlier_distance2 {
                 let (m, fits) = self.not_reachable(x, gain, w, max, p, s);
