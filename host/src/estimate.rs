@@ -22,11 +22,17 @@
 //!   A new `run` starts the estimator afresh.
 //!
 //! Appended columns: `est_thickness_mm`, `est_sigma_mm`, `est_kind`,
-//! `est_p` (as the log's) and `est_update`: what the frame did —
+//! `est_p`, `est_gain`, `est_gain_sigma` (as the log's: the optical gain
+//! against the response table's and its standard deviation; the replay
+//! applies no temperature model: a log holds the air's temperature, not the
+//! optics') and `est_update`: what the frame did —
 //! `initialised`, `measured`, `waiting`, `no_currents` (a saturated row, or
 //! currents that are not finite numbers or beyond ±10 mA: predicted only),
 //! `outlier` (currents no state explains: predicted only), `restart` (the
-//! node's uptime went back, or a new run: the estimator starts afresh).
+//! node's uptime went back, or a new run: the estimator starts afresh). The
+//! estimator updates once per second of frames on their robust mean, as on
+//! the node: `est_update` is the last update's. The gain starts unknown
+//! (1 ± 30 %) unless `--gain` gives a calibrated one.
 //!
 //! Errors (nothing written, the input never touched): an empty file, a
 //! header without the needed columns, no frame rows, a `sim curve` whose
@@ -43,11 +49,13 @@ use fois_firmware::estimator::{Estimator, EstimatorParams, Update};
 use crate::csvlog::LogReader;
 
 /// The appended columns.
-pub const EST_COLUMNS: [&str; 5] = [
+pub const EST_COLUMNS: [&str; 7] = [
     "est_thickness_mm",
     "est_sigma_mm",
     "est_kind",
     "est_p",
+    "est_gain",
+    "est_gain_sigma",
     "est_update",
 ];
 
@@ -80,6 +88,8 @@ pub struct ReplayOptions {
     pub baseline_ua: [f64; 2],
     /// The estimator's settings.
     pub params: EstimatorParams,
+    /// A calibrated gain (gain, relative sd); `None`: unknown.
+    pub gain_prior: Option<(f32, f32)>,
 }
 
 impl Default for ReplayOptions {
@@ -88,6 +98,7 @@ impl Default for ReplayOptions {
             curve: CurveTiming::default(),
             baseline_ua: [0.0, 0.0],
             params: EstimatorParams::default(),
+            gain_prior: None,
         }
     }
 }
@@ -203,6 +214,7 @@ struct Replay {
     last_uptime_ms: Option<f64>,
     last_thickness_mm: Option<f64>,
     last_run: Option<String>,
+    gain_prior: Option<(f32, f32)>,
 }
 
 impl Replay {
@@ -212,7 +224,7 @@ impl Replay {
         x: Option<[f32; 2]>,
         temp_c: Option<f64>,
         restarted: bool,
-    ) -> [String; 5] {
+    ) -> [String; 7] {
         let e = self.est.step(dt_s as f32, x, temp_c.map(|t| t as f32));
         self.sum.frames += 1;
         let update = self.est.last_update();
@@ -226,6 +238,7 @@ impl Replay {
         } else {
             update_name(update)
         };
+        let gain = self.est.gain();
         match e {
             Some(e) => {
                 self.sum.last = Some(crate::text::estimate_text(&e));
@@ -234,10 +247,14 @@ impl Replay {
                     format!("{:.3}", f64::from(e.sigma_um) / 1000.0),
                     e.medium.name().to_string(),
                     format!("{:.3}", f64::from(e.probability_permille) / 1000.0),
+                    gain.map_or(String::new(), |g| format!("{:.3}", g.gain)),
+                    gain.map_or(String::new(), |g| format!("{:.3}", g.gain * g.sigma)),
                     what.to_string(),
                 ]
             }
             None => [
+                String::new(),
+                String::new(),
                 String::new(),
                 String::new(),
                 String::new(),
@@ -252,7 +269,7 @@ impl Replay {
         self.sum.restarts += 1;
     }
 
-    fn log_row(&mut self, f: &StringRecord, c: LogCols) -> Option<[String; 5]> {
+    fn log_row(&mut self, f: &StringRecord, c: LogCols) -> Option<[String; 7]> {
         let LogCols {
             kind,
             uptime,
@@ -266,6 +283,12 @@ impl Replay {
             .and_then(|d| dark_baseline(&f[d]))
         {
             self.baseline_ua = b;
+            // As the node: the gain back to its calibration (or unknown),
+            // the face dry.
+            match self.gain_prior {
+                Some((g, sd)) => self.est.set_gain_prior(g, sd),
+                None => self.est.reset_gain(),
+            }
             self.est.set_dry();
             return None;
         }
@@ -304,7 +327,7 @@ impl Replay {
         i: [usize; 2],
         run: Option<usize>,
         timing: CurveTiming,
-    ) -> anyhow::Result<[String; 5]> {
+    ) -> anyhow::Result<[String; 7]> {
         let mut restarted = false;
         if let Some(r) = run {
             let this = f[r].trim().to_string();
@@ -367,8 +390,12 @@ pub fn replay(
         .with_context(|| format!("cannot write {}", tmp.display()))?;
     let result = (|| -> anyhow::Result<ReplaySummary> {
         w.write_record(&header)?;
+        let mut est = Estimator::new(opts.params);
+        if let Some((g, sd)) = opts.gain_prior {
+            est.set_gain_prior(g, sd);
+        }
         let mut r = Replay {
-            est: Estimator::new(opts.params),
+            est,
             sum: ReplaySummary {
                 input_kind: match layout {
                     Layout::Log(_) => "monitor log",
@@ -380,10 +407,11 @@ pub fn replay(
             last_uptime_ms: None,
             last_thickness_mm: None,
             last_run: None,
+            gain_prior: opts.gain_prior,
         };
         let mut fields = StringRecord::new();
         let mut line = 1u64;
-        let empty = || std::array::from_fn::<String, 5, _>(|_| String::new());
+        let empty = || std::array::from_fn::<String, 7, _>(|_| String::new());
         while rd.next_row(&mut fields)? {
             line += 1;
             let est = match layout {

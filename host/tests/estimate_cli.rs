@@ -56,7 +56,8 @@ fn a_sim_curve_of_rime_is_read_as_growing_rime() {
     assert_eq!(code, 0, "{err}");
     let before = std::fs::read(&curve).unwrap();
     let out = dir.path().join("est.csv");
-    let (code, stdout, err) = estimate(&curve, &out, &[]);
+    // The simulator's curve is at gain 1 by definition: a calibrated node.
+    let (code, stdout, err) = estimate(&curve, &out, &["--gain", "1", "--gain-sd", "0.02"]);
     assert_eq!(code, 0, "{err}");
     assert!(
         stdout.contains("sim curve: 151 rows, 151 frames"),
@@ -84,6 +85,68 @@ fn a_sim_curve_of_rime_is_read_as_growing_rime() {
         checked += 1;
     }
     assert_eq!(checked, 61);
+    let (g, gs) = (c("est_gain"), c("est_gain_sigma"));
+    for r in &t.rows {
+        assert!(
+            (num(&r[g]) - 1.0).abs() < 0.1 && num(&r[gs]) < 0.05,
+            "{r:?}"
+        );
+    }
+
+    // 15 % more light and the gain not told: never confidently thin, the
+    // estimate within 2σ, the gain learned on thick rime.
+    let bright = dir.path().join("bright.csv");
+    let text = std::fs::read_to_string(&curve).unwrap();
+    let mut lines = text.lines();
+    let mut scaled = format!("{}\n", lines.next().unwrap());
+    let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+    let (i1, i2) = (
+        header.iter().position(|h| *h == "i1_ua").unwrap(),
+        header.iter().position(|h| *h == "i2_ua").unwrap(),
+    );
+    for l in lines {
+        let mut f: Vec<String> = l.split(',').map(str::to_string).collect();
+        for i in [i1, i2] {
+            f[i] = format!("{}", num(&f[i]) * 1.15);
+        }
+        scaled.push_str(&f.join(","));
+        scaled.push('\n');
+    }
+    std::fs::write(&bright, scaled).unwrap();
+    let (code, _, err) = estimate(&bright, &out, &[]);
+    assert_eq!(code, 0, "{err}");
+    let t = LogTable::read(&out).unwrap();
+    let c = |n: &str| t.col(n).unwrap();
+    let (d, e, s, g) = (
+        c("thickness_mm"),
+        c("est_thickness_mm"),
+        c("est_sigma_mm"),
+        c("est_gain"),
+    );
+    let (mut rows, mut within) = (0, 0);
+    for r in t.rows.iter().filter(|r| num(&r[d]) >= 4.0) {
+        assert!(
+            num(&r[e]) + 2.0 * num(&r[s]) >= num(&r[d]) / 2.0,
+            "thin: {r:?}"
+        );
+        rows += 1;
+        if (num(&r[e]) - num(&r[d])).abs() <= 2.0 * num(&r[s]) {
+            within += 1;
+        }
+    }
+    assert!(within * 100 >= rows * 95, "{within} of {rows} within 2σ");
+    let last = t.rows.iter().rfind(|r| num(&r[d]) <= 10.0).unwrap();
+    assert!((num(&last[g]) / 1.15).ln().abs() < 0.1, "{last:?}");
+    // A gain out of range, or its sd without it: usage errors.
+    for flags in [
+        &["--gain", "5"][..],
+        &["--gain", "0"],
+        &["--gain-sd", "0.1"],
+        &["--gain", "1", "--gain-sd", "2"],
+    ] {
+        let (code, _, _) = estimate(&bright, &out, flags);
+        assert_eq!(code, 2, "{flags:?}");
+    }
 }
 
 #[test]

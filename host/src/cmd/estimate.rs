@@ -19,8 +19,9 @@ pub struct EstimateArgs {
     #[arg(long, value_name = "FILE.csv")]
     pub input: PathBuf,
     /// Where to write the input's rows with est_thickness_mm, est_sigma_mm
-    /// (mm), est_kind (dry/water/glazed/rime), est_p (0-1) and est_update
-    /// appended. Must not be the input; an existing file is replaced (only
+    /// (mm), est_kind (dry/water/glazed/rime), est_p (0-1), est_gain,
+    /// est_gain_sigma (the optical gain against the response table's) and
+    /// est_update appended. Must not be the input; an existing file is replaced (only
     /// once the replay has succeeded).
     #[arg(long, value_name = "FILE.csv")]
     pub out: PathBuf,
@@ -38,6 +39,16 @@ pub struct EstimateArgs {
     /// until a DarkCalibrated answer in the log replaces it.
     #[arg(long, value_name = "UA1,UA2", default_value = "0", value_parser = ua_pair)]
     pub baseline_ua: [f64; 2],
+    /// The sensor's optical gain against the response table's, as a gain
+    /// calibration measured it (0.25..=4). Without it the gain is unknown
+    /// (1 ± 30 %) and learned from the frames, as on a new node.
+    #[arg(long, value_name = "GAIN", value_parser = f64_in(0.25, 4.0))]
+    pub gain: Option<f64>,
+    /// Relative standard deviation of --gain (0.001..=1; a calibration
+    /// against a target: 0.02).
+    #[arg(long, value_name = "SD", default_value_t = 0.02, requires = "gain",
+          value_parser = f64_in(0.001, 1.0))]
+    pub gain_sd: f64,
 }
 
 /// Run `foisctl estimate`.
@@ -58,6 +69,7 @@ pub fn run(args: EstimateArgs) -> anyhow::Result<()> {
             temperature_c: args.temperature_c,
         },
         baseline_ua: args.baseline_ua,
+        gain_prior: args.gain.map(|g| (g as f32, args.gain_sd as f32)),
         ..ReplayOptions::default()
     };
     let pb = ProgressBar::new_spinner();
