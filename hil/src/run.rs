@@ -359,6 +359,7 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
     let opts = NodeOptions {
         seed: sc.seed,
         calibrate_at_s: None,
+        gain_calibration: f.gain_calibration.map(|[gain, rel_sd]| (gain, rel_sd)),
         ..NodeOptions::default()
     };
     let mut node = VirtualNode::new(env.clone(), opts);

@@ -98,6 +98,11 @@ pub struct ScenarioFile {
     /// recorded beside the truth every frame; see [`crate::accuracy`]).
     #[serde(default)]
     pub accuracy: bool,
+    /// A factory calibration of the optical gain, `[gain, relative sd]`
+    /// (e.g. `[1.0, 0.02]`), in the node's flash before it boots
+    /// (`fois_vnode::NodeOptions::gain_calibration`); without it the node
+    /// is new and its gain unknown.
+    pub gain_calibration: Option<[f64; 2]>,
     /// The timeline: `fois_vnode::scenario`'s `[[segment]]` tables, checked
     /// there.
     #[serde(default, rename = "segment")]
@@ -432,6 +437,17 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
     let config = build_config(&file.config)?;
     validate_commands(&file.commands)?;
     validate_expect(&file.expect)?;
+    if let Some([gain, rel_sd]) = file.gain_calibration {
+        let (lo, hi) = fois_firmware::gain_cal::GAIN_RANGE;
+        ensure!(
+            gain >= f64::from(lo) && gain <= f64::from(hi),
+            "gain_calibration: gain {gain} outside the node's range {lo}..={hi}"
+        );
+        ensure!(
+            rel_sd > 0.0 && rel_sd < 1.0,
+            "gain_calibration: relative sd {rel_sd} must be in (0, 1)"
+        );
+    }
     ensure!(
         file.accuracy || file.expect.not_confidently_thin_from_mm.is_none(),
         "[expect] not_confidently_thin_from_mm needs accuracy = true (the estimates are recorded only then)"

@@ -94,6 +94,29 @@ fn bad_values_are_refused_with_the_reason() {
             "{extra:?} → {e}"
         );
     }
+    // A factory gain calibration the node could not hold.
+    for (top, words) in [
+        (
+            "gain_calibration = [5.0, 0.02]\n",
+            "outside the node's range",
+        ),
+        ("gain_calibration = [1.0, 0.0]\n", "relative sd"),
+    ] {
+        let e = format!(
+            "{:#}",
+            scenario::parse(Path::new("scenarios/bad.toml"), &format!("{top}{BASE}")).unwrap_err()
+        );
+        assert!(
+            e.contains("scenarios/bad.toml") && e.contains(words),
+            "{top:?} → {e}"
+        );
+    }
+    let ok = scenario::parse(
+        Path::new("ok.toml"),
+        &format!("gain_calibration = [1.0, 0.02]\n{BASE}"),
+    )
+    .unwrap();
+    assert_eq!(ok[0].file.gain_calibration, Some([1.0, 0.02]));
     let e = format!(
         "{:#}",
         scenario::parse(Path::new("x.toml"), "class = \"icy\"\n").unwrap_err()

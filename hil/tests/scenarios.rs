@@ -81,7 +81,7 @@ fn gain_scenarios(rows: &[accuracy::AccuracyRow]) {
     let tempco = |t_c: f64| (-0.006 * (t_c - 25.0)).exp();
     // Rime starts at 60 s; the first frame with ice is ~1 s later, the
     // last at the end: ramps are within 0.01 of their ends there.
-    let want: [(&str, f64, f64); 11] = [
+    let want: [(&str, f64, f64); 12] = [
         ("accuracy-rime-gain-070", 0.70, 0.70),
         ("accuracy-rime-gain-085", 0.85, 0.85),
         ("accuracy-rime-gain-115", 1.15, 1.15),
@@ -89,6 +89,7 @@ fn gain_scenarios(rows: &[accuracy::AccuracyRow]) {
         ("accuracy-glazed-gain-085", 0.85, 0.85),
         ("accuracy-glazed-gain-115", 1.15, 1.15),
         ("accuracy-rime-led-drift", 1.0, 0.70),
+        ("accuracy-rime-calibrated-led-drift", 1.0, 0.70),
         ("accuracy-rime-temp-swing", tempco(-25.0), tempco(-2.0)),
         ("accuracy-rime-temp-swing-told", tempco(-25.0), tempco(-2.0)),
         ("accuracy-rime-reboot", 1.0, 1.0),
