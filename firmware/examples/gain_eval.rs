@@ -11,7 +11,7 @@
 //! (ln) at 10 mm and the share of those frames within ±8 %. FILTER keeps
 //! only the classes whose name contains it. The estimator's settings can be
 //! overridden through `EST_MEMORY` (gain memory, s) and `EST_PERIOD`
-//! (update period, s) and `EST_WITHIN` (smallest gain spread within a
+//! (update period, s), `EST_SWITCH` (medium changes per hour) and `EST_WITHIN` (smallest gain spread within a
 //! hypothesis).
 // An evaluation tool sharing the accuracy test's harness: a missing estimate
 // there is a failed evaluation, as in the tests.
@@ -70,6 +70,13 @@ fn classes() -> Vec<Class> {
             }
             out.push(base(1.0, Some(0.8), None, false, "drift 1→0.8".into()));
             out.push(base(1.0, Some(1.2), None, false, "drift 1→1.2".into()));
+            out.push(base(
+                1.0,
+                None,
+                Some((1.0, 0.02)),
+                false,
+                "g 1.00 calibrated ±2 %".into(),
+            ));
             for g in [0.85, 1.15] {
                 out.push(base(
                     g,
@@ -96,6 +103,9 @@ fn params_from_env() -> EstimatorParams {
     let get = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f32>().ok());
     if let Some(v) = get("EST_MEMORY") {
         p.gain_memory_s = v;
+    }
+    if let Some(v) = get("EST_SWITCH") {
+        p.switch_per_h = v;
     }
     if let Some(v) = get("EST_WITHIN") {
         p.gain_within_min = v;

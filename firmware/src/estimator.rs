@@ -319,6 +319,9 @@ pub const UNKNOWN_GAIN_SD: f32 = 0.3;
 /// frame counts fully for the gain: below it the frame says little about
 /// the gain (a dry face: nothing at all) and the gain's memory runs slower.
 const GAIN_INFO_NATS: f32 = 1.0;
+/// Weight of an outermost gain hypothesis beyond which the bank follows
+/// the gain out of its range.
+const FOLLOW_EDGE_WEIGHT: f32 = 0.35;
 /// Most frames averaged into one update.
 pub const MAX_PENDING: usize = 16;
 /// Reference temperature of the optical gain (the table's), °C.
@@ -863,6 +866,29 @@ impl Estimator {
         }
         if !normalise(&mut self.weights) {
             self.weights = prior;
+        }
+        self.follow();
+    }
+
+    /// The gain left the hypotheses' range (an LED failing after a
+    /// calibration, a face fouling, a gain beyond 0.63 … 1.58): when an
+    /// outermost hypothesis holds more than 35 % of the weight, the bank moves
+    /// its centre there and doubles its spread (up to the unknown prior's);
+    /// the evidence starts again, the grids keep what they hold.
+    fn follow(&mut self) {
+        let first = self.weights.first().copied().unwrap_or(0.0);
+        let last = self.weights.last().copied().unwrap_or(0.0);
+        if first.max(last) <= FOLLOW_EDGE_WEIGHT {
+            return;
+        }
+        let mut m = 0.0f32;
+        for (w, l) in self.weights.iter().zip(self.ln_gains) {
+            m += w * l;
+        }
+        let sd = (2.0 * self.prior.1).min(UNKNOWN_GAIN_SD);
+        let g = fast_math::exp(m);
+        if (0.1..=10.0).contains(&g) {
+            self.set_gain_prior(g, sd);
         }
     }
 

@@ -167,3 +167,38 @@ fn the_temperature_model_compensates_the_gain() {
     cold.set_optics_temp_c(Some(f32::NAN));
     assert!(cold.compensation().is_finite());
 }
+
+#[test]
+fn a_gain_beyond_the_hypotheses_is_followed() {
+    // Half the light (a face badly fouled, an LED failing): beyond the
+    // unknown prior's hypotheses (0.63 … 1.58) and the plausible band (the
+    // node raises GAIN_OUT_OF_BAND). On thick rime the bank moves out to
+    // it; on the way, before it has, a few per cent of the seconds read
+    // thin with confidence (outside the band that is not promised).
+    let mut est = Estimator::default();
+    est.set_dry();
+    let mut thin = 0;
+    grow_rime(&mut est, 0.5, 10.0, |d, est| {
+        let p = est.posterior().expect("an estimate");
+        if d >= 4.0 && p.thickness_mm + 2.0 * p.sigma_mm < d / 2.0 {
+            thin += 1;
+        }
+    });
+    // 4320 s from 4 mm to 10 mm.
+    assert!(thin < 130, "{thin} s confidently thin");
+    let g = est.gain().unwrap();
+    assert!(
+        (g.gain / 0.5).ln().abs() < 0.1,
+        "{g:?} prior {:?} weights {:?} {:?}",
+        est.gain_prior(),
+        est.gain_weights(),
+        est.posterior()
+    );
+    assert!(
+        est.gain_hypotheses()[0] < 0.5,
+        "{:?}",
+        est.gain_hypotheses()
+    );
+    let p = est.posterior().unwrap();
+    assert!((p.thickness_mm - 10.0).abs() <= 2.0 * p.sigma_mm, "{p:?}");
+}
