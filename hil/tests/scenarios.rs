@@ -81,9 +81,10 @@ fn gain_scenarios(rows: &[accuracy::AccuracyRow]) {
     let tempco = |t_c: f64| (-0.006 * (t_c - 25.0)).exp();
     // Rime starts at 60 s; the first frame with ice is ~1 s later, the
     // last at the end: ramps are within 0.01 of their ends there.
-    let want: [(&str, f64, f64); 12] = [
+    let want: [(&str, f64, f64); 13] = [
         ("accuracy-rime-gain-070", 0.70, 0.70),
         ("accuracy-rime-gain-085", 0.85, 0.85),
+        ("accuracy-rime-gain-100", 1.0, 1.0),
         ("accuracy-rime-gain-115", 1.15, 1.15),
         ("accuracy-rime-gain-130", 1.30, 1.30),
         ("accuracy-glazed-gain-085", 0.85, 0.85),
