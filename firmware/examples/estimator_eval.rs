@@ -1,5 +1,6 @@
 //! Accuracy of the ice estimator on ray-traced accretions (seeds the response
-//! table does not use): `cargo run --release -p fois-firmware --example estimator_eval`.
+//! table does not use): `cargo run --release -p fois-firmware --example estimator_eval`
+//! (`EST_PRIOR_SD=0.02`: a node whose gain is calibrated to 1 ± 2 %).
 // An evaluation tool sharing the accuracy test's harness: a missing estimate
 // there is a failed evaluation, as in the tests.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -74,6 +75,7 @@ fn main() {
             );
             run.led = led;
             run.frame_s = frame_s;
+            run.gain_prior = gain_prior_from_env();
             let frames = simulate(&run, params);
             st.add(&frames, 0.05);
         }
@@ -142,6 +144,12 @@ pub fn trace(args: &[String]) {
 }
 
 /// Defaults, with overrides from `EST_GAIN`, `EST_NOISE`, `EST_TAU`, `EST_GROWTH` (tuning).
+/// `EST_PRIOR_SD=S`: the node's gain calibrated to 1 ± S (unset: unknown).
+fn gain_prior_from_env() -> Option<(f32, f32)> {
+    let sd = std::env::var("EST_PRIOR_SD").ok()?.parse::<f32>().ok()?;
+    Some((1.0, sd))
+}
+
 fn params_from_env() -> EstimatorParams {
     let mut p = EstimatorParams::default();
     let get = |k: &str| std::env::var(k).ok().and_then(|v| v.parse::<f32>().ok());

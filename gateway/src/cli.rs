@@ -198,7 +198,7 @@ pub fn check_config(cfg: &GatewayConfig) -> anyhow::Result<String> {
     }
     Ok(format!(
         "config OK: gateway {}, {} node(s), broker {}, queue {} (at most {} bytes), \
-         Home Assistant discovery {}, MQTT commands {}",
+         Home Assistant discovery {}, MQTT commands {}, {}",
         cfg.name,
         cfg.nodes.len(),
         cfg.broker.describe(),
@@ -216,6 +216,10 @@ pub fn check_config(cfg: &GatewayConfig) -> anyhow::Result<String> {
             "on"
         } else {
             "off"
+        },
+        match &cfg.modbus {
+            Some(m) => m.describe(),
+            None => "Modbus TCP off".to_string(),
         },
     ))
 }

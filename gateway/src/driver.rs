@@ -153,9 +153,27 @@ impl Service {
         let Service {
             cfg,
             fleet,
+            commands_tx,
             commands_rx: mut front_rx,
-            ..
         } = self;
+        // Modbus first: a taken port stops the start before anything else
+        // is opened.
+        let modbus = match &cfg.modbus {
+            Some(m) => {
+                let listener = crate::modbus::server::bind(m).await?;
+                info!("{}", m.describe());
+                let units =
+                    crate::modbus::server::Units::new(m.clone(), fleet.clone(), commands_tx);
+                Some(tokio::spawn(crate::modbus::server::serve(
+                    listener,
+                    Arc::new(units),
+                )))
+            }
+            None => {
+                drop(commands_tx);
+                None
+            }
+        };
         let limits_q = QueueLimits::for_max_bytes(cfg.queue_max_bytes);
         let (queue, rec) = Queue::open(&cfg.queue_dir, limits_q)?;
         info!(
@@ -259,6 +277,9 @@ impl Service {
                 readers_stop.store(true, Ordering::Relaxed);
                 break;
             }
+        }
+        if let Some(m) = modbus {
+            m.abort();
         }
         for t in threads {
             let _ = t.join();

@@ -13,6 +13,7 @@
 //! | [`inflight`] | packet-id bookkeeping: which record a PUBACK acknowledges |
 //! | [`queue`] | the bounded on-disk store-and-forward queue |
 //! | [`snapshot`] | every node's latest state, shared with other front ends |
+//! | [`modbus`] | Modbus TCP for SCADA: the register table of a node's snapshot, the server (`tokio-modbus`) |
 //! | [`topics`], [`payload`] | the topic layout, the JSON payloads |
 //! | [`state_filter`] | when the retained state is published: discrete changes at once, continuous values deadbanded |
 //! | [`discovery`] | Home Assistant MQTT discovery: the entities of a node, the messages for the configured release |
@@ -25,6 +26,7 @@ pub mod driver;
 pub mod inflight;
 pub mod logging;
 pub mod machine;
+pub mod modbus;
 pub mod mqtt;
 pub mod payload;
 pub mod queue;

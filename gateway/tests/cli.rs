@@ -87,12 +87,27 @@ fn bad_configs_exit_2_with_the_reason() {
         "sys.toml",
         &format!("topic_prefix = \"$SYS/fois\"\n{node}"),
     );
-    let cases: [(Option<&str>, &str); 5] = [
+    let modbus_addr = write(
+        dir.path(),
+        "modbus.toml",
+        &format!("[modbus]\nenabled = true\nlisten = \"localhost\"\n{node}"),
+    );
+    let modbus_unit = write(
+        dir.path(),
+        "unit.toml",
+        &format!("[modbus]\nenabled = true\n{node}[[node]]\nport = \"/dev/y\"\nmodbus_unit = 1\n"),
+    );
+    let cases: [(Option<&str>, &str); 7] = [
         (None, "no nodes"),
         (Some(&missing), "cannot read the config"),
         (Some(&bad_key), "unknown field `prot`"),
         (Some(&bad_name), "not usable in topics"),
         (Some(&sys), "starts with `$`"),
+        (
+            Some(&modbus_addr),
+            "[modbus] listen `localhost` is not an address and port",
+        ),
+        (Some(&modbus_unit), "nodes 1 and 2 both have Modbus unit 1"),
     ];
     for (config, needle) in cases {
         for check in [false, true] {
@@ -138,7 +153,39 @@ fn check_config_validates_certificates_and_opens_nothing() {
         out.contains("Home Assistant discovery on (for Home Assistant 2024.1 and later)"),
         "{out}"
     );
+    assert!(out.contains("Modbus TCP off"), "{out}");
     assert!(!dir.path().join("q").exists(), "the queue was not created");
+    // Modbus on a port another program holds: --check-config does not
+    // listen, so it is OK; the run stops at once with exit 1 and the reason.
+    let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = taken.local_addr().unwrap().port();
+    let modbus = write(
+        dir.path(),
+        "modbus.toml",
+        &format!(
+            "[broker]\nport = {}\n[queue]\ndir = \"{d}/q2\"\n[modbus]\nenabled = true\n\
+             listen = \"127.0.0.1:{port}\"\n{nodes}",
+            support::free_port()
+        ),
+    );
+    let (code, out, err) = gateway(&["--config", &modbus, "--check-config"]);
+    assert_eq!(code, Some(0), "{out}{err}");
+    assert!(
+        out.contains(&format!(
+            "Modbus TCP on 127.0.0.1:{port} (unit(s) 1,2, read-only, stale after 10 s, at most 64 clients)"
+        )),
+        "{out}"
+    );
+    let (code, out, err) = gateway(&["--config", &modbus, "--duration", "10"]);
+    assert_eq!(code, Some(1), "{out}{err}");
+    assert!(
+        err.contains(&format!(
+            "cannot listen for Modbus TCP on 127.0.0.1:{port}: Address already in use"
+        )),
+        "{err}"
+    );
+    assert!(!dir.path().join("q2").exists(), "stopped before the queue");
+    drop(taken);
     // The server's key with the client's certificate: they do not match.
     let mismatched = write(
         dir.path(),

@@ -2,14 +2,16 @@
 //!
 //! - `cargo xtask ci`   — every check the README promises, in order: the
 //!   system tools the tests need (installed if missing, before anything is
-//!   compiled: [`tools`]), format, the crate rules of ARCHITECTURE.md
+//!   compiled: [`tools`]; with the gateway Modbus tests' pymodbus
+//!   virtualenv), format, the crate rules of ARCHITECTURE.md
 //!   ([`crates`]), clippy (host crates, and the firmware on its thumb
 //!   target), the whole test suite, the firmware's release cross-build with
 //!   its size budget, the firmware logic on an emulated Cortex-M4F, the
 //!   fuzz crates' build, the gateway's Debian package ([`package`]), and
 //!   the Home Assistant check when its inputs changed since its recorded
 //!   pass ([`ha_check`]).
-//! - `cargo xtask tools` — only the system tools.
+//! - `cargo xtask tools` — only the system tools (and the pymodbus
+//!   virtualenv `target/pymodbus-venv`).
 //! - `cargo xtask crates` — only the crate rules.
 //! - `cargo xtask deb` — build the gateway's Debian package and check it.
 //! - `cargo xtask ha-check [--if-changed]` — the gateway's Home Assistant
@@ -60,7 +62,7 @@ fn main() -> Result<()> {
     std::env::set_current_dir(&root)?;
     match task.as_str() {
         "ci" => ci(),
-        "tools" => tools::ensure(),
+        "tools" => tools::ensure(&root),
         "crates" => crates::check(&root),
         "deb" => package::build().and_then(|deb| package::check(&deb)),
         "ha-check" => match std::env::args().nth(2).as_deref() {
@@ -78,7 +80,7 @@ fn main() -> Result<()> {
                  ci     system tools, format, crate rules, clippy (host + thumb), tests, firmware size\n         \
                  budget, QEMU run, fuzz crates build, the gateway's Debian package, the Home\n         \
                  Assistant check when its inputs changed since its recorded pass\n  \
-                 tools  install the system tools the tests need (mosquitto, qemu-system-arm, systemd, python3)\n  \
+                 tools  install the system tools the tests need (mosquitto, qemu-system-arm, systemd, python3)\n         and the gateway Modbus tests' pymodbus virtualenv (target/pymodbus-venv)\n  \
                  crates check the crate rules of ARCHITECTURE.md on the dependency graph\n  \
                  deb    build the gateway's Debian package and check its files, config and unit\n  \
                  ha-check [--if-changed]  the gateway's Home Assistant discovery checked by Home Assistant\n         \
@@ -138,7 +140,7 @@ fn ci() -> Result<()> {
 
     // Before anything is compiled: a missing broker must not cost minutes
     // of building first.
-    step("system tools", &mut tools::ensure)?;
+    step("system tools", &mut || tools::ensure(&project_root()))?;
     step("cargo tools", &mut || {
         // The firmware links through flip-link (stack overflow protection).
         if !have("flip-link") {

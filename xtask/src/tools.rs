@@ -9,7 +9,11 @@
 //! | `qemu-system-arm` | `qemu-system-arm` | the firmware logic on an emulated Cortex-M4F |
 //! | `systemd-analyze` | `systemd` | `systemd-analyze verify` of the gateway's unit file |
 //! | `dpkg-deb` | `dpkg` | reading the gateway's Debian package back |
-//! | `python3` (3.11 or 3.12, with `venv`) | `python3-venv` | the Home Assistant check's virtualenvs ([`crate::ha_check`]) |
+//! | `python3` (3.11 or 3.12, with `venv`) | `python3-venv` | the Home Assistant check's virtualenvs ([`crate::ha_check`]); the gateway's Modbus tests' client |
+//!
+//! Then the virtualenv of the gateway's Modbus tests ([`ensure_pymodbus`]):
+//! `target/pymodbus-venv` with the pymodbus of
+//! `gateway/tests/modbus/requirements.txt` (the test fails without it).
 //!
 //! Cargo tools (`flip-link`, `cargo-deb`) are installed with `cargo install`
 //! by the steps that need them.
@@ -131,9 +135,56 @@ pub fn install_command(packages: &[&str]) -> String {
     )
 }
 
+/// The gateway Modbus tests' virtualenv, under the workspace root.
+pub const PYMODBUS_VENV: &str = "target/pymodbus-venv";
+/// Its pinned requirements (read by the tests too).
+pub const PYMODBUS_REQUIREMENTS: &str = "gateway/tests/modbus/requirements.txt";
+/// What the virtualenv was made from (a copy of the requirements).
+const PYMODBUS_MARKER: &str = "fois-requirements.txt";
+
 /// Look for every tool; install what is missing where this machine allows,
-/// otherwise fail at once with the command to run.
-pub fn ensure() -> Result<()> {
+/// otherwise fail at once with the command to run. Then the Modbus tests'
+/// virtualenv.
+pub fn ensure(root: &Path) -> Result<()> {
+    ensure_packages()?;
+    ensure_pymodbus(root)
+}
+
+/// The virtualenv `target/pymodbus-venv` with the pinned pymodbus, made
+/// (again) unless it was made from the same requirements.
+pub fn ensure_pymodbus(root: &Path) -> Result<()> {
+    let req_path = root.join(PYMODBUS_REQUIREMENTS);
+    let req = std::fs::read_to_string(&req_path)
+        .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", req_path.display()))?;
+    let venv = root.join(PYMODBUS_VENV);
+    let python = venv.join("bin/python");
+    let marker = venv.join(PYMODBUS_MARKER);
+    if python.exists() && std::fs::read_to_string(&marker).is_ok_and(|m| m == req) {
+        eprintln!("pymodbus virtualenv: {} ({})", venv.display(), req.trim());
+        return Ok(());
+    }
+    if venv.exists() {
+        std::fs::remove_dir_all(&venv)?;
+    }
+    let v = venv.to_string_lossy().to_string();
+    let r = req_path.to_string_lossy().to_string();
+    crate::run("python3", &["-m", "venv", &v])?;
+    let pip = venv.join("bin/pip").to_string_lossy().to_string();
+    crate::run(
+        &pip,
+        &[
+            "install",
+            "--quiet",
+            "--disable-pip-version-check",
+            "-r",
+            &r,
+        ],
+    )?;
+    std::fs::write(&marker, &req)?;
+    Ok(())
+}
+
+fn ensure_packages() -> Result<()> {
     let missing = missing_packages(&TOOLS, |t| found(t.name, t.dirs));
     if missing.is_empty() {
         eprintln!("system tools: all present");

@@ -32,6 +32,9 @@ pub struct FileConfig {
     /// Commands from MQTT to the nodes.
     #[serde(default)]
     pub commands: CommandsFile,
+    /// The Modbus TCP server.
+    #[serde(default)]
+    pub modbus: super::modbus::ModbusFile,
     /// The nodes, one `[[node]]` table each.
     #[serde(default, rename = "node")]
     pub nodes: Vec<NodeFile>,
@@ -141,6 +144,9 @@ pub struct NodeFile {
     pub name: Option<String>,
     /// Baud rate [default: 115200].
     pub baud: Option<u32>,
+    /// Its Modbus unit id, 1–247 [default: its position among the nodes,
+    /// 1, 2, 3…].
+    pub modbus_unit: Option<u8>,
 }
 
 /// Values from the command line that override the file.

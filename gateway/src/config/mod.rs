@@ -5,6 +5,7 @@
 //! | module | what lives there |
 //! | --- | --- |
 //! | [`file`] | the file as written ([`FileConfig`]: every key optional, unknown keys refused) and the flags' [`Overrides`] |
+//! | [`modbus`] | `[modbus]`: the Modbus TCP server's address, commands, stale time, unit ids |
 //! | `resolve` | [`FileConfig::resolve`]: flags over file over defaults, section by section, every check |
 //! | here | the resolved [`GatewayConfig`], [`Secret`], names, [`BrokerAddr`], [`NodeSpec`] |
 //!
@@ -13,6 +14,7 @@
 //! with `{:?}` or `--print-config` never shows them.
 
 pub mod file;
+pub mod modbus;
 mod resolve;
 
 use std::fmt;
@@ -22,6 +24,7 @@ use std::time::Duration;
 use serde::Deserialize;
 
 pub use file::{FileConfig, Overrides};
+pub use modbus::ModbusConfig;
 pub use resolve::default_gateway_name;
 
 /// A value that must never be printed (a password).
@@ -136,6 +139,8 @@ pub struct GatewayConfig {
     pub command_min_interval: Duration,
     /// The nodes.
     pub nodes: Vec<NodeSpec>,
+    /// The Modbus TCP server (None: off).
+    pub modbus: Option<ModbusConfig>,
 }
 
 /// Default queue bound: 256 MiB (a day of 200 nodes at one measurement per

@@ -90,7 +90,11 @@ impl FileConfig {
         let (homeassistant_prefix, homeassistant_version) =
             resolve_homeassistant(self.homeassistant, o)?;
         let commands = resolve_commands(self.commands, &topic_prefix, &name)?;
+        // The file's nodes first, then the flags' (which have no unit).
+        let mut units: Vec<Option<u8>> = self.nodes.iter().map(|n| n.modbus_unit).collect();
         let nodes = resolve_nodes(self.nodes, o)?;
+        units.resize(nodes.len(), None);
+        let modbus = super::modbus::resolve_modbus(self.modbus, &units)?;
         Ok(GatewayConfig {
             name,
             topic_prefix,
@@ -106,6 +110,7 @@ impl FileConfig {
             command_topic: commands.topic,
             command_min_interval: commands.min_interval,
             nodes,
+            modbus,
         })
     }
 }

@@ -16,6 +16,7 @@ use std::time::{Duration, Instant};
 pub mod ha_snapshot;
 pub mod home_assistant;
 pub mod pki;
+pub mod pymodbus;
 pub mod vnode;
 #[allow(unused_imports)] // the load benchmark serves its nodes itself
 pub use vnode::{NodeProc, Scene};

@@ -1,0 +1,328 @@
+use std::time::{Duration, Instant};
+
+use fois_link::Reading;
+use fois_protocol::{DetectorState, GainEstimate, IceEstimate, Measurement, Medium, flags};
+
+use super::*;
+use crate::snapshot::NodeSnapshot;
+
+const STALE: Duration = Duration::from_secs(2);
+
+fn iced(t: Instant) -> NodeSnapshot {
+    let m = Measurement {
+        uptime_ms: 12_345,
+        i1_na: 1_500,
+        i2_na: -250,
+        ambient1_na: 20_000,
+        ambient2_na: 0,
+        temperature_centi_c: -512,
+        vdda_mv: 3300,
+        flags: flags::ALARM | flags::ALARM_ACKED | flags::NTC_OPEN,
+        state: DetectorState::Ice,
+    };
+    let e = IceEstimate {
+        thickness_um: 1_250,
+        sigma_um: 80,
+        medium: Medium::Rime,
+        probability_permille: 930,
+    };
+    let g = GainEstimate {
+        gain_ppm: 1_150_260,
+        sigma_ppm: 61_000,
+    };
+    let mut n = NodeSnapshot::new(0, Some("tower-3".into()), "/dev/x".into());
+    n.link_up = true;
+    n.reading = Some(Reading::new(&m, Some(&e), Some(&g)));
+    n.seq = Some(0x0001_0002);
+    n.received = Some(t);
+    n.frames_lost = 3;
+    n
+}
+
+#[test]
+fn a_node_not_heard_from_is_stale_and_every_value_not_available() {
+    let n = NodeSnapshot::new(0, None, "/dev/x".into());
+    let r = register_map(&n, Instant::now(), STALE);
+    assert_eq!(
+        r,
+        [
+            status::STALE,
+            0xFFFF, // state
+            0,      // faults: none known
+            0x8000,
+            0x0000, // i1
+            0x8000,
+            0x0000, // i2
+            0x8000, // temperature
+            0xFFFF,
+            0xFFFF,
+            0xFFFF,
+            0xFFFF, // thickness, sigma, medium, probability
+            0xFFFF,
+            0xFFFF,
+            0xFFFF,
+            0xFFFF, // gain, sigma
+            0xFFFF,
+            0xFFFF, // data age
+            0xFFFF,
+            0xFFFF, // seq
+            0xFFFF, // vdda
+            0,
+            0, // frames lost
+            0, // ack
+        ]
+    );
+}
+
+#[test]
+fn an_iced_node_with_estimate_and_gain_in_scaled_integers() {
+    let t0 = Instant::now();
+    let r = register_map(&iced(t0), t0 + Duration::from_millis(1_234), STALE);
+    let want_status = status::ALARM
+        | status::ALARM_ACKED
+        | status::ICE
+        | status::LINK_UP
+        | status::DATA
+        | status::VALID
+        | status::ESTIMATE
+        | status::GAIN
+        | status::DARK_BASELINE
+        | status::FAULT;
+    assert_eq!(r[0], want_status);
+    assert_eq!(r[0], 0b111_1110_1111);
+    assert_eq!(r[1], 2, "ice");
+    assert_eq!(r[2], 1 << 2, "ntc_open; the alarm bits are no faults");
+    assert_eq!((r[3], r[4]), (0, 1500), "1.5 µA in nA");
+    assert_eq!((r[5], r[6]), (0xFFFF, 0xFF06), "-0.25 µA = -250 nA");
+    assert_eq!(r[7], 0xFE00, "-5.12 °C = -512 × 0.01 °C");
+    assert_eq!(r[8], 1250, "1.25 mm in µm");
+    assert_eq!(r[9], 80);
+    assert_eq!(r[10], 3, "rime");
+    assert_eq!(r[11], 930, "0.93 in ‰");
+    assert_eq!((r[12], r[13]), (0x0011, 0x8D34), "gain 1.15026 in ppm");
+    assert_eq!((r[14], r[15]), (0, 61_000), "σ 0.061");
+    assert_eq!((r[16], r[17]), (0, 1234), "1.234 s old, in ms");
+    assert_eq!((r[18], r[19]), (1, 2), "seq 0x0001_0002");
+    assert_eq!(r[20], 3300);
+    assert_eq!((r[21], r[22]), (0, 3));
+    assert_eq!(r[23], 0, "the ack register reads 0");
+}
+
+#[test]
+fn the_stale_bit_follows_the_data_age_and_the_link_bit_the_link() {
+    let t0 = Instant::now();
+    let mut n = iced(t0);
+    let at = |n: &NodeSnapshot, ms: u64| register_map(n, t0 + Duration::from_millis(ms), STALE);
+    assert_eq!(at(&n, 2_000)[0] & status::STALE, 0, "2 s: not yet");
+    let r = at(&n, 2_001);
+    assert_ne!(r[0] & status::STALE, 0, "2.001 s: stale");
+    assert_eq!((r[16], r[17]), (0, 2_001));
+    // An hour and more: the age goes on in the pair's high word.
+    let r = at(&n, 4_000_000);
+    assert_eq!(
+        (u32::from(r[16]) << 16) | u32::from(r[17]),
+        4_000_000,
+        "{r:?}"
+    );
+    n.link_up = false;
+    let r = at(&n, 100);
+    assert_eq!(r[0] & (status::LINK_UP | status::STALE), 0);
+    assert_eq!(
+        r[0] & status::DATA,
+        status::DATA,
+        "the last data still shown"
+    );
+}
+
+#[test]
+fn a_node_without_estimate_or_gain_says_so_and_values_are_clamped_short_of_not_available() {
+    let t0 = Instant::now();
+    let mut n = iced(t0);
+    if let Some(m) = n.reading.as_mut() {
+        m.estimate = None;
+        m.gain = None;
+        m.temperature_c = -400.0; // beyond i16's range at 0.01 °C
+        m.i1_ua = -3e6; // beyond i32's range at 0.001 µA
+    }
+    let r = register_map(&n, t0, STALE);
+    assert_eq!(r[0] & (status::ESTIMATE | status::GAIN), 0);
+    assert_eq!(&r[8..16], &[0xFFFF; 8]);
+    assert_eq!(r[7], 0x8001, "-327.67 °C, not 0x8000 (not available)");
+    assert_eq!((r[3], r[4]), (0x8000, 0x0001), "i32::MIN + 1");
+    // 65.535 mm, the largest µm count the wire carries, would read as "not
+    // available": it is 65.534.
+    if let Some(m) = n.reading.as_mut() {
+        m.estimate = Some(fois_link::EstimateReading {
+            thickness_mm: 65.535,
+            thickness_sigma_mm: 0.0,
+            medium: Medium::Glazed,
+            medium_probability: 1.0,
+        });
+    }
+    let r = register_map(&n, t0, STALE);
+    assert_eq!(&r[8..12], &[65_534, 0, 2, 1000]);
+}
+
+#[test]
+fn the_table_covers_every_register_once_in_order() {
+    let mut next = 0;
+    for f in &TABLE {
+        assert_eq!(f.address, next, "{}", f.name);
+        next += f.kind.width();
+    }
+    assert_eq!(usize::from(next), REGISTERS);
+}
+
+#[test]
+fn the_readme_shows_this_table() {
+    let readme = include_str!("../../README.md");
+    let table = markdown_table();
+    assert!(
+        readme.contains(&table),
+        "gateway/README.md's register table differs from modbus::TABLE; it is:\n\n{table}"
+    );
+}
+
+#[test]
+fn the_faults_register_names_the_protocols_fault_bits() {
+    let what = TABLE[usize::from(FAULTS)].what;
+    let mut n = 0;
+    for (bit, name) in flags::NAMES {
+        if bit & flags::FAULT_MASK != 0 {
+            let text = format!("{} {name}", bit.trailing_zeros());
+            assert!(what.contains(&text), "{text} missing from: {what}");
+            n += 1;
+        }
+    }
+    assert_eq!(what.matches(", ").count() + 1, n, "{what}");
+}
+
+mod answers {
+    use std::net::SocketAddr;
+    use std::time::{Duration, Instant};
+
+    use tokio::sync::mpsc;
+    use tokio_modbus::{ExceptionCode, Request, Response};
+
+    use super::super::server::Units;
+    use super::iced;
+    use crate::config::ModbusConfig;
+    use crate::driver::FrontEndCommand;
+    use crate::reader::NodeCommand;
+    use crate::snapshot::{Fleet, NodeSnapshot};
+
+    fn units(commands: bool) -> (Units, mpsc::UnboundedReceiver<FrontEndCommand>, Instant) {
+        let t0 = Instant::now();
+        let mut down = NodeSnapshot::new(1, Some("down".into()), "/dev/y".into());
+        down.link_up = false;
+        let fleet = Fleet::new(vec![iced(t0), down]);
+        let cfg = ModbusConfig {
+            listen: "127.0.0.1:5020".parse().unwrap(),
+            commands,
+            stale_after: Duration::from_secs(2),
+            max_clients: 4,
+            units: vec![5, 9],
+        };
+        let (tx, rx) = mpsc::unbounded_channel();
+        (Units::new(cfg, fleet, tx), rx, t0)
+    }
+
+    const PEER: SocketAddr =
+        SocketAddr::new(std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST), 4242);
+
+    #[test]
+    fn reads_of_either_function_give_the_same_registers_and_bad_ones_the_modbus_exception() {
+        let (u, _rx, t0) = units(false);
+        let now = t0 + Duration::from_millis(500);
+        let ask = |unit, r: Request<'static>| u.answer(unit, &r, now, PEER);
+        assert_eq!(
+            ask(5, Request::ReadInputRegisters(7, 5)),
+            Ok(Response::ReadInputRegisters(vec![0xFE00, 1250, 80, 3, 930]))
+        );
+        assert_eq!(
+            ask(5, Request::ReadHoldingRegisters(7, 5)),
+            Ok(Response::ReadHoldingRegisters(vec![
+                0xFE00, 1250, 80, 3, 930
+            ]))
+        );
+        assert_eq!(
+            ask(5, Request::ReadInputRegisters(0, 24)).map(|r| match r {
+                Response::ReadInputRegisters(v) => v.len(),
+                _ => 0,
+            }),
+            Ok(24)
+        );
+        assert_eq!(
+            ask(5, Request::ReadInputRegisters(23, 2)),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(
+            ask(5, Request::ReadHoldingRegisters(100, 1)),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(
+            ask(5, Request::ReadInputRegisters(0, 0)),
+            Err(ExceptionCode::IllegalDataValue)
+        );
+        assert_eq!(
+            ask(5, Request::ReadInputRegisters(0, 126)),
+            Err(ExceptionCode::IllegalDataValue)
+        );
+        assert_eq!(
+            ask(1, Request::ReadInputRegisters(0, 1)),
+            Err(ExceptionCode::GatewayPathUnavailable)
+        );
+        assert_eq!(
+            ask(5, Request::ReadCoils(0, 1)),
+            Err(ExceptionCode::IllegalFunction)
+        );
+        // Read-only: writes are an illegal function, even the ack register.
+        assert_eq!(
+            ask(5, Request::WriteSingleRegister(23, 1)),
+            Err(ExceptionCode::IllegalFunction)
+        );
+        assert_eq!(
+            ask(5, Request::WriteMultipleRegisters(23, vec![1].into())),
+            Err(ExceptionCode::IllegalFunction)
+        );
+    }
+
+    #[test]
+    fn with_commands_on_only_a_1_in_the_ack_register_of_a_linked_node_is_handed_to_the_node() {
+        let (u, mut rx, t0) = units(true);
+        let ask = |unit, r: Request<'static>| u.answer(unit, &r, t0, PEER);
+        assert_eq!(
+            ask(5, Request::WriteSingleRegister(22, 1)),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(
+            ask(5, Request::WriteMultipleRegisters(22, vec![0, 1].into())),
+            Err(ExceptionCode::IllegalDataAddress)
+        );
+        assert_eq!(
+            ask(5, Request::WriteSingleRegister(23, 2)),
+            Err(ExceptionCode::IllegalDataValue)
+        );
+        assert_eq!(
+            ask(9, Request::WriteSingleRegister(23, 1)),
+            Err(ExceptionCode::GatewayTargetDevice),
+            "the link is down"
+        );
+        assert!(rx.try_recv().is_err(), "nothing handed over yet");
+        assert_eq!(
+            ask(5, Request::WriteSingleRegister(23, 1)),
+            Ok(Response::WriteSingleRegister(23, 1))
+        );
+        assert_eq!(
+            ask(5, Request::WriteMultipleRegisters(23, vec![1].into())),
+            Ok(Response::WriteMultipleRegisters(23, 1))
+        );
+        let want = FrontEndCommand {
+            node: 0,
+            command: NodeCommand::AckAlarm,
+        };
+        assert_eq!(rx.try_recv(), Ok(want));
+        assert_eq!(rx.try_recv(), Ok(want));
+        assert!(rx.try_recv().is_err());
+    }
+}
