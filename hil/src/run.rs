@@ -11,6 +11,7 @@ use fois_protocol::{
     AckResult, Command, DetectorState, DeviceFrame, DeviceMsg, ErrorCode, EventKind, FrameDecoder,
     HostFrame, MAX_FRAME, SeqEvent, SeqTracker, encode_to_vec, flags,
 };
+use fois_sim::streams::SplitMix64;
 use fois_vnode::{Cover, Environment, NodeOptions, Truth, VirtualNode};
 
 use crate::scenario::{Class, Scenario, Send, ice_start_s};
@@ -193,28 +194,11 @@ pub fn is_false_alarm(t: &Truth) -> bool {
     }
 }
 
-/// SplitMix64: the lossy link's seeded draws.
-#[derive(Debug, Clone)]
-struct SplitMix(u64);
-
-impl SplitMix {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-    fn uniform(&mut self) -> f64 {
-        (self.next() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 struct Observer {
     env: Arc<Environment>,
     record_estimates: bool,
     decoder: FrameDecoder<MAX_FRAME>,
-    link: Option<(f64, f64, SplitMix)>,
+    link: Option<(f64, f64, SplitMix64)>,
     seq: SeqTracker,
     out: Outcome,
     expected_ids: Vec<u16>,
@@ -230,8 +214,8 @@ impl Observer {
             }
             if rng.uniform() < *p_corrupt && bytes.len() > 1 {
                 let mut b = bytes.to_vec();
-                let i = (rng.next() % (b.len() as u64 - 1)) as usize;
-                b[i] ^= 1 << (rng.next() % 8);
+                let i = (rng.next_u64() % (b.len() as u64 - 1)) as usize;
+                b[i] ^= 1 << (rng.next_u64() % 8);
                 self.out.link_corrupted += 1;
                 self.feed(&b);
                 return;
@@ -371,10 +355,13 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
         env: env.clone(),
         record_estimates: f.accuracy,
         decoder: FrameDecoder::new(),
-        link: f
-            .link
-            .as_ref()
-            .map(|l| (l.corrupt_probability, l.drop_probability, SplitMix(l.seed))),
+        link: f.link.as_ref().map(|l| {
+            (
+                l.corrupt_probability,
+                l.drop_probability,
+                SplitMix64::new(l.seed),
+            )
+        }),
         seq: SeqTracker::new(),
         out: Outcome {
             sensor: match sc.sensor {

@@ -167,6 +167,76 @@ fn analytic_montecarlo_and_crlb_write_their_headers() {
 }
 
 #[test]
+fn crlb_with_an_unknown_gain_adds_its_bound_beside_the_known_one() {
+    let c = tmp("crlb_gain.csv");
+    let png = tmp("crlb_gain.png");
+    let o = foisctl(&[
+        "sim",
+        "crlb",
+        "--ice",
+        "rime",
+        "--runs",
+        "40",
+        "--max-mm",
+        "8",
+        "--gain-sd",
+        "0.1",
+        "--out",
+        c.to_str().unwrap(),
+        "--plot",
+        png.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (h, vals) = records(&c);
+    assert_eq!(
+        h,
+        "thickness_mm,crlb_std_mm,crlb_no_dsigma_std_mm,crlb_gain_std_mm,crlb_gain_no_dsigma_std_mm"
+    );
+    assert_eq!(vals.len(), 81);
+    assert_eq!(&vals[0][3], "NaN"); // dry face
+    let at = |i: usize, k: usize| vals[i][k].parse::<f64>().unwrap();
+    // The unknown gain never lowers the bound, and at 6 mm (I1 and I2 rising in proportion)
+    // it raises it several times.
+    for i in 10..81 {
+        assert!(at(i, 3) >= at(i, 1) * (1.0 - 1e-5), "{i}: {vals:?}");
+        assert!(at(i, 4) >= at(i, 2) * (1.0 - 1e-5), "{i}");
+    }
+    assert!(at(60, 3) > 2.0 * at(60, 1), "{:?}", vals[60]);
+    assert!(std::fs::metadata(&png).unwrap().len() > 1000);
+    // The same run without the flag: the known-gain columns are the same numbers.
+    let k = tmp("crlb_known.csv");
+    let o = foisctl(&[
+        "sim",
+        "crlb",
+        "--ice",
+        "rime",
+        "--runs",
+        "40",
+        "--max-mm",
+        "8",
+        "--out",
+        k.to_str().unwrap(),
+    ]);
+    assert!(o.status.success());
+    let (h, known) = records(&k);
+    assert_eq!(h, "thickness_mm,crlb_std_mm,crlb_no_dsigma_std_mm");
+    for (a, b) in known.iter().zip(&vals) {
+        assert_eq!(&a[1], &b[1]);
+    }
+    let bad = foisctl(&[
+        "sim",
+        "crlb",
+        "--runs",
+        "2",
+        "--gain-sd",
+        "-1",
+        "--out",
+        k.to_str().unwrap(),
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
+}
+
+#[test]
 fn bad_input_exits_with_an_error_not_a_panic() {
     let out = tmp("bad.csv");
     let o = out.to_str().unwrap();
@@ -255,6 +325,32 @@ fn help_explains_units_and_defaults() {
     ] {
         assert!(h.contains(sub), "{sub}");
     }
+}
+
+#[test]
+fn bench_reports_ray_evaluations_per_thread_for_each_medium() {
+    let o = foisctl(&["sim", "bench", "--runs", "4", "--threads", "2"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let out = String::from_utf8_lossy(&o.stdout);
+    for medium in ["rime", "glazed", "water"] {
+        let head = format!("{medium} ice, thesis-ch5: 2553 rays × 151 thicknesses = 385503");
+        assert!(out.contains(&head), "{out}");
+    }
+    // Three media, each with its one-thread and per-thread figures.
+    assert_eq!(out.matches(" per thread").count(), 3, "{out}");
+    let rates: Vec<f64> = out
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("1 thread:"))
+        .map(|l| l.split_whitespace().next().unwrap().parse().unwrap())
+        .collect();
+    assert_eq!(rates.len(), 3);
+    assert!(rates.iter().all(|&r| r.is_finite() && r > 0.0), "{rates:?}");
+    let o = foisctl(&["sim", "bench", "--runs", "2", "--ice", "water"]);
+    assert!(o.status.success());
+    assert_eq!(
+        String::from_utf8_lossy(&o.stdout).matches(" ice, ").count(),
+        1
+    );
 }
 
 #[test]

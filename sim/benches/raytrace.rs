@@ -7,7 +7,12 @@ use std::hint::black_box;
 
 fn accretions(c: &mut Criterion) {
     let mut g = c.benchmark_group("accretion");
-    for ice in [IceKind::Flat, IceKind::Glazed, IceKind::Rime] {
+    for ice in [
+        IceKind::Flat,
+        IceKind::Water,
+        IceKind::Glazed,
+        IceKind::Rime,
+    ] {
         let cfg = SimConfig::new(ice, SensorKind::B, Geometry::ThesisCh5);
         let model = SensorModel::new(&cfg);
         // Throughput in ray evaluations (rays × thicknesses).

@@ -22,37 +22,7 @@ use glam::DVec2;
 use crate::consts::BUBBLE_LAYER_MM;
 use crate::geometry::Bundles;
 use crate::kernels::{small_int, u32_to_f64, vector_kernel};
-use crate::model::mix64;
-
-/// Increment of the SplitMix64 sequence (2⁶⁴/φ, odd).
-const GOLDEN_GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
-
-/// 2⁻³²: a 32-bit draw to [0, 1).
-const INV_2_POW_32: f64 = 1.0 / 4_294_967_296.0;
-
-/// A counter-based random stream: word n is the SplitMix64 output (Steele, Lea & Flood,
-/// "Fast splittable pseudorandom number generators", OOPSLA 2014) n + 1 steps after the
-/// stream's start, i.e. a pure function of (start, n). Any word can be computed without
-/// the ones before it, in any order, in vector lanes.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct CounterStream {
-    start: u64,
-}
-
-impl CounterStream {
-    /// The stream `id` of the accretion with PCG key `key` (ids as in the tracer's table).
-    pub(crate) fn new(key: u64, id: u64) -> Self {
-        CounterStream {
-            start: mix64(key ^ mix64(id)),
-        }
-    }
-
-    /// Word n of the stream.
-    #[inline(always)]
-    pub(crate) fn word(self, n: u64) -> u64 {
-        mix64(self.start.wrapping_add(n.wrapping_mul(GOLDEN_GAMMA)))
-    }
-}
+use crate::streams::{CounterStream, INV_2_POW_32};
 
 /// Bits of a draw that index the bucket table of [`GapSampler`].
 const GAP_BUCKET_BITS: u32 = 12;
@@ -488,38 +458,6 @@ mod tests {
         // P_B = 1: every layer holds a bubble.
         let all = GapSampler::new(1.0);
         assert!((0..1000).all(|k| all.gap((s.word(k) >> 32) as u32) == 0));
-    }
-
-    #[test]
-    fn counter_stream_is_a_pure_function_of_its_counter() {
-        let s = CounterStream::new(123, 4);
-        let forward: Vec<u64> = (0..50).map(|n| s.word(n)).collect();
-        let backward: Vec<u64> = (0..50).rev().map(|n| s.word(n)).collect();
-        assert!(forward.iter().eq(backward.iter().rev()));
-        // Word n is SplitMix64's output after n + 1 steps from the start (mix64 adds the
-        // first step), and no two words repeat.
-        let mut state = s.start;
-        for &w in &forward {
-            assert_eq!(w, mix64(state));
-            state = state.wrapping_add(GOLDEN_GAMMA);
-        }
-        let mut sorted = forward.clone();
-        sorted.sort_unstable();
-        sorted.dedup();
-        assert_eq!(sorted.len(), forward.len());
-        // Different streams and keys differ.
-        assert_ne!(CounterStream::new(123, 5).word(0), s.word(0));
-        assert_ne!(CounterStream::new(124, 4).word(0), s.word(0));
-        // Bits are balanced: mean of the upper 32 bits as a uniform.
-        let n = 100_000u64;
-        let mean = (0..n)
-            .map(|k| (s.word(k) >> 32) as f64 * INV_2_POW_32)
-            .sum::<f64>()
-            / n as f64;
-        assert!(
-            (mean - 0.5).abs() < 4.0 * (1.0 / 12.0 / n as f64).sqrt(),
-            "{mean}"
-        );
     }
 
     #[test]

@@ -1,20 +1,23 @@
 #!/usr/bin/env python3
-"""Statistical equivalence of two builds of the tracer (the rime random-stream layout).
+"""Statistical equivalence of two builds of the tracer (the rime random-stream layout, the
+glazed arithmetic).
 
-Runs `foisctl sim montecarlo` and `foisctl sim crlb` for rime ice with K independent seeds per
+Runs `foisctl sim montecarlo` and `foisctl sim crlb` for ICE (default rime) with K independent seeds per
 build (different seeds for the two builds), and compares, per thickness, the batch means of
 mu_I1, mu_I2, var_I1, var_I2, cov and the CRLB: z = (new - old) / sqrt(SE_old^2 + SE_new^2),
 SE = standard deviation of the K batch values / sqrt(K). Under equivalence about 5 % of the
 |z| exceed 2 and 0.3 % exceed 3 (neighbouring thicknesses are correlated, so the counts
 fluctuate more than for independent tests).
 
-Usage: stream_layout_equivalence.py OLD_FOISCTL NEW_FOISCTL [K] [RUNS] [SEED_OLD] [SEED_NEW]
-(seeds SEED_OLD.. and SEED_NEW.., default 1001.. and 2001..)
+Usage: stream_layout_equivalence.py OLD_FOISCTL NEW_FOISCTL [K] [RUNS] [SEED_OLD] [SEED_NEW] [ICE]
+(seeds SEED_OLD.. and SEED_NEW.., default 1001.. and 2001..; ICE rime, glazed or water)
 """
 import csv, math, os, subprocess, sys, tempfile
 
+ICE = "rime"
+
 def run(binary, sub, seed, runs, out):
-    subprocess.run([binary, "sim", sub, "--ice", "rime", "--runs", str(runs), "--seed", str(seed),
+    subprocess.run([binary, "sim", sub, "--ice", ICE, "--runs", str(runs), "--seed", str(seed),
                     "--out", out], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     with open(out) as f:
         return list(csv.DictReader(f))
@@ -42,7 +45,8 @@ def mean_se(values):
     return m, sd / math.sqrt(k)
 
 def main():
-    if not 3 <= len(sys.argv) <= 7:
+    global ICE
+    if not 3 <= len(sys.argv) <= 8:
         sys.exit(__doc__.strip().splitlines()[-2] + "\n" + __doc__.strip().splitlines()[-1])
     old, new = sys.argv[1], sys.argv[2]
     for b in (old, new):
@@ -55,6 +59,10 @@ def main():
         )
     except ValueError as e:
         sys.exit(f"K, RUNS and the seeds are whole numbers: {e}")
+    if len(sys.argv) > 7:
+        ICE = sys.argv[7]
+        if ICE not in ("rime", "glazed", "water"):
+            sys.exit(f"ICE is rime, glazed or water, not {ICE}")
     if k < 5 or runs < 2:
         sys.exit("K must be at least 5 (the standard error comes from the spread of the K "
                  "batches; 10-20 give usable z) and RUNS at least 2")
@@ -62,7 +70,7 @@ def main():
         a = batches(old, range(seed_old, seed_old + k), runs, tmp)
         b = batches(new, range(seed_new, seed_new + k), runs, tmp)
     keys = ["mu_I1", "mu_I2", "var_I1", "var_I2", "cov", "crlb"]
-    print(f"{k} seeds x {runs} accretions per build; z per thickness (d > 0)")
+    print(f"{ICE}: {k} seeds x {runs} accretions per build; z per thickness (d > 0)")
     print(f"{'quantity':8} {'n':>4} {'|z|>2':>6} {'|z|>3':>6} {'max|z|':>7} {'chi2/n':>7}")
     rows = []
     for key in keys:

@@ -1,5 +1,5 @@
-//! `foisctl sim bench`: ray evaluations per second on rime ice,
-//! thesis-ch5, on one thread and on all.
+//! `foisctl sim bench`: ray evaluations per second for rime, glazed and
+//! water, thesis-ch5, on one thread and on all.
 
 use std::time::Instant;
 
@@ -8,7 +8,7 @@ use clap::Args;
 use fois_sim::{Geometry, IceKind, SensorKind, SensorModel, SimConfig};
 
 use super::runs::{bar, pool};
-use crate::cmd::args::threads;
+use crate::cmd::args::{IceArg, threads};
 
 /// `foisctl sim bench`.
 #[derive(Debug, Args)]
@@ -19,43 +19,57 @@ pub struct BenchArgs {
     /// Worker threads for the parallel measurement (>= 1; default: all cores).
     #[arg(long, value_parser = threads)]
     pub threads: Option<usize>,
+    /// Only this medium (default: rime, glazed and water).
+    #[arg(long, value_enum)]
+    pub ice: Option<IceArg>,
 }
+
+/// The media `foisctl sim bench` measures by default: those of the response table.
+const MEDIA: [IceKind; 3] = [IceKind::Rime, IceKind::Glazed, IceKind::Water];
 
 /// Run `foisctl sim bench`.
 pub fn run(args: BenchArgs) -> Result<()> {
-    let BenchArgs { runs, threads } = args;
-    let cfg = SimConfig::new(IceKind::Rime, SensorKind::B, Geometry::ThesisCh5);
-    let model = SensorModel::new(&cfg);
-    let evals = model.ray_evaluations() as f64;
-    println!(
-        "rime ice, thesis-ch5: {} rays × {} thicknesses = {} ray evaluations per accretion",
-        model.n_rays(),
-        cfg.thicknesses_mm().len(),
-        evals
-    );
-    // One thread, then all of them.
-    let (t1, sink) = time_accretions(&model, runs, &pool(Some(1))?, "1 thread")?;
-    let single = evals * runs as f64 / t1;
-    println!(
-        "1 thread:  {:.3e} ray evaluations/s ({:.2} ms per accretion)",
-        single,
-        1e3 * t1 / runs as f64
-    );
-    let pool = pool(threads)?;
-    let n = pool.current_num_threads();
-    let (tp, par) = time_accretions(&model, runs, &pool, "all threads")?;
-    let total = evals * runs as f64 / tp;
-    println!(
-        "{n} threads: {:.3e} ray evaluations/s total, {:.3e} per thread",
-        total,
-        total / n as f64
-    );
-    println!(
-        "estimated full thesis Monte Carlo (1000 accretions): {:.2} s",
-        1000.0 * evals / total
-    );
-    if !(sink.is_finite() && par.is_finite()) {
-        bail!("non-finite currents");
+    let BenchArgs { runs, threads, ice } = args;
+    let media: Vec<IceKind> = match ice {
+        Some(i) => vec![i.into()],
+        None => MEDIA.to_vec(),
+    };
+    let one = pool(Some(1))?;
+    let all = pool(threads)?;
+    let n = all.current_num_threads();
+    for ice in media {
+        let cfg = SimConfig::new(ice, SensorKind::B, Geometry::ThesisCh5);
+        let model = SensorModel::new(&cfg);
+        let evals = model.ray_evaluations() as f64;
+        println!(
+            "{} ice, thesis-ch5: {} rays × {} thicknesses = {} ray evaluations per accretion",
+            ice.name(),
+            model.n_rays(),
+            cfg.thicknesses_mm().len(),
+            evals
+        );
+        // One thread, then all of them.
+        let (t1, sink) = time_accretions(&model, runs, &one, "1 thread")?;
+        let single = evals * runs as f64 / t1;
+        println!(
+            "  1 thread:  {:.3e} ray evaluations/s ({:.2} ms per accretion)",
+            single,
+            1e3 * t1 / runs as f64
+        );
+        let (tp, par) = time_accretions(&model, runs, &all, "all threads")?;
+        let total = evals * runs as f64 / tp;
+        println!(
+            "  {n} threads: {:.3e} ray evaluations/s total, {:.3e} per thread",
+            total,
+            total / n as f64
+        );
+        println!(
+            "  estimated thesis Monte Carlo (1000 accretions): {:.2} s",
+            1000.0 * evals / total
+        );
+        if !(sink.is_finite() && par.is_finite()) {
+            bail!("non-finite currents");
+        }
     }
     Ok(())
 }

@@ -7,7 +7,9 @@ use std::path::Path;
 use anyhow::Result;
 use fois_sim::{CrlbPoint, Curve, MonteCarlo, SimConfig, analytic_curve};
 
-use crate::plot::series::{self as plot, C_I1, C_I1_MEAN, C_I2, C_I2_MEAN, ErrBar, Kind, Series};
+use crate::plot::series::{
+    self as plot, C_GREEN, C_I1, C_I1_MEAN, C_I2, C_I2_MEAN, C_MAGENTA, ErrBar, Kind, Series,
+};
 
 /// Curves of several runs (I1 blue, I2 red); with `components`, reflection and scattering
 /// parts dashed / thin as in thesis Figs. 3.21 and 3.23.
@@ -159,8 +161,14 @@ pub fn plot_mc(path: &Path, title: &str, mc: &MonteCarlo) -> Result<()> {
 }
 
 /// The bound with and without the dΣ/dd term, like thesis Fig. 5.18.
-pub fn plot_crlb(path: &Path, title: &str, bound: &[CrlbPoint]) -> Result<()> {
-    let s = vec![
+/// With `gain` (S and the unknown-gain bound per point, `fois_sim::gain`) its two curves too.
+pub fn plot_crlb(
+    path: &Path,
+    title: &str,
+    bound: &[CrlbPoint],
+    gain: Option<(f64, &[(f64, f64)])>,
+) -> Result<()> {
+    let mut s = vec![
         Series::new(
             Some("CRLB std (with dΣ/dd)"),
             C_I1,
@@ -180,6 +188,27 @@ pub fn plot_crlb(path: &Path, title: &str, bound: &[CrlbPoint]) -> Result<()> {
                 .collect(),
         ),
     ];
+    if let Some((sd, g)) = gain {
+        let xy = |f: fn(&(f64, f64)) -> f64| {
+            bound
+                .iter()
+                .zip(g)
+                .map(|(p, v)| (p.thickness_mm, f(v)))
+                .collect::<Vec<_>>()
+        };
+        s.push(Series::new(
+            Some(&format!("gain unknown, S = {sd} (with dΣ/dd)")),
+            C_GREEN,
+            Kind::Line(2),
+            xy(|v| v.0),
+        ));
+        s.push(Series::new(
+            Some(&format!("gain unknown, S = {sd} (mean term only)")),
+            C_MAGENTA,
+            Kind::Dashed,
+            xy(|v| v.1),
+        ));
+    }
     plot::plot(path, title, "std of thickness estimate (mm)", &s, &[])
 }
 

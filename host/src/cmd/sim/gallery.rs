@@ -1,11 +1,12 @@
 //! `foisctl sim gallery`: every figure of the gallery in sim/README.md
-//! (thesis Figs. 3.19–3.23, 5.13–5.18 and three extras), from one seed.
+//! (thesis Figs. 3.19–3.23, 5.13–5.18 and four extras), from one seed.
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
 use clap::Args;
+use fois_sim::gain::crlb_gain_unknown;
 use fois_sim::montecarlo::{DEFAULT_FIT_HALF_WIDTH_MM, fit_quality};
 use fois_sim::{Coupling, DiffuseFresnel, Geometry, IceKind, SensorKind, SimConfig, crlb};
 
@@ -25,6 +26,9 @@ pub struct GalleryArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
 }
+
+/// The prior standard deviation of ln g of the unknown-gain figure: a gain known to ≈ 10 %.
+const GALLERY_GAIN_SD: f64 = 0.1;
 
 fn geo_cfg(ice: IceKind, geo: Geometry) -> SimConfig {
     SimConfig::new(ice, SensorKind::B, geo)
@@ -120,6 +124,14 @@ pub fn run(args: GalleryArgs) -> Result<()> {
         &f("fig5_18_rime_crlb.png"),
         &format!("CRLB, rime ice, {runs} accretions"),
         &bound,
+        None,
+    )?;
+    // The same bound with the gain unknown, known to 10 % beforehand (fois_sim::gain).
+    plot_crlb(
+        &f("extra_crlb_unknown_gain.png"),
+        &format!("CRLB, rime ice, {runs} accretions: gain known vs unknown (S = 0.1)"),
+        &bound,
+        Some((GALLERY_GAIN_SD, &crlb_gain_unknown(&bound, GALLERY_GAIN_SD))),
     )?;
     // Extras: the acceptance-cone trap, water vs glazed, Sensor A vs B.
     let mut acc = geo_cfg(IceKind::Flat, ch5);

@@ -52,7 +52,8 @@ pub enum SimCmd {
     /// CSV header: thickness_mm,crlb_std_mm,crlb_no_dsigma_std_mm (the first with the dΣ/dd
     /// term of the Gaussian Fisher information, the second without; NaN where Σ is singular).
     Crlb(crlb::CrlbArgs),
-    /// Print ray evaluations per second (total and per thread) on rime ice, thesis-ch5.
+    /// Print ray evaluations per second (total and per thread) for rime, glazed and water,
+    /// thesis-ch5.
     ///
     /// One ray evaluation = one source ray at one thickness (surface reflection plus the
     /// bubbles newly frozen in).

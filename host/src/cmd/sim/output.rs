@@ -31,6 +31,15 @@ pub const MONTECARLO_HEADER: [&str; 6] = [
 ];
 /// Header of `sim crlb`.
 pub const CRLB_HEADER: [&str; 3] = ["thickness_mm", "crlb_std_mm", "crlb_no_dsigma_std_mm"];
+/// Header of `sim crlb --gain-sd S`: the known-gain bound, then the bound with the gain
+/// unknown (with and without the dΣ/dd terms).
+pub const CRLB_GAIN_HEADER: [&str; 5] = [
+    "thickness_mm",
+    "crlb_std_mm",
+    "crlb_no_dsigma_std_mm",
+    "crlb_gain_std_mm",
+    "crlb_gain_no_dsigma_std_mm",
+];
 
 /// A CSV file being written (created at once, so a bad path fails before a
 /// long run).
@@ -119,15 +128,21 @@ pub fn write_montecarlo(out: CsvOut, points: &[McPoint]) -> Result<()> {
     out.finish()
 }
 
-/// `sim crlb`: the bound with and without the dΣ/dd term.
-pub fn write_crlb(out: CsvOut, bound: &[CrlbPoint]) -> Result<()> {
+/// `sim crlb`: the bound with and without the dΣ/dd term; with `gain` (one pair per point),
+/// also the unknown-gain bound with and without it.
+pub fn write_crlb(out: CsvOut, bound: &[CrlbPoint], gain: Option<&[(f64, f64)]>) -> Result<()> {
     let mut out = out;
-    for p in bound {
-        out.row([
+    for (i, p) in bound.iter().enumerate() {
+        let mut row = vec![
             num(p.thickness_mm, 4),
             num(p.crlb_std_mm, 6),
             num(p.crlb_no_dsigma_std_mm, 6),
-        ])?;
+        ];
+        if let Some(g) = gain {
+            let (full, mean_only) = g.get(i).copied().unwrap_or((f64::NAN, f64::NAN));
+            row.extend([num(full, 6), num(mean_only, 6)]);
+        }
+        out.row(row)?;
     }
     out.finish()
 }

@@ -1,0 +1,476 @@
+//! The diffuse reflection of glazed ice (thesis eq. 3.22, decision 7 of sim/README) over all
+//! thicknesses of one ray at once: where each reflected ray lands (all lanes), then the
+//! Fresnel factors and the absorption of those that land; the thickness beyond which none
+//! can land; the one-division Fresnel factor and the polynomial `exp` they use.
+
+use glam::DVec3;
+
+use crate::geometry::Bundles;
+use crate::kernels::{small_sin_cos, vector_kernel};
+
+/// What the diffuse reflection of one ray needs besides its thicknesses and draws.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct DiffuseRay {
+    /// Ray direction in the ice (unit, z > 0).
+    pub v: DVec3,
+    /// Upward unit normal of the mean (tilted) ice surface.
+    pub normal: DVec3,
+    /// Position of the ray on the face, mm.
+    pub p0: [f64; 2],
+    /// Height of the surface plane above the ray's fibre at d = 0, mm.
+    pub a: f64,
+    /// v_z − tan δ_x v_x − tan δ_y v_y (> 0).
+    pub den: f64,
+    /// δ_R ~ U(±diffuse_max), rad.
+    pub diffuse_max_rad: f64,
+    /// Take the Fresnel reflectance at the facet's angle (else at the mean surface's).
+    pub facet_fresnel: bool,
+    /// Refractive indices: the ice, the air above it, the fibre below.
+    pub n_medium: f64,
+    /// See `n_medium`.
+    pub n_air: f64,
+    /// See `n_medium`.
+    pub n_fibre: f64,
+    /// Absorption coefficient of the ice, 1/mm (Beer–Lambert, eq. 3.15).
+    pub alpha_per_mm: f64,
+    /// Keep the x and y of every reflected direction (`DiffuseLanes::dir`; the acceptance
+    /// cone needs them), not only z.
+    pub keep_dir: bool,
+}
+
+impl DiffuseRay {
+    /// The largest h0 = d + a at which a diffusely reflected ray can still land within
+    /// `reach_mm` of the ray's entry point, whatever its δ_R (∞ when no bound holds). Beyond
+    /// it the lanes need not be traced: their slot would be 2.
+    ///
+    /// The horizontal distance D from the entry point to the landing point is the length of
+    /// v·t_up + r·t_down (the z parts cancel), with t_up = h0/den and the angle between v and
+    /// −r twice the angle α between v and the facet normal; over t_down ≥ 0 that length is at
+    /// least t_up·sin 2α (2α ≤ 90°) or t_up. α is at least α_min, the smallest angle between
+    /// v and the normal turned by any φ = δ_R/2 in ±δ_max/2 about y: v·n(φ) = A cos φ +
+    /// B sin φ + C, whose maximum over the interval is closed-form. A relative margin of 10⁻⁶
+    /// covers the kernel's rounding (≈ 10⁻¹⁵).
+    pub(crate) fn h0_cutoff_mm(&self, reach_mm: f64) -> f64 {
+        let (v, n) = (self.v, self.normal);
+        let (a, b, c) = (v.x * n.x + v.z * n.z, v.x * n.z - v.z * n.x, v.y * n.y);
+        let (s, co) = (0.5 * self.diffuse_max_rad).sin_cos();
+        // The peak of A cos φ + B sin φ, at φ = atan2(B, A), lies within ±φ_max iff A > 0 and
+        // |B| ≤ A tan φ_max (φ_max ≤ 30°).
+        let best = if a > 0.0 && b.abs() * co <= a * s {
+            a.hypot(b)
+        } else {
+            (a * co + b * s).max(a * co - b * s)
+        };
+        let cos_min = (best + c).clamp(-1.0, 1.0);
+        // sin 2α_min = 2 cos α sin α for α_min < 45°, else the bound is 1.
+        let g = if cos_min > std::f64::consts::FRAC_1_SQRT_2 {
+            2.0 * cos_min * (1.0 - cos_min * cos_min).max(0.0).sqrt()
+        } else {
+            1.0
+        };
+        if g < 1e-6 {
+            return f64::INFINITY;
+        }
+        reach_mm * self.den / g * (1.0 + 1e-6) + 1e-9
+    }
+}
+
+/// Per thickness, the diffusely reflected ray: outputs of [`reflect_diffuse`].
+#[derive(Clone, Debug, Default)]
+pub(crate) struct DiffuseLanes {
+    /// 0 or 1 for the bundle the reflected ray lands on, 2 for none (also when it does not
+    /// meet the surface from below or does not come back down).
+    pub slot: Vec<u32>,
+    /// The reflected direction (x, y and z apart; x and y only with `DiffuseRay::keep_dir`).
+    pub dir: [Vec<f64>; 3],
+    /// Cosine of the angle of incidence of the Fresnel reflectance.
+    cos_fresnel: Vec<f64>,
+    /// Path length in the ice, up and back down, mm.
+    path_mm: Vec<f64>,
+    /// The lanes that land on a bundle, in order.
+    pub landed: Vec<u32>,
+    /// The landed lanes' cosine, −direction z and path, packed.
+    packed: [Vec<f64>; 3],
+    /// Per landed lane: the fraction of the ray's forward flux that enters the bundle,
+    /// Fresnel reflectance at the ice/air surface × Fresnel transmittance ice → fibre ×
+    /// Beer–Lambert absorption over the path up and back down.
+    pub weight: Vec<f64>,
+}
+
+/// The diffusely reflected ray of one source ray at each thickness `thick_mm[n]` (all with
+/// the surface above the fibre, h0 = d + a > 0), its micro-facet turned by
+/// δ_R = δ_max·(2u − 1) with u = `draws[n]`·2⁻³² (eq. 3.22). Two passes: where every ray
+/// lands (all lanes), then the Fresnel factors and the absorption of the third that land
+/// on a bundle.
+pub(crate) fn reflect_diffuse(
+    ray: &DiffuseRay,
+    bundles: &Bundles,
+    thick_mm: &[f64],
+    draws: &[u32],
+    out: &mut DiffuseLanes,
+) {
+    let n = thick_mm.len();
+    out.slot.resize(n, 2);
+    for d in &mut out.dir {
+        d.resize(n, 0.0);
+    }
+    out.cos_fresnel.resize(n, 0.0);
+    out.path_mm.resize(n, 0.0);
+    diffuse_landing(ray, bundles, thick_mm, draws, out);
+    // The landed lanes and their inputs packed (so that the second pass runs on whole
+    // vectors), without a branch: every lane is written at the count, which moves on for
+    // the landed ones only.
+    out.landed.resize(n, 0);
+    for p in &mut out.packed {
+        p.resize(n, 0.0);
+    }
+    let [cos_p, rdz_p, path_p] = &mut out.packed;
+    let (landed, cos_p, rdz_p, path_p) = (
+        &mut out.landed[..n],
+        &mut cos_p[..n],
+        &mut rdz_p[..n],
+        &mut path_p[..n],
+    );
+    let (slot, cos_f, dir_z, path) = (
+        &out.slot[..n],
+        &out.cos_fresnel[..n],
+        &out.dir[2][..n],
+        &out.path_mm[..n],
+    );
+    let mut m = 0;
+    for k in 0..n {
+        // SAFETY: m ≤ k < n, the length of the four packed slices.
+        unsafe {
+            *landed.get_unchecked_mut(m) = k as u32;
+            *cos_p.get_unchecked_mut(m) = cos_f[k];
+            *rdz_p.get_unchecked_mut(m) = -dir_z[k];
+            *path_p.get_unchecked_mut(m) = path[k];
+        }
+        m += usize::from(slot[k] < 2);
+    }
+    out.landed.truncate(m);
+    out.weight.resize(m, 0.0);
+    let [cos_p, rdz_p, path_p] = &out.packed;
+    diffuse_weights(ray, &cos_p[..m], &rdz_p[..m], &path_p[..m], &mut out.weight);
+}
+
+vector_kernel! {
+/// Where each diffusely reflected ray lands ([`reflect_diffuse`], first pass).
+fn diffuse_landing(
+    ray: &DiffuseRay,
+    bundles: &Bundles,
+    thick_mm: &[f64],
+    draws: &[u32],
+    out: &mut DiffuseLanes,
+) {
+    let n = thick_mm.len();
+    let (v, normal) = (ray.v, ray.normal);
+    let cos_mean = v.dot(normal);
+    let inv_den = 1.0 / ray.den;
+    let half_max = 0.5 * ray.diffuse_max_rad;
+    let draws = &draws[..n];
+    let slot = &mut out.slot[..n];
+    let [dir_x, dir_y, dir_z] = &mut out.dir;
+    let (dir_x, dir_y, dir_z) = (&mut dir_x[..n], &mut dir_y[..n], &mut dir_z[..n]);
+    let cos_fresnel = &mut out.cos_fresnel[..n];
+    let path = &mut out.path_mm[..n];
+    for k in 0..n {
+        // Reflection at the ice/air surface, h0 = d + a above the fibre.
+        let h0 = thick_mm[k] + ray.a;
+        let t_up = h0 * inv_den;
+        let z_hit = v.z * t_up;
+        // u ∈ [0, 1) from the draw; δ_R/2 = δ_max/2 · (2u − 1).
+        let u = draws[k] as f64 * (2.0 / 4_294_967_296.0);
+        // δ_R deflects the reflected ray by δ_R (eq. 3.22): micro-facet normal turned by
+        // δ_R/2 about the y axis (`laws::facet_normal`, without the libm call).
+        let (sh, ch) = small_sin_cos(half_max * (u - 1.0));
+        let nrm_x = normal.x.mul_add(ch, normal.z * sh);
+        let nrm_y = normal.y;
+        let nrm_z = normal.z.mul_add(ch, -normal.x * sh);
+        // v · n and the law of reflection (`laws::reflect`), written out.
+        let cos_i = v.x.mul_add(nrm_x, v.y.mul_add(nrm_y, v.z * nrm_z));
+        let twice = -2.0 * cos_i;
+        let rd_x = twice.mul_add(nrm_x, v.x);
+        let rd_y = twice.mul_add(nrm_y, v.y);
+        let rd_z = twice.mul_add(nrm_z, v.z);
+        let t_down = z_hit / -rd_z;
+        let land_x = rd_x.mul_add(t_down, v.x.mul_add(t_up, ray.p0[0]));
+        let land_y = rd_y.mul_add(t_down, v.y.mul_add(t_up, ray.p0[1]));
+        let bundle = bundles.slot(land_x, land_y) as u32;
+        let meets = cos_i > 0.0 && rd_z < -1e-9;
+        slot[k] = if meets { bundle } else { 2 };
+        cos_fresnel[k] = if ray.facet_fresnel { cos_i } else { cos_mean };
+        path[k] = t_up + t_down;
+        if ray.keep_dir {
+            dir_x[k] = rd_x;
+            dir_y[k] = rd_y;
+        }
+        dir_z[k] = rd_z;
+    }
+}
+}
+
+vector_kernel! {
+/// The weights of the landed lanes ([`reflect_diffuse`], second pass), from their cosines,
+/// downward directions and paths packed in `cos_fresnel`, `minus_rd_z`, `path_mm`.
+fn diffuse_weights(
+    ray: &DiffuseRay,
+    cos_fresnel: &[f64],
+    minus_rd_z: &[f64],
+    path_mm: &[f64],
+    weight: &mut [f64],
+) {
+    let to_air = Fresnel::new(ray.n_medium, ray.n_air);
+    let to_fibre = Fresnel::new(ray.n_medium, ray.n_fibre);
+    let m = weight.len();
+    let (cos_fresnel, minus_rd_z, path_mm) = (&cos_fresnel[..m], &minus_rd_z[..m], &path_mm[..m]);
+    for j in 0..m {
+        let reflectance = to_air.reflectance(cos_fresnel[j]);
+        let couple = 1.0 - to_fibre.reflectance(minus_rd_z[j]);
+        weight[j] = reflectance * couple * exp_small(-ray.alpha_per_mm * path_mm[j]);
+    }
+}
+}
+
+/// The Fresnel reflectance of one interface (`laws::fr_dielectric`, eqs. 3.8, 3.9, 3.12) with
+/// one division instead of two: R = ½ (r_⊥² + r_∥²) over the common denominator. Agrees with
+/// `fr_dielectric` to rounding (tested).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Fresnel {
+    n_i: f64,
+    n_t: f64,
+    eta2: f64,
+}
+
+impl Fresnel {
+    #[inline(always)]
+    pub(crate) fn new(n_i: f64, n_t: f64) -> Self {
+        let eta = n_i / n_t;
+        Fresnel {
+            n_i,
+            n_t,
+            eta2: eta * eta,
+        }
+    }
+
+    /// Reflectance for the angle of incidence whose cosine is `cos_i`; 1 on total internal
+    /// reflection.
+    #[inline(always)]
+    pub(crate) fn reflectance(self, cos_i: f64) -> f64 {
+        let cos_i = cos_i.clamp(0.0, 1.0);
+        let sin2_t = self.eta2 * (1.0 - cos_i * cos_i);
+        let total = sin2_t >= 1.0;
+        let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
+        // r_⊥ = (a − b)/(a + b), r_∥ = (e − f)/(e + f).
+        let (a, b) = (self.n_i * cos_i, self.n_t * cos_t);
+        let (e, f) = (self.n_t * cos_i, self.n_i * cos_t);
+        let (ab, ef) = (a + b, e + f);
+        let (am, em) = ((a - b) * ef, (e - f) * ab);
+        let den = ab * ef;
+        let r = 0.5 * (am * am + em * em) / (den * den);
+        if total { 1.0 } else { r }
+    }
+}
+
+/// e^x for the absorption factors (|x| up to a few units; clamped to ±700) without a libm
+/// call, so that it vectorises (fused multiply-adds, exactly rounded on every CPU): x = k ln 2 + r, |r| ≤ ln 2 / 2, e^r by its Taylor series to
+/// r¹² (truncation below 2·10⁻¹⁶), 2^k from the exponent bits. Within 4 ulp of libm's `exp`
+/// (tested).
+#[inline(always)]
+pub(crate) fn exp_small(x: f64) -> f64 {
+    const LOG2_E: f64 = std::f64::consts::LOG2_E;
+    // ln 2 in two parts (fdlibm): k·LN2_HI is exact for |k| < 2¹¹.
+    const LN2_HI: f64 = f64::from_bits(0x3FE6_2E42_FEE0_0000);
+    const LN2_LO: f64 = f64::from_bits(0x3DEA_39EF_3579_3C76);
+    // 1.5·2⁵²: adding it rounds to an integer held in the low mantissa bits.
+    const ROUND: f64 = 6_755_399_441_055_744.0;
+    let x = x.clamp(-700.0, 700.0);
+    let t = x * LOG2_E + ROUND;
+    let k = t - ROUND;
+    let r = (-k).mul_add(LN2_LO, (-k).mul_add(LN2_HI, x));
+    let mut p: f64 = 1.0 / 479_001_600.0; // 1/12!
+    for c in [
+        1.0 / 39_916_800.0,
+        1.0 / 3_628_800.0,
+        1.0 / 362_880.0,
+        1.0 / 40_320.0,
+        1.0 / 5_040.0,
+        1.0 / 720.0,
+        1.0 / 120.0,
+        1.0 / 24.0,
+        1.0 / 6.0,
+        0.5,
+        1.0,
+        1.0,
+    ] {
+        p = p.mul_add(r, c);
+    }
+    let k_int = (t.to_bits() as i64).wrapping_sub(ROUND.to_bits() as i64);
+    let scale = f64::from_bits(((k_int + 1023) << 52) as u64);
+    p * scale
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::Geometry;
+    use crate::laws::{facet_normal, fr_dielectric, reflect};
+
+    /// A random source ray and surface, and thicknesses with draws.
+    fn case(seed: u64) -> (DiffuseRay, Vec<f64>, Vec<u32>) {
+        let mut x = seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
+        let mut next = move || {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let v = DVec3::new(next() - 0.2, next() - 0.5, 1.0).normalize();
+        let normal = DVec3::new(0.3 * (next() - 0.5), 0.3 * (next() - 0.5), 1.0).normalize();
+        let ray = DiffuseRay {
+            v,
+            normal,
+            p0: [-4.0 * next(), 4.0 * (next() - 0.5)],
+            a: 2.0 * (next() - 0.5),
+            den: 0.5 + next(),
+            diffuse_max_rad: (60.0 * next()).to_radians(),
+            facet_fresnel: next() < 0.5,
+            n_medium: 1.31,
+            n_air: 1.00028,
+            n_fibre: 1.581,
+            alpha_per_mm: 0.012,
+            keep_dir: true,
+        };
+        let thick: Vec<f64> = (0..151).map(|i| i as f64 * 0.1).collect();
+        let draws: Vec<u32> = (0..151)
+            .map(|_| (next() * 4_294_967_296.0) as u32)
+            .collect();
+        (ray, thick, draws)
+    }
+
+    // One index addresses the draws and the outputs of both kernels.
+    #[allow(clippy::needless_range_loop)]
+    #[test]
+    fn diffuse_kernels_match_the_laws() {
+        let bundles = Geometry::ThesisCh5.bundles();
+        let mut landed = 0;
+        for seed in 0..200 {
+            let (ray, thick, draws) = case(seed);
+            // The dispatched kernels (AVX2 where the CPU has it), twice into one buffer: the
+            // second call leaves nothing of the first.
+            let mut fast = DiffuseLanes::default();
+            reflect_diffuse(&ray, &bundles, &thick, &draws, &mut fast);
+            let generic = fast.clone();
+            let (other, _, other_draws) = case(seed + 1000);
+            reflect_diffuse(&other, &bundles, &thick[..77], &other_draws, &mut fast);
+            reflect_diffuse(&ray, &bundles, &thick, &draws, &mut fast);
+            assert_eq!(fast.landed, generic.landed);
+            let cos_mean = ray.v.dot(ray.normal);
+            let mut landed_here = 0;
+            for k in 0..thick.len() {
+                // Scalar reference from the laws (libm's sin, cos, exp and two divisions per
+                // Fresnel factor: it agrees to rounding; the kernel's own lanes to the bit).
+                let dr = ray.diffuse_max_rad * (2.0 * (draws[k] as f64 / 4_294_967_296.0) - 1.0);
+                let nrm = facet_normal(ray.normal, dr);
+                let rd = reflect(ray.v, nrm);
+                let dir = DVec3::new(fast.dir[0][k], fast.dir[1][k], fast.dir[2][k]);
+                assert!((dir - rd).length() < 1e-12, "{seed} {k}");
+                assert_eq!(fast.slot[k], generic.slot[k]);
+                let t_up = (thick[k] + ray.a) / ray.den;
+                let t_down = ray.v.z * t_up / -rd.z;
+                let cos_f = if ray.facet_fresnel {
+                    ray.v.dot(nrm)
+                } else {
+                    cos_mean
+                };
+                let want = fr_dielectric(cos_f, ray.n_medium, ray.n_air)
+                    * (1.0 - fr_dielectric(-rd.z, ray.n_medium, ray.n_fibre))
+                    * (-ray.alpha_per_mm * (t_up + t_down)).exp();
+                if fast.slot[k] < 2 {
+                    let j = fast.landed[landed_here];
+                    assert_eq!(j as usize, k);
+                    let w = fast.weight[landed_here];
+                    assert_eq!(w.to_bits(), generic.weight[landed_here].to_bits());
+                    assert!(
+                        (w - want).abs() <= 1e-12 * want,
+                        "{seed} {k}: {w} vs {want}"
+                    );
+                    landed_here += 1;
+                }
+            }
+            assert_eq!(landed_here, fast.landed.len());
+            landed += landed_here;
+        }
+        // The cases land on the bundles often enough to mean something.
+        assert!(landed > 5_000, "{landed}");
+    }
+
+    // One index addresses the thicknesses and the kernel's outputs.
+    #[allow(clippy::needless_range_loop)]
+    #[test]
+    fn no_ray_lands_beyond_the_cutoff() {
+        let bundles = Geometry::ThesisCh5.bundles();
+        let (mut beyond, mut cut) = (0, 0);
+        for seed in 0..400 {
+            let (ray, _, draws) = case(seed);
+            // Thicknesses to 40 mm; every landing point within 12 mm of the entry point
+            // counts, not only the bundles.
+            let thick: Vec<f64> = (0..151).map(|i| i as f64 * 0.27).collect();
+            let reach = 12.0;
+            let h0_max = ray.h0_cutoff_mm(reach);
+            let mut out = DiffuseLanes::default();
+            reflect_diffuse(&ray, &bundles, &thick, &draws, &mut out);
+            for k in 0..thick.len() {
+                let h0 = thick[k] + ray.a;
+                if h0 <= h0_max || h0 <= 0.0 {
+                    continue;
+                }
+                beyond += 1;
+                let t_up = h0 / ray.den;
+                let t_down = ray.v.z * t_up / -out.dir[2][k];
+                let dx = ray.v.x * t_up + out.dir[0][k] * t_down;
+                let dy = ray.v.y * t_up + out.dir[1][k] * t_down;
+                assert!(
+                    t_down < 0.0 || dx.hypot(dy) > reach,
+                    "{seed} {k}: lands {} mm away beyond the cutoff {h0_max} (h0 {h0})",
+                    dx.hypot(dy)
+                );
+            }
+            cut += usize::from(h0_max.is_finite());
+        }
+        // The bound cuts most rays, and many lanes lie beyond it.
+        assert!(cut > 300 && beyond > 10_000, "{cut} {beyond}");
+    }
+
+    #[test]
+    fn one_division_fresnel_agrees_with_the_law() {
+        for (n_i, n_t) in [(1.31, 1.00028), (1.31, 1.581), (1.33, 1.581), (1.581, 1.31)] {
+            let f = Fresnel::new(n_i, n_t);
+            for k in 0..=10_000 {
+                let c = k as f64 / 10_000.0;
+                let (got, want) = (f.reflectance(c), fr_dielectric(c, n_i, n_t));
+                assert!(
+                    (got - want).abs() <= 4e-16 + 1e-13 * want,
+                    "{n_i} {n_t} {c}"
+                );
+            }
+            assert_eq!(f.reflectance(-0.5), fr_dielectric(-0.5, n_i, n_t));
+        }
+        // Total internal reflection beyond the critical angle (ice/air: 49.8°).
+        assert_eq!(Fresnel::new(1.31, 1.00028).reflectance(0.6), 1.0);
+    }
+
+    #[test]
+    fn exp_small_is_within_a_few_ulp_of_libm() {
+        for k in -200_000..=20_000 {
+            let x = k as f64 * 1.37e-4; // −27.4 … 2.7
+            let (got, want) = (exp_small(x), x.exp());
+            assert!(
+                (got - want).abs() <= 4.0 * f64::EPSILON * want,
+                "{x}: {got} vs {want}"
+            );
+        }
+        assert_eq!(exp_small(0.0), 1.0);
+        assert!(exp_small(-800.0) > 0.0 && exp_small(-800.0) < 1e-300);
+    }
+}

@@ -1,0 +1,561 @@
+//! One accretion traced ray by ray (thesis §3.2, §5.3), in phases:
+//!
+//! 1. [`Accretion::new`]: the accretion's surface (slopes δ_S,x, δ_S,y from stream 0) and
+//!    the sums per thickness;
+//! 2. per ray, [`Accretion::trace`]: its frame against the surface ([`RayFrame`]), then
+//!    pass 1, the bubbles ([`Accretion::bubbles_dense`] for rime, [`Accretion::bubbles_sparse`]
+//!    for glazed), which leaves the forward flux after each bubble and where it is frozen in,
+//!    then pass 2, the surface at every thickness ([`Accretion::surface_diffuse`] or
+//!    [`Accretion::surface_specular`], and Sensor A's leak);
+//! 3. [`Accretion::into_curve`]: flux to current, the scattered light prefix-summed.
+//!
+//! Cost O(rays × (thicknesses + bubbles)); sim/README, *Speed*.
+
+use glam::{DVec2, DVec3};
+use rand_pcg::Pcg32;
+
+use crate::bubbles::{BubbleLanes, BubbleRay, GapSampler, land_scattered};
+use crate::config::{Coupling, DiffuseFresnel, SensorKind};
+use crate::consts::*;
+use crate::curve::{Curve, CurvePoint};
+use crate::diffuse::{DiffuseLanes, DiffuseRay, reflect_diffuse};
+use crate::geometry::Bundles;
+use crate::kernels::specular_slots;
+use crate::laws::{fr_dielectric, reflect};
+use crate::model::{SensorModel, SourceRay};
+use crate::streams::{
+    CounterStream, STREAM_ACCRETION, accretion_key, bubble_stream, diffuse_stream, fill_u32,
+    geometric_gap, uniform, uniform32, unit_circle_unnormalised,
+};
+
+/// Most bubble layers one ray walks through (20 000 × 0.1 mm = 2 m of ice along z).
+const MAX_LAYERS_PER_RAY: u32 = 20_000;
+
+/// One accretion being traced: its surface, the sums per thickness and the scratch buffers
+/// the rays share.
+pub(crate) struct Accretion<'m> {
+    m: &'m SensorModel,
+    key: u64,
+    /// tan δ_S,x, tan δ_S,y of the surface plane, and its upward unit normal.
+    tx: f64,
+    ty: f64,
+    normal: DVec3,
+    nt: usize,
+    /// The first thickness index with ice (thickness 0 is the dry face).
+    first_wet: usize,
+    inv_step: f64,
+    ln_q: f64,
+    bundles: Bundles,
+    /// The face's bounding box: x_lo ≤ x ≤ x_hi, |y| ≤ y_hi (culling of scattered rays).
+    x_lo: f64,
+    x_hi: f64,
+    y_hi: f64,
+    /// The circle around the bundles (0 ≤ x ≤ B + R, |y| ≤ R): a reflection that lands
+    /// farther than `face_radius` from `face_centre` misses them.
+    face_centre: DVec2,
+    face_radius: f64,
+    /// Reflected flux per thickness and bundle, W.
+    refl: Vec<[f64; 2]>,
+    /// Scattered flux newly frozen in at each thickness, per bundle, W.
+    scat_delta: Vec<[f64; 2]>,
+    /// Flux reflected at the fibre face per thickness (Sensor A), W.
+    leak: Vec<f64>,
+    /// Per ray: the forward flux after n bubbles (fwd_after[n]) and, at each thickness index
+    /// where bubbles are frozen in, how many are frozen in up to it (`frozen_by`, 0 at the
+    /// other indices: the bubbles are frozen in in walk order, so the number frozen in at
+    /// indices ≤ i is the running maximum). The forward flux at thickness i is
+    /// fwd_after[that number].
+    fwd_after: Vec<f64>,
+    frozen_by: Vec<u32>,
+    /// F^n, n = 0, 1, …: grown to the most bubbles one ray met.
+    forward_pow: Vec<f64>,
+    lanes: BubbleLanes,
+    landed: Vec<u32>,
+    spec_slot: Vec<i32>,
+    diffuse_draws: Vec<u32>,
+    diffuse_out: DiffuseLanes,
+    diffuse_bubbles: Vec<usize>,
+}
+
+/// One ray against this accretion's surface.
+struct RayFrame {
+    /// The ray's index (its streams) and the ray.
+    r: usize,
+    ray: SourceRay,
+    /// Height of the surface plane above the ray's fibre at d = 0, mm.
+    a: f64,
+    /// v_z − tan δ_x v_x − tan δ_y v_y (> 0: the ray is steeper than the plane).
+    den: f64,
+    /// The ray's bubble geometry.
+    bubble: BubbleRay,
+}
+
+impl<'m> Accretion<'m> {
+    /// Phase 1: the surface of accretion `run` of `seed`, and empty sums.
+    pub(crate) fn new(m: &'m SensorModel, seed: u64, run: u64) -> Self {
+        let cfg = &m.cfg;
+        let p = cfg.params;
+        let geo = cfg.geometry;
+        let key = accretion_key(seed, run);
+        let mut acc = Pcg32::new(key, STREAM_ACCRETION);
+        let sx = p.slope_max_rad * (2.0 * uniform(&mut acc) - 1.0);
+        let sy = p.slope_max_rad * (2.0 * uniform(&mut acc) - 1.0);
+        let (tx, ty) = (sx.tan(), sy.tan());
+        let nt = m.thick.len();
+        let (x_lo, x_hi, y_hi) = (
+            -geo.radius_mm(),
+            geo.length_b_mm() + geo.radius_mm(),
+            geo.radius_mm(),
+        );
+        let face_centre = DVec2::new(0.5 * x_hi, 0.0);
+        Accretion {
+            m,
+            key,
+            tx,
+            ty,
+            normal: DVec3::new(-tx, -ty, 1.0).normalize(),
+            nt,
+            first_wet: m.thick.iter().position(|&d| d > 0.0).unwrap_or(nt),
+            inv_step: 1.0 / cfg.step_mm,
+            ln_q: if p.p_bubble > 0.0 {
+                (1.0 - p.p_bubble).ln()
+            } else {
+                0.0
+            },
+            bundles: geo.bundles(),
+            x_lo,
+            x_hi,
+            y_hi,
+            face_centre,
+            face_radius: face_centre.x.hypot(y_hi),
+            refl: vec![[0.0; 2]; nt],
+            scat_delta: vec![[0.0; 2]; nt],
+            leak: vec![0.0; nt],
+            fwd_after: Vec::with_capacity(256),
+            frozen_by: vec![0; nt],
+            forward_pow: vec![1.0],
+            lanes: BubbleLanes::default(),
+            landed: Vec::new(),
+            spec_slot: Vec::with_capacity(nt),
+            diffuse_draws: Vec::with_capacity(nt),
+            diffuse_out: DiffuseLanes::default(),
+            diffuse_bubbles: Vec::with_capacity(nt),
+        }
+    }
+
+    /// Phase 2, one ray: its bubbles, then the surface at every thickness.
+    pub(crate) fn trace(&mut self, r: usize, ray: &SourceRay) {
+        let m = self.m;
+        let p = m.cfg.params;
+        let sensor_a = m.cfg.sensor == SensorKind::A;
+        if sensor_a {
+            for l in self.leak.iter_mut().take(self.first_wet) {
+                *l += ray.refl_air_w;
+            }
+        }
+        let v = ray.dir;
+        let cx = m.cfg.geometry.centre_x_mm();
+        let a = self.tx * (ray.p0.x - cx) + self.ty * ray.p0.y;
+        let den = v.z - self.tx * v.x - self.ty * v.y;
+        if ray.flux_in_w <= 0.0 || den <= 1e-9 {
+            return;
+        }
+        let slope_xy = DVec2::new(v.x, v.y) / v.z;
+        // Pass 1, bubbles: layer j (z from jΔ to (j+1)Δ, bubble at its middle) is frozen in
+        // once the local surface above the bubble is at least (j+1)Δ high, i.e. from the mean
+        // thickness d_j = (j+1)Δ − off(z_b), where off is the plane's local offset at the
+        // bubble. d_j grows with j (the ray is steeper than the plane: den > 0), so the
+        // forward flux at each thickness is a running product, stored as fwd_after[n] and,
+        // per index, the number of bubbles frozen in up to it.
+        let f = RayFrame {
+            r,
+            ray: *ray,
+            a,
+            den,
+            bubble: BubbleRay {
+                p0: ray.p0,
+                slope_xy,
+                a,
+                off1: self.tx * slope_xy.x + self.ty * slope_xy.y,
+                inv_step: self.inv_step,
+                first_wet: self.first_wet as u32,
+            },
+        };
+        // The layers that the ice covers within max_mm: j < j_end. Beyond, the bubbles are
+        // not drawn. A ray almost parallel to a tilted surface would walk very many layers
+        // before the surface covers them: at most MAX_LAYERS_PER_RAY (2 m).
+        let j_end = if p.p_bubble > 0.0 {
+            let bray = f.bubble;
+            layers_covered(
+                &|j: u32| bray.cover_steps(f64::from(j)),
+                self.first_wet,
+                self.nt,
+            )
+        } else {
+            0
+        };
+        self.fwd_after.clear();
+        self.fwd_after.push(ray.flux_in_w);
+        match &m.dense {
+            Some(gaps) => self.bubbles_dense(&f, gaps, j_end),
+            None => self.bubbles_sparse(&f, j_end),
+        }
+        let had_bubbles = self.fwd_after.len() > 1;
+
+        // Pass 2, the surface at every thickness.
+        if sensor_a {
+            for (i, l) in self.leak.iter_mut().enumerate().skip(self.first_wet) {
+                *l += if m.thick[i] + a <= 0.0 {
+                    ray.refl_air_w
+                } else {
+                    ray.refl_med_w
+                };
+            }
+        }
+        if p.diffuse_max_rad > 0.0 {
+            self.surface_diffuse(&f, had_bubbles);
+        } else {
+            self.surface_specular(&f);
+        }
+        if had_bubbles {
+            let first_wet = self.first_wet;
+            self.frozen_by[first_wet..].fill(0);
+        }
+    }
+
+    /// The scattered part of a bubble: 5 % deflected toward the face (Fig. 3.11), attenuated
+    /// along the ray up to the bubble and down to the face (Beer–Lambert, eq. 3.21), entering
+    /// bundle `k` with the coupling of eqs. 3.24–3.25, frozen in at thickness index `i`.
+    #[inline]
+    fn scatter(
+        &mut self,
+        f: &RayFrame,
+        (i, k): (usize, usize),
+        fwd: f64,
+        s: DVec3,
+        z_b: f64,
+        reach: f64,
+    ) {
+        let path = z_b / f.ray.dir.z + reach;
+        self.scat_delta[i][k] +=
+            fwd * (1.0 - FORWARD_FRACTION) * self.m.couple(s) * (-ALPHA_PER_MM * path).exp();
+    }
+
+    /// Pass 1, dense bubbles (rime): the walk draws one geometric gap per bubble from a
+    /// counter-based stream, then lands all scattered rays at once (bubbles.rs).
+    fn bubbles_dense(&mut self, f: &RayFrame, gaps: &GapSampler, j_end: u32) {
+        let stream = CounterStream::new(self.key, bubble_stream(f.r));
+        self.lanes.walk(stream, gaps, j_end);
+        land_scattered(&f.bubble, &self.bundles, &mut self.lanes);
+        let count = self.lanes.len();
+        // Forward flux after n bubbles: Φ·F^n (F = FORWARD_FRACTION).
+        while self.forward_pow.len() <= count {
+            let last = self.forward_pow.last().copied().unwrap_or(1.0);
+            self.forward_pow.push(last * FORWARD_FRACTION);
+        }
+        let flux = f.ray.flux_in_w;
+        self.fwd_after
+            .extend(self.forward_pow[1..=count].iter().map(|&p| flux * p));
+        let landed_count = self.lanes.tally(&mut self.frozen_by, &mut self.landed);
+        for l in 0..landed_count {
+            let n = self.landed[l] as usize;
+            let sc = self.lanes.scattered(n);
+            let at = (self.lanes.index[n] as usize, self.lanes.slot[n] as usize);
+            let fwd = self.fwd_after[n];
+            self.scatter(f, at, fwd, DVec3::from(sc.dir), sc.z_mm, sc.reach_mm);
+        }
+    }
+
+    /// Pass 1, sparse bubbles (glazed): geometric gaps between bubbles by inversion (one `ln`
+    /// per bubble), P_B per layer; each bubble's scattered ray is culled before its azimuth is
+    /// drawn when it cannot reach the face.
+    fn bubbles_sparse(&mut self, f: &RayFrame, j_end: u32) {
+        let ray = &f.ray;
+        let slope_xy = f.bubble.slope_xy;
+        let mut bub = Pcg32::new(self.key, bubble_stream(f.r));
+        let mut j: u32 = if self.m.cfg.params.p_bubble > 0.0 {
+            geometric_gap(&mut bub, self.ln_q)
+        } else {
+            j_end
+        };
+        let mut fwd = ray.flux_in_w;
+        while j < j_end {
+            let z_b = (j as f64 + 0.5) * BUBBLE_LAYER_MM;
+            // First output index at or above d_j (j < j_end: below nt).
+            let i = ceil_index(f.bubble.cover_steps(f64::from(j))).max(self.first_wet);
+            let b = ray.p0 + slope_xy * z_b;
+            let cos_b = 1.0 - uniform32(&mut bub); // isotropic over the lower hemisphere
+            let sin2_b = (1.0 - cos_b * cos_b).max(0.0);
+            // Horizontal travel z_b·tan θ_B; beyond the farthest point of the face the ray
+            // misses whatever its azimuth, so the azimuth is not drawn.
+            let far_x = (b.x - self.x_lo).abs().max((b.x - self.x_hi).abs());
+            let far_y = b.y.abs() + self.y_hi;
+            let travel2 = z_b * z_b * sin2_b / (cos_b * cos_b);
+            if travel2 <= far_x * far_x + far_y * far_y {
+                let (ua, ub, uq) = unit_circle_unnormalised(&mut bub);
+                let norm = uq.sqrt().recip();
+                let (c_phi, s_phi) = (ua * norm, ub * norm);
+                let sin_b = sin2_b.sqrt();
+                let reach = z_b / cos_b;
+                let land = b + DVec2::new(c_phi, s_phi) * (sin_b * reach);
+                let k = self.bundles.slot(land.x, land.y);
+                if k < 2 {
+                    let s = DVec3::new(sin_b * c_phi, sin_b * s_phi, -cos_b);
+                    self.scatter(f, (i, k), fwd, s, z_b, reach);
+                }
+            }
+            fwd *= FORWARD_FRACTION;
+            self.fwd_after.push(fwd);
+            self.frozen_by[i] = (self.fwd_after.len() - 1) as u32;
+            let gap = geometric_gap(&mut bub, self.ln_q);
+            j = j.saturating_add(1).saturating_add(gap);
+        }
+    }
+
+    /// Pass 2 with diffuse angles: the surface is above the fibre (h0 = d + a > 0) from
+    /// index i0 on; one diffuse angle is drawn per such thickness, in order. The reflected
+    /// rays of all of them are traced at once (kernels.rs), then added in order.
+    fn surface_diffuse(&mut self, f: &RayFrame, had_bubbles: bool) {
+        let m = self.m;
+        let cfg = &m.cfg;
+        let (ray, a, nt, first_wet) = (&f.ray, f.a, self.nt, self.first_wet);
+        let i0 = (first_wet..nt)
+            .find(|&i| m.thick[i] + a > 0.0)
+            .unwrap_or(nt);
+        let dray = DiffuseRay {
+            v: ray.dir,
+            normal: self.normal,
+            p0: [ray.p0.x, ray.p0.y],
+            a,
+            den: f.den,
+            diffuse_max_rad: cfg.params.diffuse_max_rad,
+            facet_fresnel: cfg.diffuse_fresnel == DiffuseFresnel::Facet,
+            n_medium: cfg.params.n_medium,
+            n_air: N_AIR,
+            n_fibre: N_FIBRE,
+            alpha_per_mm: ALPHA_PER_MM,
+            keep_dir: cfg.coupling == Coupling::AcceptanceCone,
+        };
+        // Beyond a thickness that depends on the ray no diffuse angle brings the reflection
+        // back onto the face: those thicknesses are not traced, nor their angles drawn (the
+        // draws are the stream's first ones, in order).
+        let reach = (ray.p0 - self.face_centre).length() + self.face_radius;
+        let h0_max = dray.h0_cutoff_mm(reach);
+        let i_end = i0 + m.thick[i0..nt].partition_point(|&d| d + a <= h0_max);
+        self.diffuse_draws.resize(i_end - i0, 0);
+        fill_u32(self.key, diffuse_stream(f.r), &mut self.diffuse_draws);
+        reflect_diffuse(
+            &dray,
+            &self.bundles,
+            &m.thick[i0..i_end],
+            &self.diffuse_draws,
+            &mut self.diffuse_out,
+        );
+        // The bubbles frozen in up to each landed thickness: a running maximum
+        // (`frozen_by`), needed only when the ray met bubbles.
+        let n_bub0 = frozen_before(&self.frozen_by[first_wet..i0]);
+        if had_bubbles {
+            self.diffuse_bubbles.clear();
+            self.diffuse_bubbles
+                .extend(self.frozen_by[i0..i_end].iter().scan(n_bub0, |b, &f| {
+                    *b = (*b).max(f as usize);
+                    Some(*b)
+                }));
+        }
+        let cone = cfg.coupling == Coupling::AcceptanceCone;
+        let d = &self.diffuse_out;
+        for (&n, &w) in d.landed.iter().zip(&d.weight) {
+            let n = n as usize;
+            if cone && !m.in_acceptance_cone(DVec3::new(d.dir[0][n], d.dir[1][n], d.dir[2][n])) {
+                continue;
+            }
+            let fwd = if had_bubbles {
+                self.fwd_after[self.diffuse_bubbles[n]]
+            } else {
+                self.fwd_after[n_bub0]
+            };
+            self.refl[i0 + n][d.slot[n] as usize] += fwd * w;
+        }
+    }
+
+    /// Pass 2 without diffuse angles: specular reflection, fixed per accretion. The landing
+    /// point moves on a line, land(d) = p0 + w·(d + a), so only the thicknesses whose landing
+    /// point lies in the face's bounding box are visited (the bundles are convex, their union
+    /// too): cost per ray O(visited), not O(thicknesses).
+    fn surface_specular(&mut self, f: &RayFrame) {
+        let m = self.m;
+        let (ray, a, den, nt) = (&f.ray, f.a, f.den, self.nt);
+        let v = ray.dir;
+        let Some((rfl, rd)) = reflect_setup(v, self.normal, m.cfg.params.n_medium) else {
+            return;
+        };
+        let cpl = m.couple(rd);
+        if cpl <= 0.0 {
+            return;
+        }
+        let back = v.z / -rd.z;
+        let w = (DVec2::new(v.x, v.y) + DVec2::new(rd.x, rd.y) * back) / den;
+        let base = ray.p0 + w * a;
+        let (mut d_lo, mut d_hi) = (-a, f64::INFINITY); // h0 = d + a > 0
+        for (p0, w0, lo, hi) in [
+            (base.x, w.x, 0.0, self.x_hi),
+            (base.y, w.y, -self.y_hi, self.y_hi),
+        ] {
+            if w0.abs() < 1e-12 {
+                if p0 < lo || p0 > hi {
+                    d_hi = f64::NEG_INFINITY;
+                }
+            } else {
+                let (u, t) = ((lo - p0) / w0, (hi - p0) / w0);
+                d_lo = d_lo.max(u.min(t));
+                d_hi = d_hi.min(u.max(t));
+            }
+        }
+        if d_hi.is_nan() || d_lo.is_nan() || d_hi < d_lo {
+            return;
+        }
+        // One index of margin each side; the exact test is the bundle slot below.
+        let i_lo = ((d_lo * self.inv_step).max(0.0).min(nt as f64) as usize)
+            .saturating_sub(1)
+            .max(self.first_wet);
+        let i_hi = ((d_hi * self.inv_step).max(0.0).min(nt as f64) as usize + 2).min(nt);
+        if i_lo >= i_hi {
+            return;
+        }
+        // Up and back: path (d + a)·k_path, absorbed by the same ratio every step.
+        let k_path = (1.0 + back) / den;
+        let att = (-ALPHA_PER_MM * k_path * (m.thick[i_lo] + a)).exp();
+        let att_step = (-ALPHA_PER_MM * k_path * m.cfg.step_mm).exp();
+        let n_bub = frozen_before(&self.frozen_by[self.first_wet..i_lo]);
+        self.spec_slot.resize(i_hi - i_lo, 2);
+        specular_slots(
+            ray.p0,
+            w,
+            a,
+            &self.bundles,
+            &m.thick[i_lo..i_hi],
+            &mut self.spec_slot,
+        );
+        add_specular(
+            &mut self.refl[i_lo..i_hi],
+            &self.frozen_by[i_lo..i_hi],
+            &self.spec_slot,
+            &self.fwd_after,
+            n_bub,
+            [rfl, cpl],
+            [att, att_step],
+        );
+    }
+
+    /// Phase 3: flux to current; the scattered light frozen in at each thickness summed up.
+    pub(crate) fn into_curve(self) -> Curve {
+        let ua = RESPONSIVITY_A_PER_W * 1e6;
+        let mut points = Vec::with_capacity(self.nt);
+        let mut scat = [0.0f64; 2];
+        for (i, &d) in self.m.thick.iter().enumerate() {
+            scat[0] += self.scat_delta[i][0];
+            scat[1] += self.scat_delta[i][1];
+            let i1_refl = (self.refl[i][0] + SENSOR_A_LEAK[0] * self.leak[i]) * ua;
+            let i2_refl = (self.refl[i][1] + SENSOR_A_LEAK[1] * self.leak[i]) * ua;
+            let i1_scat = scat[0] * ua;
+            let i2_scat = scat[1] * ua;
+            points.push(CurvePoint {
+                thickness_mm: d,
+                i1_ua: i1_refl + i1_scat,
+                i2_ua: i2_refl + i2_scat,
+                i1_refl_ua: i1_refl,
+                i1_scat_ua: i1_scat,
+                i2_refl_ua: i2_refl,
+                i2_scat_ua: i2_scat,
+            });
+        }
+        Curve { points }
+    }
+}
+
+/// The number of bubble layers a ray meets within the output thicknesses: the first layer j
+/// whose q(j) (its thickness in output steps, non-decreasing in j) lies beyond the last
+/// output index, at most `MAX_LAYERS_PER_RAY`. Layer j is frozen in at the first index
+/// i ≥ `first_wet` with i ≥ q(j); j_end is the first layer for which that index is ≥ `nt`.
+fn layers_covered(q_of: &impl Fn(u32) -> f64, first_wet: usize, nt: usize) -> u32 {
+    if first_wet >= nt {
+        return 0;
+    }
+    let last = (nt - 1) as f64;
+    let beyond = |j: u32| q_of(j) > last;
+    // q is linear in j up to rounding: start from the straight-line estimate, then settle
+    // on the exact first j with the same comparisons as a walk layer by layer.
+    let (q0, q1) = (q_of(0), q_of(1));
+    let slope = q1 - q0;
+    let mut j = if slope > 0.0 {
+        ((last - q0) / slope).clamp(0.0, MAX_LAYERS_PER_RAY as f64) as u32
+    } else {
+        0
+    };
+    while j > 0 && beyond(j - 1) {
+        j -= 1;
+    }
+    while j < MAX_LAYERS_PER_RAY && !beyond(j) {
+        j += 1;
+    }
+    j
+}
+
+/// The smallest integer i ≥ 0 with i ≥ q, as an index (q ≤ `usize::MAX`): ceil without a
+/// libm call. Exact: `i as f64 >= q` and `(i - 1) as f64 < q` for every finite q.
+#[inline]
+fn ceil_index(q: f64) -> usize {
+    let t = q as i64; // toward zero: the ceiling for q ≤ 0, the floor for q > 0
+    let t = if (t as f64) < q { t + 1 } else { t };
+    t.max(0) as usize
+}
+
+/// How many bubbles are frozen in up to the end of a range of thickness indices, from the
+/// `frozen_by` entries of the range (0 where none is frozen in): their maximum.
+fn frozen_before(frozen_by: &[u32]) -> usize {
+    frozen_by.iter().copied().max().unwrap_or(0) as usize
+}
+
+/// The specular reflection of one ray at the visited thicknesses: at each, the forward flux
+/// left after the bubbles frozen in so far (`fwd_after[n]`, n the running maximum of
+/// `frozen_by` from `n_bub` on) times
+/// the Fresnel reflectance and coupling `[rfl, cpl]` times the absorption, which falls by
+/// `att[1]` per step from `att[0]`, added to the bundle of `slot`.
+// Its own function: inside the tracer the running values would live on the stack.
+#[inline(never)]
+fn add_specular(
+    refl: &mut [[f64; 2]],
+    frozen_by: &[u32],
+    slot: &[i32],
+    fwd_after: &[f64],
+    mut n_bub: usize,
+    [rfl, cpl]: [f64; 2],
+    [mut att, att_step]: [f64; 2],
+) {
+    for ((flux, &frozen), &k) in refl.iter_mut().zip(frozen_by).zip(slot) {
+        let att_i = att;
+        att *= att_step;
+        n_bub = n_bub.max(frozen as usize);
+        // Along the line the bundle changes rarely: a branch predicts well.
+        let k = k as u32 as usize;
+        if k < 2 {
+            flux[k] += fwd_after[n_bub] * rfl * cpl * att_i;
+        }
+    }
+}
+
+/// Reflection of `v` at a surface with upward normal `nrm`: (Fresnel reflectance, reflected
+/// direction), `None` if the ray does not meet the surface from below or does not return
+/// toward the face.
+#[inline]
+fn reflect_setup(v: DVec3, nrm: DVec3, n_med: f64) -> Option<(f64, DVec3)> {
+    let cos_i = v.dot(nrm);
+    if cos_i <= 0.0 {
+        return None;
+    }
+    let rd = reflect(v, nrm);
+    if rd.z >= -1e-9 {
+        return None;
+    }
+    Some((fr_dielectric(cos_i, n_med, N_AIR), rd))
+}
