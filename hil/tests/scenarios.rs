@@ -66,6 +66,23 @@ fn accuracy_goals(outcomes: &[run::Outcome]) {
         );
         assert!(e5.bias_mm.abs() <= 0.3, "{name} 5 mm: {e5:?}");
     }
+    // Factory-calibrated (1.0 ± 2 %): the node keeps its calibration on a
+    // face of the table's gain.
+    for name in ["accuracy-rime", "accuracy-glazed", "accuracy-water"] {
+        let g = row(name).gain.unwrap();
+        assert!(
+            (g.end_gain - 1.0).abs() <= 0.01 && (g.end_sigma - 0.02).abs() <= 0.003,
+            "{name}: {g:?}"
+        );
+    }
+    // The same ice bodies on a new node (gain unknown): honest but wide at
+    // 5 mm, where the calibrated node meets the goal.
+    let new_node = row("accuracy-rime-gain-100").at[3].unwrap();
+    let calibrated = row("accuracy-rime").at[3].unwrap();
+    assert!(
+        new_node.rms_mm > 3.0 * calibrated.rms_mm && new_node.sigma_mm > 2.0,
+        "new node {new_node:?}, calibrated {calibrated:?}"
+    );
     // Water at +5 °C is never called ice.
     let w = row("accuracy-water");
     assert!(w.warm_water_called_ice.1 > 10_000, "{w:?}");
