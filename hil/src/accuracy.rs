@@ -7,6 +7,16 @@
 //! whose seed is neither the response table's nor a scenario's), and how
 //! often the medium is right once the ice is ≥ 1 mm.
 //!
+//! The gain columns compare the node's estimate of its relative optical
+//! gain (`MeasurementV3::gain`: LED × coupling × responsivity against the
+//! response table's) with the truth of the virtual hardware (LED factor ×
+//! temperature factor × face transmission², `fois_vnode::optics`): the true
+//! gain at the first and last frame with ice, the estimate and its σ at the
+//! last frame (mean over seeds), the RMS of its error and the fraction of
+//! frames with |error| ≤ 2σ, over the frames with ice on the face; "—" while
+//! the node sends no gain. And how many frames from [`THIN_FROM_MM`] are
+//! *confidently thin* (est + 2σ below half the truth).
+//!
 //! The scenarios' seeds are the ray-traced accretions: the response table
 //! is built from seed 900 001 (`fois_sim::table::TABLE_SEED`), which no
 //! scenario uses.
@@ -26,6 +36,21 @@ pub const THICKNESSES_MM: [f64; 5] = [0.5, 1.0, 2.0, 5.0, 10.0];
 pub const WINDOW_MM: f64 = 0.05;
 /// Seed of the Monte Carlo behind √CRLB (not the table's, not a scenario's).
 pub const CRLB_SEED: u64 = 4242;
+/// Frames from this true thickness count for the confidently-thin column, mm.
+pub const THIN_FROM_MM: f64 = 4.0;
+
+/// The node's gain estimate against the truth, over one scenario's seeds.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GainStat {
+    /// The estimate at each seed's last frame with ice, mean over seeds.
+    pub end_gain: f64,
+    /// Its σ, mean over seeds.
+    pub end_sigma: f64,
+    /// RMS of (estimate − truth) over the frames with ice.
+    pub rms_err: f64,
+    /// Fraction of those frames with |estimate − truth| ≤ 2σ.
+    pub within_2sigma: f64,
+}
 
 /// Bias and RMS over seeds at one thickness.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -57,6 +82,13 @@ pub struct AccuracyRow {
     pub medium_right: Option<f64>,
     /// Frames of water above the freezing band called ice / all such frames.
     pub warm_water_called_ice: (u64, u64),
+    /// The true optical gain at the first and the last frame with ice (of
+    /// the first seed: the truth is the same for every seed).
+    pub true_gain: Option<(f64, f64)>,
+    /// The node's gain estimate (`None`: it sent none).
+    pub gain: Option<GainStat>,
+    /// Frames with ice ≥ [`THIN_FROM_MM`] confidently thin / all such frames.
+    pub confidently_thin: (u64, u64),
 }
 
 /// The medium an estimate should name for a cover.
@@ -145,7 +177,53 @@ fn row(name: &str, runs: &[&Outcome]) -> AccuracyRow {
         warm_water_called_ice: runs.iter().fold((0, 0), |(a, b), o| {
             (a + o.warm_water_called_ice, b + o.warm_water_frames)
         }),
+        true_gain: runs.first().and_then(|o| {
+            let ice: Vec<&EstSample> = o.estimates.iter().filter(on_face).collect();
+            Some((ice.first()?.true_gain, ice.last()?.true_gain))
+        }),
+        gain: gain_stat(runs),
+        confidently_thin: runs
+            .iter()
+            .flat_map(|o| o.estimates.iter())
+            .filter(on_face)
+            .filter(|s| s.true_mm >= THIN_FROM_MM)
+            .fold((0, 0), |(k, n), s| {
+                (k + u64::from(s.confidently_thin()), n + 1)
+            }),
     }
+}
+
+fn gain_stat(runs: &[&Outcome]) -> Option<GainStat> {
+    let on_face = |s: &&EstSample| s.cover != Cover::Dry && s.true_mm > 0.0;
+    let with_gain = |o: &&Outcome| -> Vec<(f64, f64, f64)> {
+        o.estimates
+            .iter()
+            .filter(on_face)
+            .filter_map(|s| s.gain.map(|(g, sd)| (s.true_gain, g, sd)))
+            .collect()
+    };
+    let per_run: Vec<Vec<(f64, f64, f64)>> = runs
+        .iter()
+        .map(with_gain)
+        .filter(|v| !v.is_empty())
+        .collect();
+    let ends: Vec<(f64, f64, f64)> = per_run.iter().filter_map(|v| v.last().copied()).collect();
+    let all: Vec<&(f64, f64, f64)> = per_run.iter().flatten().collect();
+    if all.is_empty() {
+        return None;
+    }
+    let n = all.len() as f64;
+    let m = ends.len() as f64;
+    Some(GainStat {
+        end_gain: ends.iter().map(|e| e.1).sum::<f64>() / m,
+        end_sigma: ends.iter().map(|e| e.2).sum::<f64>() / m,
+        rms_err: (all.iter().map(|e| (e.1 - e.0).powi(2)).sum::<f64>() / n).sqrt(),
+        within_2sigma: all
+            .iter()
+            .filter(|e| (e.1 - e.0).abs() <= 2.0 * e.2)
+            .count() as f64
+            / n,
+    })
 }
 
 /// √CRLB (thesis §5.4) of `kind` on Sensor B at [`THICKNESSES_MM`], mm,
@@ -194,11 +272,11 @@ pub fn table(rows: &[AccuracyRow], crlb: &[(IceKind, [f64; 5])]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "| scenario | medium | seeds | 0.5 mm bias / RMS | 1 mm | 2 mm | 5 mm | 10 mm | \\|err\\| ≤ 2σ (> 0.5 mm) | medium right (≥ 1 mm) | warm water called ice |"
+        "| scenario | medium | seeds | 0.5 mm bias / RMS | 1 mm | 2 mm | 5 mm | 10 mm | \\|err\\| ≤ 2σ (> 0.5 mm) | medium right (≥ 1 mm) | warm water called ice | true gain (first → last) | est. gain (σ), last frame | gain RMS err | gain \\|err\\| ≤ 2σ | confidently thin (≥ {THIN_FROM_MM} mm) |"
     );
     let _ = writeln!(
         s,
-        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
     );
     for r in rows {
         let cells: Vec<String> =
@@ -209,9 +287,26 @@ pub fn table(rows: &[AccuracyRow], crlb: &[(IceKind, [f64; 5])]) -> String {
                 })
                 .collect();
         let (ice, warm) = r.warm_water_called_ice;
+        let (gain_est, gain_rms, gain_cov) = match r.gain {
+            Some(g) => (
+                format!("{:.3} (σ {:.3})", g.end_gain, g.end_sigma),
+                format!("{:.3}", g.rms_err),
+                pct(Some(g.within_2sigma)),
+            ),
+            None => ("—".into(), "—".into(), "—".into()),
+        };
+        let true_gain = match r.true_gain {
+            Some((a, b)) if (a - b).abs() < 0.005 => format!("{a:.2}"),
+            Some((a, b)) => format!("{a:.2} → {b:.2}"),
+            None => "—".into(),
+        };
+        let thin = match r.confidently_thin {
+            (_, 0) => "—".to_string(),
+            (k, n) => format!("{k} of {n}"),
+        };
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |",
             r.name,
             cover_name(r.cover),
             r.runs,
@@ -227,12 +322,17 @@ pub fn table(rows: &[AccuracyRow], crlb: &[(IceKind, [f64; 5])]) -> String {
             } else {
                 format!("{ice} of {warm}")
             },
+            true_gain,
+            gain_est,
+            gain_rms,
+            gain_cov,
+            thin,
         );
     }
     for (kind, c) in crlb {
         let _ = writeln!(
             s,
-            "| √CRLB ({}) | | | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | | | |",
+            "| √CRLB ({}) | | | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | | | | | | | | |",
             kind.name(),
             c[0],
             c[1],
@@ -256,6 +356,8 @@ mod tests {
             est_mm,
             sigma_mm,
             medium,
+            true_gain: 1.0,
+            gain: None,
         }
     }
 
@@ -288,5 +390,57 @@ mod tests {
         // From 1 mm: 3 of 4 named rime.
         assert_eq!(r.medium_right, Some(0.75));
         assert!(table(&rows(&[]), &[]).lines().count() == 2);
+        // No gain sent: the gain columns say so.
+        assert_eq!(r.gain, None);
+        assert_eq!(r.true_gain, Some((1.0, 1.0)));
+        // 5 mm read as 5.0 ± 0.1: not thin (1 frame from 4 mm).
+        assert_eq!(r.confidently_thin, (0, 1));
+        let t = table(std::slice::from_ref(r), &[]);
+        assert!(
+            t.lines()
+                .nth(2)
+                .unwrap()
+                .ends_with("| 1.00 | — | — | — | 0 of 1 |"),
+            "{t}"
+        );
+    }
+
+    #[test]
+    fn gain_columns_compare_the_estimate_with_the_truth() {
+        let mut a = crate::run::tests_support::outcome("g@seed1");
+        let mut b = crate::run::tests_support::outcome("g@seed2");
+        let with = |true_mm, est_mm, sigma_mm, true_gain, gain| EstSample {
+            true_gain,
+            gain,
+            ..sample(true_mm, est_mm, sigma_mm, Medium::Rime)
+        };
+        // The LED drifts 1.0 → 0.8; seed 1 tracks it within σ, seed 2 sends
+        // 0.9 ± 0.01 at the end (error 0.1 > 2σ) and reads 2 mm at 6 mm.
+        a.estimates = vec![
+            with(0.0, 0.0, 0.1, 1.0, Some((1.0, 0.05))),
+            with(1.0, 1.0, 0.1, 1.0, Some((1.02, 0.05))),
+            with(6.0, 6.0, 0.5, 0.8, Some((0.78, 0.02))),
+        ];
+        b.estimates = vec![
+            with(1.0, 1.0, 0.1, 1.0, Some((1.0, 0.05))),
+            with(6.0, 2.0, 0.4, 0.8, Some((0.9, 0.01))),
+        ];
+        let r = &rows(&[a, b])[0];
+        assert_eq!(r.true_gain, Some((1.0, 0.8)));
+        let g = r.gain.unwrap();
+        // Last frames: (0.78 + 0.9) / 2 = 0.84, σ (0.02 + 0.01) / 2.
+        assert!((g.end_gain - 0.84).abs() < 1e-12, "{g:?}");
+        assert!((g.end_sigma - 0.015).abs() < 1e-12, "{g:?}");
+        // Errors over the 4 frames with ice: 0.02, −0.02, 0, 0.1.
+        let rms = ((0.02f64.powi(2) * 2.0 + 0.01) / 4.0).sqrt();
+        assert!((g.rms_err - rms).abs() < 1e-12, "{g:?}");
+        assert_eq!(g.within_2sigma, 0.75);
+        // 2.0 + 0.8 < 3.0: seed 2's 6 mm frame is confidently thin.
+        assert_eq!(r.confidently_thin, (1, 2));
+        let t = table(std::slice::from_ref(r), &[]);
+        assert!(
+            t.contains("| 1.00 → 0.80 | 0.840 (σ 0.015) | 0.052 | 75.0 % | 1 of 2 |"),
+            "{t}"
+        );
     }
 }

@@ -134,6 +134,27 @@ pub fn check(sc: &Scenario, o: &Outcome) -> Vec<String> {
             o.measurements
         ));
     }
+    if let Some(d) = e.not_confidently_thin_from_mm {
+        let thin: Vec<_> = o
+            .estimates
+            .iter()
+            .filter(|s| {
+                use fois_vnode::Cover::{Flat, Glazed, Rime};
+                matches!(s.cover, Flat | Glazed | Rime) && s.true_mm >= d
+            })
+            .filter(|s| s.confidently_thin())
+            .collect();
+        if let Some(first) = thin.first() {
+            fail.push(format!(
+                "{} frames from {d} mm confidently thin (est + 2σ < half the truth); first at {:.0} s: {:.2} ± {:.2} mm at {:.2} mm",
+                thin.len(),
+                first.t_s,
+                first.est_mm,
+                first.sigma_mm,
+                first.true_mm
+            ));
+        }
+    }
     fail
 }
 

@@ -54,6 +54,20 @@ pub struct EstSample {
     pub sigma_mm: f64,
     /// The most likely medium the node reported.
     pub medium: fois_protocol::Medium,
+    /// The true relative optical gain g (LED × temperature factor × face
+    /// transmission², `fois_vnode::optics`).
+    pub true_gain: f64,
+    /// The node's gain estimate and its σ (`MeasurementV3::gain`), if sent.
+    pub gain: Option<(f64, f64)>,
+}
+
+impl EstSample {
+    /// The estimate is confidently thin: est + 2σ < half the true
+    /// thickness (the node would tell a de-icing system there is far less
+    /// ice than there is, and be sure of it).
+    pub fn confidently_thin(&self) -> bool {
+        self.est_mm + 2.0 * self.sigma_mm < 0.5 * self.true_mm
+    }
 }
 
 /// A reply to a command.
@@ -237,6 +251,7 @@ impl Observer {
             )),
             SeqEvent::First | SeqEvent::InOrder => {}
         }
+        let gain = f.msg.gain().map(|g| (g.gain(), g.sigma()));
         if let Some((m, estimate)) = f.msg.measurement() {
             let truth = self.env.truth(m.uptime_ms.saturating_mul(1_000_000));
             if truth.cover == Cover::Water && truth.air_temp_c > WATER_FREEZING_BAND_C {
@@ -258,6 +273,8 @@ impl Observer {
                     est_mm: f64::from(e.thickness_um) / 1000.0,
                     sigma_mm: f64::from(e.sigma_um) / 1000.0,
                     medium: e.medium,
+                    true_gain: truth.gain.signal_gain(),
+                    gain,
                 });
             }
         }
@@ -326,6 +343,7 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
     let opts = NodeOptions {
         seed: sc.seed,
         calibrate_at_s: None,
+        gain_calibration: f.gain_calibration.map(|[gain, rel_sd]| (gain, rel_sd)),
         ..NodeOptions::default()
     };
     let mut node = VirtualNode::new(env.clone(), opts);

@@ -98,6 +98,11 @@ pub struct ScenarioFile {
     /// recorded beside the truth every frame; see [`crate::accuracy`]).
     #[serde(default)]
     pub accuracy: bool,
+    /// A factory calibration of the optical gain, `[gain, relative sd]`
+    /// (e.g. `[1.0, 0.02]`), in the node's flash before it boots
+    /// (`fois_vnode::NodeOptions::gain_calibration`); without it the node
+    /// is new and its gain unknown.
+    pub gain_calibration: Option<[f64; 2]>,
     /// The timeline: `fois_vnode::scenario`'s `[[segment]]` tables, checked
     /// there.
     #[serde(default, rename = "segment")]
@@ -299,6 +304,10 @@ pub struct Expect {
     pub min_saturated_frames: Option<u64>,
     /// At least this many measurements decoded.
     pub min_measurements: Option<u64>,
+    /// No frame with at least this much ice (mm) is *confidently thin*: its
+    /// estimate + 2σ below half the true thickness (needs `accuracy =
+    /// true`, whose runs record the estimates).
+    pub not_confidently_thin_from_mm: Option<f64>,
 }
 
 /// A scenario ready to run: one file, or one level of a sweep.
@@ -326,13 +335,17 @@ pub struct Scenario {
     pub sweep_lsb: Option<f64>,
 }
 
-/// The accuracy scenarios (`accuracy = true`) on `seeds` seeds 101, 102, …
-/// instead of their files' (one run per seed, named `NAME@seedK`) and at
-/// `frame_ms` frames; every other scenario unchanged. `None`: as the files
-/// say.
+/// The first seed [`for_accuracy`] uses by default.
+pub const ACCURACY_FIRST_SEED: u64 = 101;
+
+/// The accuracy scenarios (`accuracy = true`) on `seeds` seeds
+/// `first_seed`, `first_seed` + 1, … instead of their files' (one run per
+/// seed, named `NAME@seedK`) and at `frame_ms` frames; every other scenario
+/// unchanged. `None`: as the files say.
 pub fn for_accuracy(
     scenarios: Vec<Scenario>,
     seeds: Option<u64>,
+    first_seed: u64,
     frame_ms: Option<u32>,
 ) -> Vec<Scenario> {
     let mut out: Vec<Scenario> = Vec::new();
@@ -362,7 +375,7 @@ pub fn for_accuracy(
         {
             continue; // this file's seeds are already expanded
         }
-        for k in 101..101 + n {
+        for k in first_seed..first_seed.saturating_add(n) {
             let mut s = sc.clone();
             s.seed = k;
             s.name = format!("{base}@seed{k}");
@@ -424,6 +437,21 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
     let config = build_config(&file.config)?;
     validate_commands(&file.commands)?;
     validate_expect(&file.expect)?;
+    if let Some([gain, rel_sd]) = file.gain_calibration {
+        let (lo, hi) = fois_firmware::gain_cal::GAIN_RANGE;
+        ensure!(
+            gain >= f64::from(lo) && gain <= f64::from(hi),
+            "gain_calibration: gain {gain} outside the node's range {lo}..={hi}"
+        );
+        ensure!(
+            rel_sd > 0.0 && rel_sd < 1.0,
+            "gain_calibration: relative sd {rel_sd} must be in (0, 1)"
+        );
+    }
+    ensure!(
+        file.accuracy || file.expect.not_confidently_thin_from_mm.is_none(),
+        "[expect] not_confidently_thin_from_mm needs accuracy = true (the estimates are recorded only then)"
+    );
     if let Some(l) = &file.link {
         for (k, p) in [
             ("corrupt_probability", l.corrupt_probability),
@@ -673,6 +701,11 @@ fn apply_overlays(
             piece.led_factor_end = seg
                 .led_factor_end
                 .map(|_| lerp(seg.led_factor, seg.led_factor_end, frac(b)));
+            piece.face_transmission =
+                lerp(seg.face_transmission, seg.face_transmission_end, frac(a));
+            piece.face_transmission_end = seg
+                .face_transmission_end
+                .map(|_| lerp(seg.face_transmission, seg.face_transmission_end, frac(b)));
             if k > 0 {
                 piece.start_thickness_mm = None;
             }

@@ -94,6 +94,29 @@ fn bad_values_are_refused_with_the_reason() {
             "{extra:?} → {e}"
         );
     }
+    // A factory gain calibration the node could not hold.
+    for (top, words) in [
+        (
+            "gain_calibration = [5.0, 0.02]\n",
+            "outside the node's range",
+        ),
+        ("gain_calibration = [1.0, 0.0]\n", "relative sd"),
+    ] {
+        let e = format!(
+            "{:#}",
+            scenario::parse(Path::new("scenarios/bad.toml"), &format!("{top}{BASE}")).unwrap_err()
+        );
+        assert!(
+            e.contains("scenarios/bad.toml") && e.contains(words),
+            "{top:?} → {e}"
+        );
+    }
+    let ok = scenario::parse(
+        Path::new("ok.toml"),
+        &format!("gain_calibration = [1.0, 0.02]\n{BASE}"),
+    )
+    .unwrap();
+    assert_eq!(ok[0].file.gain_calibration, Some([1.0, 0.02]));
     let e = format!(
         "{:#}",
         scenario::parse(Path::new("x.toml"), "class = \"icy\"\n").unwrap_err()
@@ -191,4 +214,68 @@ fn every_shipped_file_loads() {
         let runs = scenario::load(&f).unwrap_or_else(|e| panic!("{e:#}"));
         assert!(!runs.is_empty());
     }
+}
+
+#[test]
+fn an_overlay_splits_a_fouling_ramp_and_the_thin_check_needs_accuracy() {
+    let text = "class = \"other\"\n[[segment]]\nduration_s = 100\ncover = \"rime\"\n\
+                rate_mm_per_h = 3.6\nface_transmission = 1.0\nface_transmission_end = 0.8\n\
+                gain_tempco_ppm_per_k = -6000.0\n\
+                [[overlay]]\nstart_s = 50\nduration_s = 25\nambient_ua = [5.0, 5.0]\n";
+    let runs = scenario::parse(Path::new("f.toml"), text).unwrap();
+    let segs = runs[0].timeline.segments();
+    // 0–50 | sun 50–75 | 75–100: t 1.0 → 0.9 | 0.9 → 0.85 | 0.85 → 0.8.
+    let t: Vec<(f64, f64)> = segs
+        .iter()
+        .map(|s| (s.face_transmission, s.face_transmission_end.unwrap()))
+        .collect();
+    let want = [(1.0, 0.9), (0.9, 0.85), (0.85, 0.8)];
+    assert_eq!(t.len(), 3);
+    for (got, want) in t.iter().zip(want) {
+        assert!(
+            (got.0 - want.0).abs() < 1e-12 && (got.1 - want.1).abs() < 1e-12,
+            "{t:?}"
+        );
+    }
+    assert!(
+        segs.iter()
+            .all(|s| (s.gain_tempco_per_k + 0.006).abs() < 1e-15)
+    );
+    // The signal at 60 s: t = 0.88, so × 0.7744 (and the −5 °C default air
+    // with κ = −0.6 %/K: × exp(0.18) = 1.197 22).
+    let env = fois_vnode::Environment::with_curves(runs[0].timeline.clone(), [], [0.0; 2]);
+    let g = env.truth(60_000_000_000).gain;
+    assert!((g.signal_gain() - 0.7744 * 1.197_217).abs() < 1e-5, "{g:?}");
+    assert!((env.truth(60_000_000_000).ambient_ua[0] - 5.0 * 0.88).abs() < 1e-9);
+
+    let e = err("[expect]\nnot_confidently_thin_from_mm = 4.0\n");
+    assert!(e.contains("accuracy = true"), "{e}");
+    let ok = format!("accuracy = true\n{BASE}[expect]\nnot_confidently_thin_from_mm = 4.0\n");
+    let runs = scenario::parse(Path::new("ok.toml"), &ok).unwrap();
+    assert_eq!(runs[0].file.expect.not_confidently_thin_from_mm, Some(4.0));
+}
+
+#[test]
+fn the_report_reseeds_accuracy_runs_from_a_given_first_seed() {
+    let acc = format!("accuracy = true\n{BASE}[sweep]\nseed = [21, 22]\n");
+    let mut all = scenario::parse(Path::new("acc.toml"), &acc).unwrap();
+    all.extend(scenario::parse(Path::new("plain.toml"), BASE).unwrap());
+    let out = scenario::for_accuracy(all, Some(3), 231, Some(100));
+    let got: Vec<(String, u64, Option<u32>)> = out
+        .iter()
+        .map(|s| {
+            (
+                s.name.clone(),
+                s.seed,
+                s.config.as_ref().map(|c| c.frame_period_ms),
+            )
+        })
+        .collect();
+    let want: Vec<(String, u64, Option<u32>)> = vec![
+        ("acc@seed231".into(), 231, Some(100)),
+        ("acc@seed232".into(), 232, Some(100)),
+        ("acc@seed233".into(), 233, Some(100)),
+        ("plain".into(), 1, None),
+    ];
+    assert_eq!(got, want);
 }

@@ -81,7 +81,9 @@ impl PhotoAdc for SimAdc {
     }
 
     fn read_internal_temp(&mut self) -> u16 {
-        let t = self.truth().air_temp_c;
+        // The die sits with the optoelectronics: it reads their temperature
+        // (air + the enclosure's self-heating), the one that sets the gain.
+        let t = self.truth().optics_temp_c;
         self.frontend.internal_temp_code(t)
     }
 }
@@ -131,5 +133,28 @@ mod tests {
         assert_eq!(adc.read_ntc(), 4095);
         clock.advance_to_ns(2_500_000_000);
         assert_eq!(adc.read_ntc(), 0);
+    }
+
+    #[test]
+    fn the_internal_sensor_reads_the_optics_temperature() {
+        // Air at −10 °C, the enclosure 4 K warmer: the die reads −6 °C.
+        let tl = Timeline::constant(
+            Segment::new(1.0, Cover::Dry)
+                .temp(-10.0)
+                .optics_above_air(4.0),
+        );
+        let env = Arc::new(Environment::with_curves(tl, [], [0.0, 0.0]));
+        let mut adc = SimAdc::new(VirtualClock::new(), VirtualPin::new(), env, 3);
+        let code = adc.read_internal_temp();
+        assert_eq!(code, adc.frontend.internal_temp_code(-6.0));
+        assert_ne!(code, adc.frontend.internal_temp_code(-10.0));
+        // The firmware's conversion reads it back within a step of the
+        // 12-bit code (~0.4 K).
+        let centi = fois_firmware::vref::internal_temp_centi_c(
+            &fois_firmware::FactoryCal::TYPICAL,
+            code,
+            3_300,
+        );
+        assert!((i32::from(centi) + 600).abs() <= 40, "{centi}");
     }
 }

@@ -1,8 +1,10 @@
 //! What the sensor face sees over (virtual) time: a timeline of segments,
 //! each with its cover (dry face, or a medium accreting at a rate), air
-//! temperature, ambient light (DC + 100 Hz flicker), LED output factor and
-//! ADC noise. The photocurrents come from the simulator's curve of the
-//! segment's medium at the current thickness.
+//! temperature, ambient light (DC + 100 Hz flicker), LED output factor, the
+//! optics' temperature coefficient and self-heating, the face's transmission
+//! (fouling) and ADC noise. The photocurrents come from the simulator's
+//! curve of the segment's medium at the current thickness, times the
+//! optical gain ([`crate::optics`]).
 //!
 //! Thickness is continuous across segments (a water film that freezes keeps
 //! its thickness), is 0 on a `Dry` segment, may be set at a segment's start
@@ -13,6 +15,8 @@ use std::collections::BTreeMap;
 use std::f64::consts::PI;
 
 use fois_sim::{Curve, Geometry, IceKind, SensorKind, SimConfig, accretion_curve};
+
+use crate::optics::{OpticalGain, temperature_factor};
 
 /// Largest thickness the curves cover, mm.
 pub const MAX_THICKNESS_MM: f64 = 15.0;
@@ -118,6 +122,18 @@ pub struct Segment {
     pub led_factor: f64,
     /// LED output factor at the end (`None`: constant); linear ramp.
     pub led_factor_end: Option<f64>,
+    /// Net temperature coefficient κ of the optical gain, 1/K (LED output ×
+    /// phototransistor responsivity): the signal scales with
+    /// exp(κ·(T_optics − 25 °C)) ([`crate::optics`]). 0: none.
+    pub gain_tempco_per_k: f64,
+    /// The optoelectronics' (and the MCU die's) temperature above the air,
+    /// K: the enclosure's self-heating. T_optics = air + this.
+    pub optics_above_air_k: f64,
+    /// Transmission of the face at the start (1 = clean; fouling < 1): the
+    /// LED-induced signal scales with its square, ambient light with it.
+    pub face_transmission: f64,
+    /// Transmission at the end (`None`: constant); linear ramp.
+    pub face_transmission_end: Option<f64>,
     /// ADC noise, rms LSB (Gaussian, per conversion).
     pub adc_noise_lsb: f64,
     /// The NTC's wiring (fault injection: unplugged or shorted).
@@ -140,6 +156,10 @@ impl Segment {
             flicker_hz: 100.0,
             led_factor: 1.0,
             led_factor_end: None,
+            gain_tempco_per_k: 0.0,
+            optics_above_air_k: 0.0,
+            face_transmission: 1.0,
+            face_transmission_end: None,
             adc_noise_lsb: 1.0,
             ntc: NtcWiring::Connected,
         }
@@ -191,6 +211,22 @@ impl Segment {
     pub fn led_ramp(mut self, start: f64, end: f64) -> Self {
         self.led_factor = start;
         self.led_factor_end = Some(end);
+        self
+    }
+    /// The optical gain's net temperature coefficient κ, 1/K.
+    pub fn gain_tempco(mut self, per_k: f64) -> Self {
+        self.gain_tempco_per_k = per_k;
+        self
+    }
+    /// The optics' self-heating above the air, K.
+    pub fn optics_above_air(mut self, k: f64) -> Self {
+        self.optics_above_air_k = k;
+        self
+    }
+    /// Face transmission ramping from `start` to `end` (fouling).
+    pub fn transmission_ramp(mut self, start: f64, end: f64) -> Self {
+        self.face_transmission = start;
+        self.face_transmission_end = Some(end);
         self
     }
     /// ADC noise, rms LSB.
@@ -290,12 +326,19 @@ pub struct Truth {
     pub thickness_mm: f64,
     /// Air temperature, °C.
     pub air_temp_c: f64,
-    /// LED-induced photocurrent per channel (sim curve × LED factor), µA.
+    /// The optoelectronics' temperature (air + self-heating): what the
+    /// MCU's internal sensor reads, °C.
+    pub optics_temp_c: f64,
+    /// LED-induced photocurrent per channel (sim curve × optical gain), µA.
     pub led_signal_ua: [f64; 2],
-    /// Ambient photocurrent per channel at this instant (DC + flicker ≥ 0), µA.
+    /// Ambient photocurrent per channel at this instant ((DC + flicker ≥ 0)
+    /// × face transmission), µA.
     pub ambient_ua: [f64; 2],
     /// LED output factor.
     pub led_factor: f64,
+    /// The optical gain's factors (LED, temperature, face transmission);
+    /// `gain.signal_gain()` is the true relative gain g the node estimates.
+    pub gain: OpticalGain,
     /// ADC noise, rms LSB.
     pub adc_noise_lsb: f64,
     /// The NTC's wiring.
@@ -401,17 +444,30 @@ impl Environment {
             }
         };
         let led_factor = lerp(seg.led_factor, seg.led_factor_end, w).max(0.0);
+        let air_temp_c = lerp(seg.air_temp_c, seg.air_temp_end_c, w);
+        let optics_temp_c = air_temp_c + seg.optics_above_air_k;
+        let gain = OpticalGain {
+            led_factor,
+            temperature_factor: temperature_factor(seg.gain_tempco_per_k, optics_temp_c),
+            face_transmission: lerp(seg.face_transmission, seg.face_transmission_end, w)
+                .clamp(0.0, 1.0),
+        };
         let phase = (2.0 * PI * seg.flicker_hz * t_s).sin();
-        let ambient_ua = [0, 1].map(|k| (seg.ambient_ua[k] + seg.flicker_ua[k] * phase).max(0.0));
+        let ambient_ua = [0, 1].map(|k| {
+            (seg.ambient_ua[k] + seg.flicker_ua[k] * phase).max(0.0) * gain.ambient_gain()
+        });
+        let signal_gain = gain.signal_gain();
         Truth {
             t_s,
             segment: i,
             cover: seg.cover,
             thickness_mm,
-            air_temp_c: lerp(seg.air_temp_c, seg.air_temp_end_c, w),
-            led_signal_ua: optical.map(|x| x * led_factor),
+            air_temp_c,
+            optics_temp_c,
+            led_signal_ua: optical.map(|x| x * signal_gain),
             ambient_ua,
             led_factor,
+            gain,
             adc_noise_lsb: seg.adc_noise_lsb.max(0.0),
             ntc: seg.ntc,
         }
@@ -419,87 +475,4 @@ impl Environment {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use fois_sim::CurvePoint;
-
-    /// A straight-line curve: I1 = 2·d + 0.5, I2 = d.
-    pub(crate) fn line_curve() -> Curve {
-        Curve {
-            points: (0..=150)
-                .map(|i| {
-                    let d = f64::from(i) * 0.1;
-                    CurvePoint {
-                        thickness_mm: d,
-                        i1_ua: 2.0 * d + 0.5,
-                        i2_ua: d,
-                        ..CurvePoint::default()
-                    }
-                })
-                .collect(),
-        }
-    }
-
-    #[test]
-    fn thickness_accumulates_across_segments_and_water_freezes_in_place() {
-        let tl = Timeline::new(vec![
-            Segment::new(100.0, Cover::Dry),
-            Segment::new(3600.0, Cover::Water).rate(2.0).temp(5.0),
-            Segment::new(3600.0, Cover::Glazed)
-                .rate(1.0)
-                .temp_ramp(5.0, -5.0),
-            Segment::new(10.0, Cover::Dry),
-            Segment::new(10.0, Cover::Rime).rate(3600.0 * 100.0),
-        ]);
-        let env = Environment::with_curves(
-            tl,
-            [(Cover::Water, line_curve()), (Cover::Glazed, line_curve())],
-            [0.5, 0.0],
-        );
-        let s = 1_000_000_000u64;
-        let t = env.truth(50 * s);
-        assert_eq!(
-            (t.cover, t.thickness_mm, t.led_signal_ua),
-            (Cover::Dry, 0.0, [0.5, 0.0])
-        );
-        let t = env.truth((100 + 1800) * s);
-        assert!((t.thickness_mm - 1.0).abs() < 1e-9);
-        assert!((t.led_signal_ua[0] - 2.5).abs() < 1e-9);
-        assert_eq!(t.air_temp_c, 5.0);
-        // The water film (2 mm) freezes and keeps growing at 1 mm/h.
-        let t = env.truth((100 + 3600 + 1800) * s);
-        assert_eq!(t.cover, Cover::Glazed);
-        assert!((t.thickness_mm - 2.5).abs() < 1e-9);
-        assert!(t.air_temp_c.abs() < 1e-9, "halfway down the ramp");
-        // Dry resets; a medium without a curve reads as dry; clamp at 15 mm.
-        let t = env.truth((100 + 7200 + 5) * s);
-        assert_eq!(t.thickness_mm, 0.0);
-        let t = env.truth((100 + 7200 + 10 + 5) * s);
-        assert_eq!(t.thickness_mm, MAX_THICKNESS_MM);
-        assert_eq!(t.led_signal_ua, [0.5, 0.0]);
-        // After the end the last segment holds.
-        assert_eq!(env.truth(1_000_000 * s).segment, 4);
-    }
-
-    #[test]
-    fn ambient_flicker_and_led_drift() {
-        let tl = Timeline::constant(
-            Segment::new(100.0, Cover::Glazed)
-                .thickness(5.0)
-                .ambient([10.0, 1.0])
-                .flicker([4.0, 4.0])
-                .led_ramp(1.0, 0.7),
-        );
-        let env = Environment::with_curves(tl, [(Cover::Glazed, line_curve())], [0.0; 2]);
-        // 2.5 ms into a 100 Hz period: sin = 1.
-        let t = env.truth(2_500_000);
-        assert!((t.ambient_ua[0] - 14.0).abs() < 1e-6);
-        assert_eq!(t.ambient_ua[1], 5.0);
-        let t = env.truth(7_500_000);
-        assert!((t.ambient_ua[0] - 6.0).abs() < 1e-6);
-        assert_eq!(t.ambient_ua[1], 0.0, "never negative");
-        let t = env.truth(100_000_000_000);
-        assert!((t.led_factor - 0.7).abs() < 1e-12);
-        assert!((t.led_signal_ua[0] - 0.7 * 10.5).abs() < 1e-9);
-    }
-}
+mod tests;

@@ -6,7 +6,7 @@
 //! to GND; 10 kΩ to 3V3 on PA4; ratiometric), VREFINT and the internal
 //! temperature sensor (from the factory calibration). The conversions are
 //! the firmware's own (`fois_firmware::sim_board::codes`, also behind its
-//! tests' simulated board); this adds the noise and the die temperature.
+//! tests' simulated board); this adds the noise.
 
 use fois_firmware::FactoryCal;
 use fois_firmware::sim_board::codes;
@@ -30,8 +30,6 @@ pub struct FrontEnd {
     pub cal: FactoryCal,
     /// Force the NTC code (fault injection: 4095 = open, 0 = short).
     pub ntc_code_override: Option<u16>,
-    /// MCU die temperature above the air, °C.
-    pub die_above_air_c: f64,
     rng: Pcg32,
 }
 
@@ -46,7 +44,6 @@ impl FrontEnd {
             vce_sat_v: codes::VCE_SAT_TYPICAL_V,
             cal: FactoryCal::TYPICAL,
             ntc_code_override: None,
-            die_above_air_c: 0.0,
             rng: Pcg32::new(seed ^ 0x9E37_79B9_7F4A_7C15, 0xF015),
         }
     }
@@ -96,10 +93,12 @@ impl FrontEnd {
         codes::vrefint_code(&self.cal, self.vdda_v)
     }
 
-    /// Internal temperature sensor code at air temperature `air_temp_c`
+    /// Internal temperature sensor code at die temperature `die_temp_c`
     /// (linear between TS_CAL1 at 30 °C and TS_CAL2 at 110 °C, at 3.3 V).
-    pub fn internal_temp_code(&self, air_temp_c: f64) -> u16 {
-        codes::internal_temp_code(&self.cal, air_temp_c + self.die_above_air_c, self.vdda_v)
+    /// The die's temperature above the air (self-heating) is the
+    /// environment's: `Truth::optics_temp_c`.
+    pub fn internal_temp_code(&self, die_temp_c: f64) -> u16 {
+        codes::internal_temp_code(&self.cal, die_temp_c, self.vdda_v)
     }
 }
 

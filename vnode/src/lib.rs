@@ -5,6 +5,7 @@
 //! - [`clock`]: virtual time, the delay, output pins that record their edges.
 //! - [`environment`]: segments, the timeline, what the face sees at each instant.
 //! - [`frontend`]: light and temperature → ADC codes, with noise.
+//! - [`optics`]: the optical gain (LED, temperature coefficient, fouling).
 //! - [`adc`]: the simulated ADC ([`fois_firmware::PhotoAdc`]).
 //! - [`flash`]: the board's store flash in RAM, stalling the virtual clock.
 //! - [`node`]: the virtual node, its options and its storage.
@@ -17,6 +18,7 @@ pub mod environment;
 pub mod flash;
 pub mod frontend;
 pub mod node;
+pub mod optics;
 #[cfg(feature = "pty")]
 pub mod pty;
 pub mod scenario;
@@ -27,4 +29,5 @@ pub use environment::{Cover, Environment, NtcWiring, Segment, Timeline, Truth};
 pub use flash::VirtualFlash;
 pub use frontend::FrontEnd;
 pub use node::{FirmwareNode, NodeOptions, SharedStorage, VirtualNode, instance_unique_id};
+pub use optics::OpticalGain;
 pub use scenario::Scenario;

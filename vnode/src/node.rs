@@ -121,6 +121,27 @@ impl SharedStorage {
         MemStorage::with_bytes(buf.get(..n).unwrap_or(&[]))
     }
 
+    /// Write `record` if the flash holds none (erased, or nothing readable
+    /// as a record); a stored record is left as it is. Returns whether it
+    /// wrote.
+    pub fn write_if_empty(&self, record: &fois_firmware::persist::Record) -> bool {
+        let mut probe = self.clone();
+        let mut buf = [0u8; fois_firmware::persist::MAX_RECORD];
+        let empty = match probe.read(&mut buf) {
+            Ok(n) => matches!(
+                fois_firmware::persist::decode(buf.get(..n).unwrap_or(&[])),
+                Err(fois_firmware::persist::LoadError::Empty)
+            ),
+            Err(_) => false,
+        };
+        if !empty {
+            return false;
+        }
+        let mut out = [0u8; fois_firmware::persist::MAX_RECORD];
+        let n = fois_firmware::persist::encode(record, &mut out);
+        n > 0 && probe.write(out.get(..n).unwrap_or(&[])).is_ok()
+    }
+
     /// From now on every erase and write stalls `clock` as the board's
     /// flash stalls its CPU.
     pub fn stall_on(&self, clock: &VirtualClock) {
@@ -174,6 +195,13 @@ pub struct NodeOptions {
     /// ([`instance_unique_id`]), as every board has its own; a gateway
     /// names entities after it, so two virtual nodes must not share one.
     pub unique_id: Option<[u8; 12]>,
+    /// A factory calibration of the optical gain, (gain, relative sd),
+    /// e.g. `(1.0, 0.02)`: written into the flash before the node boots,
+    /// if the flash holds no record ([`factory_record`]), as a calibration
+    /// against a target (`Command::CalibrateGain`) would have left it. The
+    /// node then starts with that gain as its prior instead of an unknown
+    /// one. `None`: a new node, its gain unknown (the default).
+    pub gain_calibration: Option<(f64, f64)>,
 }
 
 /// A unique id no other virtual node has while this process runs (nor
@@ -198,7 +226,22 @@ impl Default for NodeOptions {
             calibrate_at_s: Some(1.0),
             estimator: EstimatorParams::default(),
             unique_id: None,
+            gain_calibration: None,
         }
+    }
+}
+
+/// The record a factory-calibrated node has in its flash before its first
+/// boot: the default config, no dark baseline, the gain calibration
+/// `(gain, relative sd)` and, as the learned gain, the same (the node's
+/// prior is then the calibration itself, not widened).
+pub fn factory_record(gain: f64, rel_sd: f64) -> fois_firmware::persist::Record {
+    let estimate = fois_firmware::gain_cal::to_estimate(gain as f32, rel_sd as f32);
+    fois_firmware::persist::Record {
+        config: fois_protocol::Config::default(),
+        baseline: None,
+        gain: Some(estimate),
+        gain_calibration: Some(estimate),
     }
 }
 
@@ -281,6 +324,9 @@ impl VirtualNode {
             }),
             None => SharedStorage::new(opts.storage.clone()),
         };
+        if let Some((gain, rel_sd)) = opts.gain_calibration {
+            storage.write_if_empty(&factory_record(gain, rel_sd));
+        }
         storage.stall_on(&clock);
         let hw = Hardware {
             clock: &clock,
@@ -584,5 +630,70 @@ mod tests {
             },
         );
         assert_eq!(&fixed.node().hello().unique_id, b"FOIS-VIRTUAL");
+    }
+
+    /// The gain the node's first `MeasurementV3` reports.
+    fn first_gain(opts: NodeOptions) -> (f64, f64) {
+        use fois_protocol::{DeviceFrame, DeviceMsg, FrameDecoder};
+        let env = Arc::new(Environment::new(
+            Timeline::new(vec![Segment::new(60.0, Cover::Dry)]),
+            fois_sim::SensorKind::B,
+            1,
+        ));
+        let mut vn = VirtualNode::new(env, opts);
+        let mut dec = FrameDecoder::<{ fois_protocol::MAX_FRAME }>::new();
+        let mut gain = None;
+        while gain.is_none() {
+            vn.step_frame(&mut |bytes: &[u8]| {
+                dec.feed::<DeviceFrame>(bytes, |r| {
+                    if let DeviceMsg::MeasurementV3(m) = r.unwrap().msg {
+                        let g = m.gain.unwrap();
+                        gain.get_or_insert((g.gain(), g.sigma()));
+                    }
+                })
+            });
+        }
+        gain.unwrap()
+    }
+
+    #[test]
+    fn a_factory_calibrated_node_starts_with_its_calibrated_gain() {
+        let calibrated = NodeOptions {
+            calibrate_at_s: None,
+            gain_calibration: Some((1.0, 0.02)),
+            ..NodeOptions::default()
+        };
+        let (g, sd) = first_gain(calibrated);
+        assert!((g - 1.0).abs() < 0.005, "gain {g}");
+        assert!((sd - 0.02).abs() < 0.002, "sd {sd}");
+        let (g, sd) = first_gain(NodeOptions {
+            calibrate_at_s: None,
+            gain_calibration: Some((0.8, 0.05)),
+            ..NodeOptions::default()
+        });
+        assert!((g - 0.8).abs() < 0.005, "gain {g}");
+        assert!((sd - 0.04).abs() < 0.004, "sd {sd}");
+        // A new node: the gain unknown (prior 1 ± 30 %).
+        let (_, sd) = first_gain(NodeOptions {
+            calibrate_at_s: None,
+            ..NodeOptions::default()
+        });
+        assert!(sd > 0.2, "sd {sd}");
+    }
+
+    #[test]
+    fn a_factory_calibration_leaves_a_stored_record_alone() {
+        let record = factory_record(0.9, 0.02);
+        let mut out = [0u8; fois_firmware::persist::MAX_RECORD];
+        let n = fois_firmware::persist::encode(&record, &mut out);
+        let storage = SharedStorage::new(MemStorage::with_bytes(&out[..n]));
+        assert!(!storage.write_if_empty(&factory_record(1.0, 0.02)));
+        let mut buf = [0u8; fois_firmware::persist::MAX_RECORD];
+        let n = storage.snapshot().read(&mut buf).unwrap();
+        assert_eq!(fois_firmware::persist::decode(&buf[..n]).unwrap(), record);
+        let erased = SharedStorage::new(MemStorage::new());
+        assert!(erased.write_if_empty(&record));
+        let n = erased.snapshot().read(&mut buf).unwrap();
+        assert_eq!(fois_firmware::persist::decode(&buf[..n]).unwrap(), record);
     }
 }

@@ -24,6 +24,10 @@
 //! flicker_hz = 100.0
 //! led_factor = 1.0
 //! led_factor_end = 0.7        # LED output -30 % over the segment
+//! gain_tempco_ppm_per_k = -6000.0  # optical gain × exp(κ·(T_optics − 25 °C))
+//! optics_above_air_k = 2.0    # enclosure self-heating (default 0)
+//! face_transmission = 1.0     # fouling: signal × t², ambient × t (default 1)
+//! face_transmission_end = 0.8
 //! adc_noise_lsb = 1.0
 //! thickness_mm = 2.0          # set the thickness at the start (optional)
 //! ntc = "open"                # connected | open | short (default connected)
@@ -80,6 +84,15 @@ pub struct SegmentSpec {
     pub led_factor: Option<f64>,
     /// LED output factor at the segment's end (linear ramp).
     pub led_factor_end: Option<f64>,
+    /// Net temperature coefficient of the optical gain, ppm/K (the node
+    /// config's unit; default 0): `fois_vnode::optics`.
+    pub gain_tempco_ppm_per_k: Option<f64>,
+    /// The optics' temperature above the air (self-heating), K (default 0).
+    pub optics_above_air_k: Option<f64>,
+    /// Face transmission, 0..=1 (default 1: clean).
+    pub face_transmission: Option<f64>,
+    /// Face transmission at the segment's end (linear ramp).
+    pub face_transmission_end: Option<f64>,
     /// ADC noise, rms LSB (default 1).
     pub adc_noise_lsb: Option<f64>,
     /// Thickness at the segment's start, mm (default: carried over).
@@ -158,6 +171,21 @@ pub fn timeline(specs: Vec<SegmentSpec>) -> Result<Timeline, String> {
         seg.flicker_hz = finite(s.flicker_hz, "flicker_hz", 0.0, 10_000.0)?.unwrap_or(100.0);
         seg.led_factor = finite(s.led_factor, "led_factor", 0.0, 10.0)?.unwrap_or(1.0);
         seg.led_factor_end = finite(s.led_factor_end, "led_factor_end", 0.0, 10.0)?;
+        seg.gain_tempco_per_k = crate::optics::tempco_per_k_from_ppm(
+            finite(
+                s.gain_tempco_ppm_per_k,
+                "gain_tempco_ppm_per_k",
+                -50_000.0,
+                50_000.0,
+            )?
+            .unwrap_or(0.0),
+        );
+        seg.optics_above_air_k =
+            finite(s.optics_above_air_k, "optics_above_air_k", -20.0, 60.0)?.unwrap_or(0.0);
+        seg.face_transmission =
+            finite(s.face_transmission, "face_transmission", 0.0, 1.0)?.unwrap_or(1.0);
+        seg.face_transmission_end =
+            finite(s.face_transmission_end, "face_transmission_end", 0.0, 1.0)?;
         seg.adc_noise_lsb = finite(s.adc_noise_lsb, "adc_noise_lsb", 0.0, 500.0)?.unwrap_or(1.0);
         seg.start_thickness_mm = finite(s.thickness_mm, "thickness_mm", 0.0, 15.0)?;
         if let Some(w) = &s.ntc {
@@ -206,6 +234,16 @@ mod tests {
         assert_eq!(segs[0].cover, Cover::Water);
         assert_eq!(segs[1].air_temp_end_c, Some(-5.0));
         assert_eq!(segs[1].led_factor_end, Some(0.7));
+        assert!((segs[1].gain_tempco_per_k + 0.006).abs() < 1e-15);
+        assert_eq!(segs[1].optics_above_air_k, 2.0);
+        assert_eq!(
+            (segs[1].face_transmission, segs[1].face_transmission_end),
+            (1.0, Some(0.8))
+        );
+        assert_eq!(
+            (segs[0].gain_tempco_per_k, segs[0].face_transmission),
+            (0.0, 1.0)
+        );
         assert_eq!(segs[1].ambient_ua, [20.0, 10.0]);
         assert_eq!(segs[1].start_thickness_mm, Some(2.0));
         assert_eq!(segs[0].ntc, NtcWiring::Connected);
@@ -223,6 +261,9 @@ mod tests {
         let e =
             parse("[[segment]]\nduration_s = 1\ncover = \"rime\"\nair_temp_c = 300\n").unwrap_err();
         assert!(e.contains("air_temp_c"), "{e}");
+        let e = parse("[[segment]]\nduration_s = 1\ncover = \"dry\"\nface_transmission = 1.2\n")
+            .unwrap_err();
+        assert!(e.contains("face_transmission"), "{e}");
         let e =
             parse("[[segment]]\nduration_s = 1\ncover = \"dry\"\nntc = \"loose\"\n").unwrap_err();
         assert!(e.contains("segment 1") && e.contains("loose"), "{e}");

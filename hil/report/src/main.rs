@@ -26,11 +26,16 @@ struct Args {
     #[arg(value_name = "FILE_OR_DIR")]
     paths: Vec<PathBuf>,
     /// Run every accuracy scenario (`accuracy = true`) on this many seeds,
-    /// 101, 102, … instead of its file's few: the report's full accuracy
-    /// table (0: the files' own seeds, as CI runs them; 0..=100).
+    /// 101, 102, … (`--accuracy-first-seed`) instead of its file's few: the
+    /// report's full accuracy table (0: the files' own seeds, as CI runs
+    /// them; 0..=100).
     #[arg(long, value_name = "N", default_value_t = 10,
           value_parser = clap::value_parser!(u64).range(0..=100))]
     accuracy_seeds: u64,
+    /// The first of those seeds (the gain scenarios' table uses 231: seeds
+    /// no firmware test and no other scenario uses).
+    #[arg(long, value_name = "SEED", default_value_t = scenario::ACCURACY_FIRST_SEED)]
+    accuracy_first_seed: u64,
     /// Frame period of the accuracy scenarios, ms: the node's default 100
     /// (their files use 1000 to keep CI short; 0: as the files say;
     /// 10..=60000).
@@ -72,7 +77,7 @@ fn report(args: Args) -> anyhow::Result<()> {
         ms => Some(ms),
     };
     let seeds = (args.accuracy_seeds > 0).then_some(args.accuracy_seeds);
-    let scenarios = scenario::for_accuracy(scenarios, seeds, frame_ms);
+    let scenarios = scenario::for_accuracy(scenarios, seeds, args.accuracy_first_seed, frame_ms);
     let start = Instant::now();
     let threads = run::default_threads();
     let results = run::run_all(&scenarios, threads);
