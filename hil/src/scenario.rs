@@ -437,16 +437,8 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
     let config = build_config(&file.config)?;
     validate_commands(&file.commands)?;
     validate_expect(&file.expect)?;
-    if let Some([gain, rel_sd]) = file.gain_calibration {
-        let (lo, hi) = fois_firmware::gain_cal::GAIN_RANGE;
-        ensure!(
-            gain >= f64::from(lo) && gain <= f64::from(hi),
-            "gain_calibration: gain {gain} outside the node's range {lo}..={hi}"
-        );
-        ensure!(
-            rel_sd > 0.0 && rel_sd < 1.0,
-            "gain_calibration: relative sd {rel_sd} must be in (0, 1)"
-        );
+    if let Some(spec) = file.gain_calibration {
+        scenario::gain_calibration(spec).map_err(anyhow::Error::msg)?;
     }
     ensure!(
         file.accuracy || file.expect.not_confidently_thin_from_mm.is_none(),
@@ -630,6 +622,11 @@ fn host_scenario(f: &ScenarioFile) -> anyhow::Result<fois_vnode::Scenario> {
             .map_err(|e| anyhow::anyhow!("[[segment]] {e}"))?,
         sensor: scenario::sensor_named(f.sensor.as_deref()).map_err(anyhow::Error::msg)?,
         seed: f.seed.unwrap_or(1),
+        gain_calibration: f
+            .gain_calibration
+            .map(scenario::gain_calibration)
+            .transpose()
+            .map_err(anyhow::Error::msg)?,
     })
 }
 

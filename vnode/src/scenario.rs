@@ -6,6 +6,7 @@
 //! ```toml
 //! sensor = "b"          # a | b (optional, default b)
 //! seed = 7              # optional, default 1
+//! gain_calibration = [1.0, 0.02]  # a factory calibration of the optical gain (optional)
 //!
 //! [[segment]]
 //! duration_s = 600      # virtual seconds ("inf" allowed for the last)
@@ -47,6 +48,10 @@ pub struct Scenario {
     pub sensor: SensorKind,
     /// Seed (default 1).
     pub seed: u64,
+    /// A factory calibration of the optical gain written to the node's
+    /// flash before it boots: (gain, relative sd); `None`: a new node, its
+    /// gain unknown ([`crate::NodeOptions::gain_calibration`]).
+    pub gain_calibration: Option<(f64, f64)>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -54,7 +59,27 @@ pub struct Scenario {
 struct File {
     sensor: Option<String>,
     seed: Option<u64>,
+    gain_calibration: Option<[f64; 2]>,
     segment: Vec<SegmentSpec>,
+}
+
+/// A `gain_calibration = [gain, relative sd]` as a file gives it, checked:
+/// the gain within what the node's calibration accepts
+/// (`fois_firmware::gain_cal::GAIN_RANGE`), the sd in (0, 1).
+pub fn gain_calibration(spec: [f64; 2]) -> Result<(f64, f64), String> {
+    let [gain, rel_sd] = spec;
+    let (lo, hi) = fois_firmware::gain_cal::GAIN_RANGE;
+    if !(gain >= f64::from(lo) && gain <= f64::from(hi)) {
+        return Err(format!(
+            "gain_calibration: gain {gain} outside the node's range {lo}..={hi}"
+        ));
+    }
+    if !(rel_sd > 0.0 && rel_sd < 1.0) {
+        return Err(format!(
+            "gain_calibration: relative sd {rel_sd} must be in (0, 1)"
+        ));
+    }
+    Ok((gain, rel_sd))
 }
 
 /// One `[[segment]]` table as written in a file (every key but
@@ -204,6 +229,7 @@ pub fn parse(text: &str) -> Result<Scenario, String> {
         timeline: timeline(f.segment)?,
         sensor: sensor_named(f.sensor.as_deref())?,
         seed: f.seed.unwrap_or(1),
+        gain_calibration: f.gain_calibration.map(gain_calibration).transpose()?,
     })
 }
 
@@ -229,6 +255,11 @@ mod tests {
             .join("\n");
         let s = parse(&text).unwrap();
         assert_eq!((s.sensor, s.seed), (SensorKind::B, 7));
+        assert_eq!(s.gain_calibration, Some((1.0, 0.02)));
+        for bad in ["[5.0, 0.02]", "[1.0, 0.0]", "[nan, 0.02]", "[1.0, 1.0]"] {
+            let t = text.replace("[1.0, 0.02]", bad);
+            assert!(parse(&t).unwrap_err().contains("gain_calibration"), "{bad}");
+        }
         let segs = s.timeline.segments();
         assert_eq!(segs.len(), 2);
         assert_eq!(segs[0].cover, Cover::Water);

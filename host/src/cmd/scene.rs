@@ -130,6 +130,9 @@ pub struct Scene {
     pub speed: f64,
     /// Real duration.
     pub duration: Option<Duration>,
+    /// The node's factory gain calibration (gain, relative sd), from a
+    /// scenario file; `None`: its gain unknown.
+    pub gain_calibration: Option<(f64, f64)>,
 }
 
 impl SceneArgs {
@@ -146,6 +149,7 @@ impl SceneArgs {
                 seed: self.seed.unwrap_or(sc.seed),
                 speed,
                 duration,
+                gain_calibration: sc.gain_calibration,
             });
         }
         let ice = self.ice.map_or(d.ice, Cover::from);
@@ -173,6 +177,7 @@ impl SceneArgs {
             seed: self.seed.unwrap_or(1),
             speed,
             duration,
+            gain_calibration: None,
         })
     }
 }
@@ -228,6 +233,7 @@ pub fn build_node_with_state(scene: &Scene, state: Option<PathBuf>) -> VirtualNo
         NodeOptions {
             seed: scene.seed,
             state_file: state,
+            gain_calibration: scene.gain_calibration,
             ..NodeOptions::default()
         },
     )
