@@ -37,8 +37,8 @@ def read(c, unit, fc, address, count):
     f = c.read_input_registers if fc == 4 else c.read_holding_registers
     try:
         rr = f(address, count=count, device_id=unit)
-    except ModbusException as e:
-        # No answer at all (the connection closed, a time-out).
+    except (ModbusException, OSError) as e:
+        # No answer at all (the connection closed or reset, a time-out).
         return {"error": str(e)}
     if rr.isError():
         return {"exception": rr.exception_code}
@@ -81,35 +81,44 @@ def main(argv):
         answers, failures, latencies, failed = [0], [], [], [0]
         start = threading.Barrier(clients)
 
+        def fail(k, what):
+            with lock:
+                failed[0] += 1
+                failures.append(f"client {k}: {what}")
+
         def client(k):
+            # A client the server refuses (connection closed at once, or not
+            # accepted) counts one failure and stops; it still takes its
+            # place at the start line so that the others start together.
+            c = None
             try:
                 c = connect(host, port)
             except SystemExit as e:
-                with lock:
-                    failures.append(f"client {k}: {e}")
-                start.abort()
-                return
+                fail(k, e)
             try:
                 start.wait()
             except threading.BrokenBarrierError:
-                c.close()
+                pass
+            if c is None:
                 return
-            for _ in range(rounds):
-                for u in units:
-                    t = time.monotonic()
-                    r = read(c, u, 4, 0, REGISTERS)
-                    dt = (time.monotonic() - t) * 1000
-                    with lock:
-                        latencies.append(dt)
-                        if "registers" in r and len(r["registers"]) == REGISTERS:
-                            answers[0] += 1
-                        else:
-                            failed[0] += 1
-                            failures.append(f"client {k} unit {u}: {r}")
-                    if "error" in r:
-                        c.close()  # no connection: this client stops
-                        return
-            c.close()
+            try:
+                for _ in range(rounds):
+                    for u in units:
+                        t = time.monotonic()
+                        r = read(c, u, 4, 0, REGISTERS)
+                        dt = (time.monotonic() - t) * 1000
+                        with lock:
+                            latencies.append(dt)
+                            if "registers" in r and len(r["registers"]) == REGISTERS:
+                                answers[0] += 1
+                        if not ("registers" in r and len(r["registers"]) == REGISTERS):
+                            fail(k, f"unit {u}: {r}")
+                        if "error" in r:
+                            return  # no connection: this client stops
+            except Exception as e:  # anything else the client library raises
+                fail(k, repr(e))
+            finally:
+                c.close()
 
         threads = [threading.Thread(target=client, args=(k,)) for k in range(clients)]
         t0 = time.monotonic()
