@@ -597,3 +597,114 @@ fn virtual_node_state_file_keeps_the_config_across_restarts() {
     let line = out.lines().find(|l| l.starts_with("onset_frames")).unwrap();
     assert_eq!(line.split_whitespace().nth(1), Some("17"), "{line}");
 }
+
+/// Mean of column `col` over the measurement rows of a log.
+fn mean_of(t: &LogTable, col: &str) -> f64 {
+    let (kind, c) = (t.col("kind").unwrap(), t.col(col).unwrap());
+    let v: Vec<f64> = t
+        .rows
+        .iter()
+        .filter(|r| r[kind] == "measurement")
+        .filter_map(|r| r[c].parse().ok())
+        .collect();
+    assert!(!v.is_empty(), "no {col}");
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+#[test]
+fn calibrate_gain_and_reset_gain_as_a_user_runs_them() {
+    // A steady reference on the face: 5 mm of rime that does not grow.
+    let dir = tempfile::tempdir().unwrap();
+    let scenario = dir.path().join("target.toml");
+    std::fs::write(
+        &scenario,
+        "[[segment]]\nduration_s = \"inf\"\ncover = \"rime\"\nthickness_mm = 5.0\nair_temp_c = -8.0\n",
+    )
+    .unwrap();
+    let node = NodeProc::start(&["--speed", "10", "--scenario", scenario.to_str().unwrap()]);
+    let p = node.path.as_str();
+    let log = dir.path().join("log.csv");
+    let monitor = |log: &Path| {
+        let (code, _, err) = foisctl(&[
+            "monitor",
+            "--port",
+            p,
+            "--log",
+            log.to_str().unwrap(),
+            "--duration",
+            "1",
+            "--plain",
+        ]);
+        assert_eq!(code, 0, "{err}");
+        LogTable::read(log).unwrap()
+    };
+    // A new node: its gain unknown, wide.
+    let t = monitor(&log);
+    let (i1, i2) = (mean_of(&t, "i1_ua"), mean_of(&t, "i2_ua"));
+    assert!(i1 > 5.0 && i2 > 2.0, "{i1} {i2}");
+    // (5 mm of rime tells a new node its gain within ~10 % at once.)
+    let new_sigma = mean_of(&t, "est_gain_sigma");
+    assert!(new_sigma > 0.05, "σ {new_sigma}");
+
+    // The target's currents at gain 1 are 0.9× what the face reads: gain 1.11.
+    let (t1, t2) = (format!("{:.3}", i1 / 1.11), format!("{:.3}", i2 / 1.11));
+    let (code, out, err) = foisctl(&[
+        "calibrate-gain",
+        "--port",
+        p,
+        "--i1-ua",
+        &t1,
+        "--i2-ua",
+        &t2,
+    ]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("GainCalibrated"), "{out}");
+    let log2 = dir.path().join("log2.csv");
+    let t = monitor(&log2);
+    let (g, s) = (mean_of(&t, "est_gain"), mean_of(&t, "est_gain_sigma"));
+    assert!((g - 1.11).abs() < 0.025, "gain {g}");
+    assert!(s < 0.03, "σ {s}");
+
+    // A target of another shape (channel 2 four times too large): refused,
+    // exit 6, the reason said, the gain unchanged.
+    let wrong = format!("{:.3}", 4.0 * i2 / 1.11);
+    let (code, _, err) = foisctl(&[
+        "calibrate-gain",
+        "--port",
+        p,
+        "--i1-ua",
+        &t1,
+        "--i2-ua",
+        &wrong,
+    ]);
+    assert_eq!(code, 6, "{err}");
+    assert!(
+        err.contains("implied gain is outside the plausible range"),
+        "{err}"
+    );
+    // Bad target values never reach the node: usage errors.
+    for bad in ["0", "-3", "nan", "x"] {
+        let (code, _, err) = foisctl(&[
+            "calibrate-gain",
+            "--port",
+            p,
+            "--i1-ua",
+            bad,
+            "--i2-ua",
+            "8",
+        ]);
+        assert_eq!(code, 2, "{bad}: {err}");
+    }
+    let log3 = dir.path().join("log3.csv");
+    let t = monitor(&log3);
+    assert!((mean_of(&t, "est_gain") - 1.11).abs() < 0.02);
+
+    // Forgotten: wide again.
+    let (code, out, err) = foisctl(&["reset-gain", "--port", p]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("GainReset"), "{out}");
+    let log4 = dir.path().join("log4.csv");
+    let t = monitor(&log4);
+    assert!(mean_of(&t, "est_gain_sigma") > 0.06);
+    assert!((mean_of(&t, "est_gain") - 1.0).abs() < 0.1, "the face's own gain");
+}
