@@ -706,5 +706,8 @@ fn calibrate_gain_and_reset_gain_as_a_user_runs_them() {
     let log4 = dir.path().join("log4.csv");
     let t = monitor(&log4);
     assert!(mean_of(&t, "est_gain_sigma") > 0.06);
-    assert!((mean_of(&t, "est_gain") - 1.0).abs() < 0.1, "the face's own gain");
+    assert!(
+        (mean_of(&t, "est_gain") - 1.0).abs() < 0.1,
+        "the face's own gain"
+    );
 }

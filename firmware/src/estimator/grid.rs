@@ -164,15 +164,13 @@ impl Grid {
             };
         }
         // The predictive likelihood of a fresh grid is the prior's.
-        let (mut z, mut zn) = (LogSum::new(), 0.0f32);
+        let mut z = Predictive::new(s);
         let mut values = [0.0f32; 1 + 3 * ROWS];
         for_each(x, gain, s, &mut |st, l, _| {
             if let Some(v) = values.get_mut(st) {
                 *v = l;
             }
-            let f = static_factor(s, st);
-            z.add(l + fast_math::ln(f.max(f32::MIN_POSITIVE)));
-            zn += f;
+            z.add(static_factor(s, st), l);
         });
         for (st, v) in values.iter().enumerate() {
             if let Some(c) = self.state_mut(st) {
@@ -183,7 +181,7 @@ impl Grid {
         self.exponentiate(max);
         Step {
             update: Update::Initialised,
-            ln_z: Some(z.ln() - fast_math::ln(zn.max(f32::MIN_POSITIVE))),
+            ln_z: z.ln_z(),
             best_q,
         }
     }
@@ -205,18 +203,12 @@ impl Grid {
         let w = 1.0 - alpha;
         let mut best_q = f32::INFINITY;
         let mut max = f32::NEG_INFINITY;
-        // Σ p̂·F·L in linear terms relative to the largest ln L any state can
-        // have (det C ≥ r₁r₂), so no term overflows; one that underflows is
-        // a state whose fit is hopeless.
-        let l_ref = -0.5 * fast_math::ln(s.r_na2[0] * s.r_na2[1]);
-        let (mut z, mut zn) = (0.0f32, 0.0f32);
+        let mut z = Predictive::new(s);
         let dry_l = x.map(|x| log_lik_dry(x, s));
         if let Some((l, _)) = dry_l
             && self.dry > 0.0
         {
-            let f = self.dry * s.dry_factor;
-            z += f * fast_math::exp(l - l_ref);
-            zn += f;
+            z.add(self.dry * s.dry_factor, l);
         }
         self.dry = tempered(self.dry, alpha, w, dry_l, &mut best_q, &mut max);
         for k in 0..MEDIA.len() {
@@ -229,9 +221,7 @@ impl Grid {
                     None
                 };
                 if let Some((l, _)) = l {
-                    let f = *c * f_row;
-                    z += f * fast_math::exp_inline(l - l_ref);
-                    zn += f;
+                    z.add(*c * f_row, l);
                 }
                 f_row *= s.row_ratio[k];
                 *c = tempered(*c, alpha, w, l, &mut best_q, &mut max);
@@ -241,12 +231,7 @@ impl Grid {
         let mut ln_z = None;
         if let Some(x) = x {
             update = Update::Measured;
-            if zn > 0.0 && z > 0.0 {
-                ln_z = Some(l_ref + fast_math::ln(z) - fast_math::ln(zn));
-            } else if zn > 0.0 {
-                // Every state's fit underflowed: hopeless for this gain.
-                ln_z = Some(l_ref - 100.0);
-            }
+            ln_z = z.ln_z();
             if best_q > p.outlier_distance2 {
                 let (m, fits) = self.not_reachable(x, gain, w, max, p, s);
                 max = m;
@@ -502,40 +487,49 @@ fn static_factor(s: &Shared, st: usize) -> f32 {
     }
 }
 
-/// ln Σ eᵛ, accumulated without overflow (a running maximum).
+/// The predictive likelihood Σ F·L / Σ F of the currents (F the weight of
+/// a state before the update: predicted probability × static factor), summed
+/// in linear terms relative to the largest ln L any state can have
+/// (det C ≥ r₁r₂): no term overflows; one that underflows is a state whose
+/// fit is hopeless.
 #[derive(Debug, Clone, Copy)]
-struct LogSum {
-    max: f32,
-    sum: f32,
+struct Predictive {
+    l_ref: f32,
+    z: f32,
+    weight: f32,
 }
 
-impl LogSum {
-    fn new() -> Self {
-        LogSum {
-            max: f32::NEG_INFINITY,
-            sum: 0.0,
+impl Predictive {
+    fn new(s: &Shared) -> Self {
+        Predictive {
+            l_ref: -0.5 * fast_math::ln(s.r_na2[0] * s.r_na2[1]),
+            z: 0.0,
+            weight: 0.0,
         }
     }
 
+    /// A state of weight `f` whose ln L is `ln_l`.
     #[inline(always)]
-    fn add(&mut self, v: f32) {
-        if v.is_nan() {
-            return;
-        }
-        if v > self.max {
-            self.sum = self.sum * fast_math::exp_inline(self.max - v) + 1.0;
-            self.max = v;
-        } else {
-            self.sum += fast_math::exp_inline(v - self.max);
+    fn add(&mut self, f: f32, ln_l: f32) {
+        if f > 0.0 {
+            self.z += f * fast_math::exp_inline(ln_l - self.l_ref);
+            self.weight += f;
         }
     }
 
-    fn ln(&self) -> f32 {
-        if self.sum > 0.0 && self.max.is_finite() {
-            self.max + fast_math::ln(self.sum)
-        } else {
-            f32::NEG_INFINITY
+    /// ln of the predictive likelihood; `None` without any weight. Every
+    /// state's fit underflowing gives a floor 100 nats below the best
+    /// possible (hopeless for this gain).
+    fn ln_z(&self) -> Option<f32> {
+        if self.weight.is_nan() || self.weight <= 0.0 {
+            return None;
         }
+        let lz = if self.z > 0.0 {
+            fast_math::ln(self.z)
+        } else {
+            -100.0
+        };
+        Some(self.l_ref + lz - fast_math::ln(self.weight))
     }
 }
 
