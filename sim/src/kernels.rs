@@ -9,11 +9,83 @@ use glam::DVec2;
 
 use crate::geometry::Bundles;
 
-/// A kernel compiled twice: for the CPU's AVX2 and FMA when it has them (checked at run
-/// time) and for the baseline x86-64 (or any other target). Both run the same body, so the
-/// results are bit-identical (an explicit `mul_add` is exactly rounded either way, one
-/// instruction with FMA and a libm call without; the compiler never fuses a multiply and an
-/// add on its own).
+/// The instruction sets the vectorised kernels are compiled for. Every tier runs the same
+/// IEEE-754 operations in the same order per lane, so the results are bit-identical on all
+/// of them (the golden-value tests and the kernels' own tests check this); only the speed
+/// differs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Isa {
+    /// The target's baseline (SSE2 on x86-64): two f64 lanes.
+    Baseline,
+    /// AVX2 and FMA: four f64 lanes.
+    Avx2,
+    /// AVX-512 (F, DQ, VL) with FMA: eight f64 lanes, 64-bit integer multiplies in vectors
+    /// (the counter-based streams' hashes and the PCG draws).
+    Avx512,
+}
+
+impl Isa {
+    /// Name as the environment variable `FOIS_SIM_ISA` and `foisctl sim bench` spell it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Isa::Baseline => "baseline",
+            Isa::Avx2 => "avx2",
+            Isa::Avx512 => "avx512",
+        }
+    }
+
+    /// The best tier this CPU runs.
+    fn detected() -> Isa {
+        #[cfg(target_arch = "x86_64")]
+        {
+            use std::arch::is_x86_feature_detected as has;
+            if has!("avx512f") && has!("avx512dq") && has!("avx512vl") && has!("fma") {
+                return Isa::Avx512;
+            }
+            if has!("avx2") && has!("fma") {
+                return Isa::Avx2;
+            }
+        }
+        Isa::Baseline
+    }
+}
+
+/// The tier the kernels run on: the best this CPU has, capped by the environment variable
+/// `FOIS_SIM_ISA` (`baseline`, `avx2` or `avx512`; to measure one tier against another) and,
+/// on the calling thread, by [`with_isa`]. Detected once per process.
+pub fn isa() -> Isa {
+    static GLOBAL: std::sync::OnceLock<Isa> = std::sync::OnceLock::new();
+    let global = *GLOBAL.get_or_init(|| {
+        let best = Isa::detected();
+        let cap = match std::env::var("FOIS_SIM_ISA").as_deref() {
+            Ok("baseline") => Isa::Baseline,
+            Ok("avx2") => Isa::Avx2,
+            _ => Isa::Avx512,
+        };
+        best.min(cap)
+    });
+    THREAD_CAP
+        .with(|c| c.get())
+        .map_or(global, |cap| global.min(cap))
+}
+
+thread_local! {
+    static THREAD_CAP: std::cell::Cell<Option<Isa>> = const { std::cell::Cell::new(None) };
+}
+
+/// Run `f` with the kernels of this thread capped at `cap` (tests compare the tiers).
+pub fn with_isa<R>(cap: Isa, f: impl FnOnce() -> R) -> R {
+    let before = THREAD_CAP.with(|c| c.replace(Some(cap)));
+    let out = f();
+    THREAD_CAP.with(|c| c.set(before));
+    out
+}
+
+/// A kernel compiled three times: for AVX-512 and for AVX2 with FMA when the CPU has them
+/// ([`isa`], checked at run time) and for the baseline x86-64 (or any other target). All
+/// run the same body, so the results are bit-identical (an explicit `mul_add` is exactly
+/// rounded either way, one instruction with FMA and a libm call without; the compiler never
+/// fuses a multiply and an add on its own).
 macro_rules! vector_kernel {
     ($(#[$meta:meta])* $vis:vis fn $name:ident($($arg:ident: $ty:ty),* $(,)?) $body:block) => {
         $(#[$meta])*
@@ -27,12 +99,19 @@ macro_rules! vector_kernel {
             fn kernel_avx2($($arg: $ty),*) {
                 kernel_body($($arg),*)
             }
+            $(#[$meta])*
             #[cfg(target_arch = "x86_64")]
-            if std::arch::is_x86_feature_detected!("avx2")
-                && std::arch::is_x86_feature_detected!("fma")
-            {
-                // SAFETY: the CPU supports AVX2 and FMA (checked just above).
-                return unsafe { kernel_avx2($($arg),*) };
+            #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
+            fn kernel_avx512($($arg: $ty),*) {
+                kernel_body($($arg),*)
+            }
+            #[cfg(target_arch = "x86_64")]
+            match $crate::kernels::isa() {
+                // SAFETY: `isa` reports a tier only when the CPU has its features.
+                $crate::kernels::Isa::Avx512 => return unsafe { kernel_avx512($($arg),*) },
+                // SAFETY: as above.
+                $crate::kernels::Isa::Avx2 => return unsafe { kernel_avx2($($arg),*) },
+                $crate::kernels::Isa::Baseline => {}
             }
             kernel_body($($arg),*)
         }

@@ -30,6 +30,7 @@ mod tracer;
 
 pub use analytic::analytic_curve;
 pub use geometry::{Geometry, Region};
+pub use kernels::{Isa, isa, with_isa};
 pub use model::{
     Coupling, Curve, CurvePoint, DiffuseFresnel, IceKind, IceParams, SensorKind, SensorModel,
     SimConfig, SimError, accretion_curve,

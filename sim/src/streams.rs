@@ -175,9 +175,14 @@ const fn lcg_power(k: u32, increment: u64) -> (u64, u64) {
     (m, c)
 }
 
-/// The first `out.len()` outputs of `Pcg32::new(state, stream)`, exactly, four at a time:
-/// four interleaved copies of the LCG, each stepping by four, so the steps do not wait on
-/// each other (one 64-bit multiply-add chain per output otherwise bounds the loop).
+/// Interleaved copies of the LCG in [`fill_u32`]: one AVX-512 vector of 64-bit lanes.
+const PCG_LANES: usize = 8;
+
+crate::kernels::vector_kernel! {
+/// The first `out.len()` outputs of `Pcg32::new(state, stream)`, exactly, eight at a time:
+/// eight interleaved copies of the LCG, each stepping by eight, so the steps do not wait on
+/// each other (one 64-bit multiply-add chain per output otherwise bounds the loop); with
+/// AVX-512 the eight are one vector.
 pub(crate) fn fill_u32(state: u64, stream: u64, out: &mut [u32]) {
     let inc = (stream << 1) | 1;
     // Pcg32::new: state + inc, one step; the first output is of the state after that.
@@ -186,19 +191,22 @@ pub(crate) fn fill_u32(state: u64, stream: u64, out: &mut [u32]) {
         .wrapping_mul(PCG_MULTIPLIER)
         .wrapping_add(inc);
     let (m1, c1) = lcg_power(1, inc);
-    let step = |s: u64| s.wrapping_mul(m1).wrapping_add(c1);
-    let mut lanes = [s0, step(s0), step(step(s0)), step(step(step(s0)))];
-    let (m4, c4) = lcg_power(4, inc);
-    let mut chunks = out.chunks_exact_mut(4);
+    let mut lanes = [s0; PCG_LANES];
+    for k in 1..PCG_LANES {
+        lanes[k] = lanes[k - 1].wrapping_mul(m1).wrapping_add(c1);
+    }
+    let (m8, c8) = lcg_power(PCG_LANES as u32, inc);
+    let mut chunks = out.chunks_exact_mut(PCG_LANES);
     for chunk in &mut chunks {
         for (o, s) in chunk.iter_mut().zip(lanes.iter_mut()) {
             *o = pcg_output(*s);
-            *s = s.wrapping_mul(m4).wrapping_add(c4);
+            *s = s.wrapping_mul(m8).wrapping_add(c8);
         }
     }
     for (o, s) in chunks.into_remainder().iter_mut().zip(lanes) {
         *o = pcg_output(s);
     }
+}
 }
 
 #[cfg(test)]

@@ -319,9 +319,7 @@ impl<'m> Accretion<'m> {
         let m = self.m;
         let cfg = &m.cfg;
         let (ray, a, nt, first_wet) = (&f.ray, f.a, self.nt, self.first_wet);
-        let i0 = (first_wet..nt)
-            .find(|&i| m.thick[i] + a > 0.0)
-            .unwrap_or(nt);
+        let i0 = first_index(first_wet, nt, -a * self.inv_step, |i| m.thick[i] + a > 0.0);
         let dray = DiffuseRay {
             v: ray.dir,
             normal: self.normal,
@@ -341,7 +339,11 @@ impl<'m> Accretion<'m> {
         // draws are the stream's first ones, in order).
         let reach = (ray.p0 - self.face_centre).length() + self.face_radius;
         let h0_max = dray.h0_cutoff_mm(reach);
-        let i_end = i0 + m.thick[i0..nt].partition_point(|&d| d + a <= h0_max);
+        // Negated, so that a NaN bound keeps every thickness.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
+        let i_end = first_index(i0, nt, (h0_max - a) * self.inv_step, |i| {
+            !(m.thick[i] + a <= h0_max)
+        });
         self.diffuse_draws.resize(i_end - i0, 0);
         fill_u32(self.key, diffuse_stream(f.r), &mut self.diffuse_draws);
         reflect_diffuse(
@@ -499,6 +501,26 @@ fn layers_covered(q_of: &impl Fn(u32) -> f64, first_wet: usize, nt: usize) -> u3
         j += 1;
     }
     j
+}
+
+/// The first index i in `from..to` at which `beyond(i)` holds (`to` if none), for a
+/// predicate that holds from some index on: searched from the guess `near` (an index as
+/// an f64, any value), so that it costs the distance from the guess, not a scan or a
+/// binary search. The same answer as `(from..to).find(beyond)`.
+#[inline]
+fn first_index(from: usize, to: usize, near: f64, beyond: impl Fn(usize) -> bool) -> usize {
+    if from >= to {
+        return from;
+    }
+    // `as` saturates and sends NaN to 0.
+    let mut i = (near.max(0.0) as usize).clamp(from, to);
+    while i > from && beyond(i - 1) {
+        i -= 1;
+    }
+    while i < to && !beyond(i) {
+        i += 1;
+    }
+    i
 }
 
 /// The smallest integer i ≥ 0 with i ≥ q, as an index (q ≤ `usize::MAX`): ceil without a

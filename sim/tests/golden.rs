@@ -228,6 +228,30 @@ fn single_accretions_are_bit_identical_to_the_golden_values() {
     check(&got, GOLDEN_CURVES);
 }
 
+/// Every instruction-set tier of the kernels that this CPU runs (AVX-512, AVX2, the
+/// baseline) gives the golden values, bit for bit: the tiers differ in speed only.
+#[test]
+fn every_kernel_tier_gives_the_golden_values() {
+    let tiers: Vec<Isa> = [Isa::Baseline, Isa::Avx2, Isa::Avx512]
+        .into_iter()
+        .filter(|&t| t <= isa())
+        .collect();
+    // CI runs on x86-64 with AVX2 at least: a build that loses the tiers must not pass.
+    #[cfg(target_arch = "x86_64")]
+    assert!(tiers.len() >= 2, "only {tiers:?} on this CPU");
+    for tier in tiers {
+        let got: Vec<Got> = with_isa(tier, || {
+            assert_eq!(isa(), tier, "the cap holds on this thread");
+            curve_cases()
+                .iter()
+                .map(|(n, c, s, r)| compute_curve(n, c, *s, *r))
+                .collect()
+        });
+        eprintln!("tier {}", tier.name());
+        check(&got, GOLDEN_CURVES);
+    }
+}
+
 #[test]
 fn monte_carlo_and_crlb_are_bit_identical_to_the_golden_values() {
     let mut short = cfg(IceKind::Glazed, SensorKind::A);
