@@ -163,26 +163,28 @@ fn pcg_output(state: u64) -> u32 {
     xsh.rotate_right(rot)
 }
 
-/// One step of the LCG `k` times: (multiplier, increment) of x ↦ m·x + c repeated k times.
-const fn lcg_power(k: u32, increment: u64) -> (u64, u64) {
-    let (mut m, mut c) = (1u64, 0u64);
-    let mut i = 0;
-    while i < k {
-        m = m.wrapping_mul(PCG_MULTIPLIER);
-        c = c.wrapping_mul(PCG_MULTIPLIER).wrapping_add(increment);
-        i += 1;
-    }
-    (m, c)
-}
+/// Interleaved copies of the LCG in [`fill_u32`]: two AVX-512 vectors of 64-bit lanes
+/// (one vector's multiply-add chain waits on its multiply's latency).
+const PCG_LANES: usize = 16;
 
-/// Interleaved copies of the LCG in [`fill_u32`]: one AVX-512 vector of 64-bit lanes.
-const PCG_LANES: usize = 8;
+/// The LCG stepped k times is x ↦ Mᵏ·x + inc·Gₖ with Gₖ = 1 + M + … + Mᵏ⁻¹ (M the
+/// multiplier): (Mᵏ, Gₖ) for k = 0 … `PCG_LANES`, independent of the stream's increment.
+const PCG_JUMPS: [(u64, u64); PCG_LANES + 1] = {
+    let mut t = [(1u64, 0u64); PCG_LANES + 1];
+    let mut k = 1;
+    while k <= PCG_LANES {
+        let (m, g) = t[k - 1];
+        t[k] = (m.wrapping_mul(PCG_MULTIPLIER), g.wrapping_mul(PCG_MULTIPLIER).wrapping_add(1));
+        k += 1;
+    }
+    t
+};
 
 crate::kernels::vector_kernel! {
-/// The first `out.len()` outputs of `Pcg32::new(state, stream)`, exactly, eight at a time:
-/// eight interleaved copies of the LCG, each stepping by eight, so the steps do not wait on
-/// each other (one 64-bit multiply-add chain per output otherwise bounds the loop); with
-/// AVX-512 the eight are one vector.
+/// The first `out.len()` outputs of `Pcg32::new(state, stream)`, exactly, sixteen at a
+/// time: sixteen interleaved copies of the LCG, each stepping by sixteen, so the steps do
+/// not wait on each other (one 64-bit multiply-add chain per output otherwise bounds the
+/// loop); with AVX-512 the sixteen are two vectors.
 pub(crate) fn fill_u32(state: u64, stream: u64, out: &mut [u32]) {
     let inc = (stream << 1) | 1;
     // Pcg32::new: state + inc, one step; the first output is of the state after that.
@@ -190,17 +192,17 @@ pub(crate) fn fill_u32(state: u64, stream: u64, out: &mut [u32]) {
         .wrapping_add(inc)
         .wrapping_mul(PCG_MULTIPLIER)
         .wrapping_add(inc);
-    let (m1, c1) = lcg_power(1, inc);
-    let mut lanes = [s0; PCG_LANES];
-    for k in 1..PCG_LANES {
-        lanes[k] = lanes[k - 1].wrapping_mul(m1).wrapping_add(c1);
+    let mut lanes = [0u64; PCG_LANES];
+    for (s, &(m, g)) in lanes.iter_mut().zip(&PCG_JUMPS) {
+        *s = s0.wrapping_mul(m).wrapping_add(inc.wrapping_mul(g));
     }
-    let (m8, c8) = lcg_power(PCG_LANES as u32, inc);
+    let (m16, g16) = PCG_JUMPS[PCG_LANES];
+    let c16 = inc.wrapping_mul(g16);
     let mut chunks = out.chunks_exact_mut(PCG_LANES);
     for chunk in &mut chunks {
         for (o, s) in chunk.iter_mut().zip(lanes.iter_mut()) {
             *o = pcg_output(*s);
-            *s = s.wrapping_mul(m8).wrapping_add(c8);
+            *s = s.wrapping_mul(m16).wrapping_add(c16);
         }
     }
     for (o, s) in chunks.into_remainder().iter_mut().zip(lanes) {
