@@ -21,7 +21,7 @@ use glam::DVec2;
 
 use crate::consts::BUBBLE_LAYER_MM;
 use crate::geometry::Bundles;
-use crate::kernels::{small_int, u32_to_f64, vector_kernel};
+use crate::kernels::{LANES, small_int, u32_to_f64, vector_kernel};
 use crate::streams::{CounterStream, INV_2_POW_32};
 
 /// Bits of a draw that index the bucket table of [`GapSampler`].
@@ -167,10 +167,6 @@ pub(crate) struct BubbleLanes {
     out_cos_b: Vec<f64>,
     out_reach_mm: Vec<f64>,
 }
-
-/// The lanes are padded to a multiple of this: two AVX2 vectors of f64, the step of the
-/// vectorised loop, so that no bubble is left to a scalar remainder.
-const LANES: usize = 8;
 
 impl BubbleLanes {
     /// Number of bubbles.

@@ -6,7 +6,7 @@
 use glam::DVec3;
 
 use crate::geometry::Bundles;
-use crate::kernels::{small_sin_cos, vector_kernel};
+use crate::kernels::{Fresnel, LANES, exp_small, small_sin_cos, vector_kernel};
 
 /// What the diffuse reflection of one ray needs besides its thicknesses and draws.
 #[derive(Clone, Copy, Debug)]
@@ -98,7 +98,8 @@ pub(crate) struct DiffuseLanes {
 }
 
 /// The diffusely reflected ray of one source ray at each thickness `thick_mm[n]` (all with
-/// the surface above the fibre, h0 = d + a > 0), its micro-facet turned by
+/// the surface above the fibre, h0 = d + a > 0; only the first `valid` count, the others
+/// pad the lanes to whole vectors), its micro-facet turned by
 /// δ_R = δ_max·(2u − 1) with u = `draws[n]`·2⁻³² (eq. 3.22). Two passes: where every ray
 /// lands (all lanes), then the Fresnel factors and the absorption of the third that land
 /// on a bundle.
@@ -106,10 +107,12 @@ pub(crate) fn reflect_diffuse(
     ray: &DiffuseRay,
     bundles: &Bundles,
     thick_mm: &[f64],
+    valid: usize,
     draws: &[u32],
     out: &mut DiffuseLanes,
 ) {
     let n = thick_mm.len();
+    let valid = valid.min(n);
     out.slot.resize(n, 2);
     for d in &mut out.dir {
         d.resize(n, 0.0);
@@ -117,30 +120,40 @@ pub(crate) fn reflect_diffuse(
     out.cos_fresnel.resize(n, 0.0);
     out.path_mm.resize(n, 0.0);
     diffuse_landing(ray, bundles, thick_mm, draws, out);
-    // The landed lanes and their inputs packed, so that the second pass runs on whole
-    // vectors.
-    out.landed.resize(n, 0);
+    // The landed lanes among the valid ones and their inputs packed, so that the second
+    // pass runs on whole vectors (padded with lanes of normal incidence and no path).
+    let room = valid.next_multiple_of(LANES);
+    out.landed.resize(room, 0);
     for p in &mut out.packed {
-        p.resize(n, 0.0);
+        p.resize(room, 0.0);
     }
     let [cos_p, rdz_p, path_p] = &mut out.packed;
-    let (landed, cos_p, rdz_p, path_p) = (
-        &mut out.landed[..n],
-        &mut cos_p[..n],
-        &mut rdz_p[..n],
-        &mut path_p[..n],
-    );
     let (slot, cos_f, dir_z, path) = (
-        &out.slot[..n],
-        &out.cos_fresnel[..n],
-        &out.dir[2][..n],
-        &out.path_mm[..n],
+        &out.slot[..valid],
+        &out.cos_fresnel[..valid],
+        &out.dir[2][..valid],
+        &out.path_mm[..valid],
     );
-    let m = pack_landed(slot, [cos_f, dir_z, path], landed, [cos_p, rdz_p, path_p]);
+    let m = pack_landed(
+        slot,
+        [cos_f, dir_z, path],
+        &mut out.landed,
+        [cos_p, rdz_p, path_p],
+    );
+    let padded = m.next_multiple_of(LANES);
+    cos_p[m..padded].fill(1.0);
+    rdz_p[m..padded].fill(1.0);
+    path_p[m..padded].fill(0.0);
     out.landed.truncate(m);
-    out.weight.resize(m, 0.0);
-    let [cos_p, rdz_p, path_p] = &out.packed;
-    diffuse_weights(ray, &cos_p[..m], &rdz_p[..m], &path_p[..m], &mut out.weight);
+    out.weight.resize(padded, 0.0);
+    diffuse_weights(
+        ray,
+        &cos_p[..padded],
+        &rdz_p[..padded],
+        &path_p[..padded],
+        &mut out.weight,
+    );
+    out.weight.truncate(m);
 }
 
 /// The lanes whose `slot` is below 2, packed: their numbers into `landed`, and from
@@ -311,84 +324,6 @@ fn diffuse_weights(
 }
 }
 
-/// The Fresnel reflectance of one interface (`laws::fr_dielectric`, eqs. 3.8, 3.9, 3.12) with
-/// one division instead of two: R = ½ (r_⊥² + r_∥²) over the common denominator. Agrees with
-/// `fr_dielectric` to rounding (tested).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct Fresnel {
-    n_i: f64,
-    n_t: f64,
-    eta2: f64,
-}
-
-impl Fresnel {
-    #[inline(always)]
-    pub(crate) fn new(n_i: f64, n_t: f64) -> Self {
-        let eta = n_i / n_t;
-        Fresnel {
-            n_i,
-            n_t,
-            eta2: eta * eta,
-        }
-    }
-
-    /// Reflectance for the angle of incidence whose cosine is `cos_i`; 1 on total internal
-    /// reflection.
-    #[inline(always)]
-    pub(crate) fn reflectance(self, cos_i: f64) -> f64 {
-        let cos_i = cos_i.clamp(0.0, 1.0);
-        let sin2_t = self.eta2 * (1.0 - cos_i * cos_i);
-        let total = sin2_t >= 1.0;
-        let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
-        // r_⊥ = (a − b)/(a + b), r_∥ = (e − f)/(e + f).
-        let (a, b) = (self.n_i * cos_i, self.n_t * cos_t);
-        let (e, f) = (self.n_t * cos_i, self.n_i * cos_t);
-        let (ab, ef) = (a + b, e + f);
-        let (am, em) = ((a - b) * ef, (e - f) * ab);
-        let den = ab * ef;
-        let r = 0.5 * (am * am + em * em) / (den * den);
-        if total { 1.0 } else { r }
-    }
-}
-
-/// e^x for the absorption factors (|x| up to a few units; clamped to ±700) without a libm
-/// call, so that it vectorises (fused multiply-adds, exactly rounded on every CPU): x = k ln 2 + r, |r| ≤ ln 2 / 2, e^r by its Taylor series to
-/// r¹² (truncation below 2·10⁻¹⁶), 2^k from the exponent bits. Within 4 ulp of libm's `exp`
-/// (tested).
-#[inline(always)]
-pub(crate) fn exp_small(x: f64) -> f64 {
-    const LOG2_E: f64 = std::f64::consts::LOG2_E;
-    // ln 2 in two parts (fdlibm): k·LN2_HI is exact for |k| < 2¹¹.
-    const LN2_HI: f64 = f64::from_bits(0x3FE6_2E42_FEE0_0000);
-    const LN2_LO: f64 = f64::from_bits(0x3DEA_39EF_3579_3C76);
-    // 1.5·2⁵²: adding it rounds to an integer held in the low mantissa bits.
-    const ROUND: f64 = 6_755_399_441_055_744.0;
-    let x = x.clamp(-700.0, 700.0);
-    let t = x * LOG2_E + ROUND;
-    let k = t - ROUND;
-    let r = (-k).mul_add(LN2_LO, (-k).mul_add(LN2_HI, x));
-    let mut p: f64 = 1.0 / 479_001_600.0; // 1/12!
-    for c in [
-        1.0 / 39_916_800.0,
-        1.0 / 3_628_800.0,
-        1.0 / 362_880.0,
-        1.0 / 40_320.0,
-        1.0 / 5_040.0,
-        1.0 / 720.0,
-        1.0 / 120.0,
-        1.0 / 24.0,
-        1.0 / 6.0,
-        0.5,
-        1.0,
-        1.0,
-    ] {
-        p = p.mul_add(r, c);
-    }
-    let k_int = (t.to_bits() as i64).wrapping_sub(ROUND.to_bits() as i64);
-    let scale = f64::from_bits(((k_int + 1023) << 52) as u64);
-    p * scale
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -438,11 +373,11 @@ mod tests {
             // The dispatched kernels (AVX2 where the CPU has it), twice into one buffer: the
             // second call leaves nothing of the first.
             let mut fast = DiffuseLanes::default();
-            reflect_diffuse(&ray, &bundles, &thick, &draws, &mut fast);
+            reflect_diffuse(&ray, &bundles, &thick, thick.len(), &draws, &mut fast);
             let generic = fast.clone();
             let (other, _, other_draws) = case(seed + 1000);
-            reflect_diffuse(&other, &bundles, &thick[..77], &other_draws, &mut fast);
-            reflect_diffuse(&ray, &bundles, &thick, &draws, &mut fast);
+            reflect_diffuse(&other, &bundles, &thick[..77], 77, &other_draws, &mut fast);
+            reflect_diffuse(&ray, &bundles, &thick, thick.len(), &draws, &mut fast);
             assert_eq!(fast.landed, generic.landed);
             let cos_mean = ray.v.dot(ray.normal);
             let mut landed_here = 0;
@@ -498,7 +433,7 @@ mod tests {
             let reach = 12.0;
             let h0_max = ray.h0_cutoff_mm(reach);
             let mut out = DiffuseLanes::default();
-            reflect_diffuse(&ray, &bundles, &thick, &draws, &mut out);
+            reflect_diffuse(&ray, &bundles, &thick, thick.len(), &draws, &mut out);
             for k in 0..thick.len() {
                 let h0 = thick[k] + ray.a;
                 if h0 <= h0_max || h0 <= 0.0 {
@@ -519,37 +454,5 @@ mod tests {
         }
         // The bound cuts most rays, and many lanes lie beyond it.
         assert!(cut > 300 && beyond > 10_000, "{cut} {beyond}");
-    }
-
-    #[test]
-    fn one_division_fresnel_agrees_with_the_law() {
-        for (n_i, n_t) in [(1.31, 1.00028), (1.31, 1.581), (1.33, 1.581), (1.581, 1.31)] {
-            let f = Fresnel::new(n_i, n_t);
-            for k in 0..=10_000 {
-                let c = k as f64 / 10_000.0;
-                let (got, want) = (f.reflectance(c), fr_dielectric(c, n_i, n_t));
-                assert!(
-                    (got - want).abs() <= 4e-16 + 1e-13 * want,
-                    "{n_i} {n_t} {c}"
-                );
-            }
-            assert_eq!(f.reflectance(-0.5), fr_dielectric(-0.5, n_i, n_t));
-        }
-        // Total internal reflection beyond the critical angle (ice/air: 49.8°).
-        assert_eq!(Fresnel::new(1.31, 1.00028).reflectance(0.6), 1.0);
-    }
-
-    #[test]
-    fn exp_small_is_within_a_few_ulp_of_libm() {
-        for k in -200_000..=20_000 {
-            let x = k as f64 * 1.37e-4; // −27.4 … 2.7
-            let (got, want) = (exp_small(x), x.exp());
-            assert!(
-                (got - want).abs() <= 4.0 * f64::EPSILON * want,
-                "{x}: {got} vs {want}"
-            );
-        }
-        assert_eq!(exp_small(0.0), 1.0);
-        assert!(exp_small(-800.0) > 0.0 && exp_small(-800.0) < 1e-300);
     }
 }

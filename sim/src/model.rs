@@ -10,6 +10,7 @@ pub use crate::config::{
 };
 use crate::consts::*;
 pub use crate::curve::{Curve, CurvePoint};
+use crate::kernels::LANES;
 use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
 use crate::streams::{mix64, std_normal, uniform};
 use crate::tracer::Accretion;
@@ -35,6 +36,9 @@ pub struct SensorModel {
     pub(crate) cfg: SimConfig,
     rays: Vec<SourceRay>,
     pub(crate) thick: Vec<f64>,
+    /// The thicknesses continued on their grid by `kernels::LANES` more: the kernels' padded
+    /// lanes read them (and their outputs are never used).
+    pub(crate) thick_lanes: Vec<f64>,
     /// Unit vector along the signal fibres' axis (pointing into the medium).
     fibre_axis: DVec3,
     cos_accept: f64,
@@ -99,6 +103,10 @@ impl SensorModel {
             cfg: cfg.clone(),
             rays,
             thick: cfg.thicknesses_mm(),
+            thick_lanes: {
+                let n = cfg.thicknesses_mm().len() + LANES;
+                (0..n).map(|i| i as f64 * cfg.step_mm).collect()
+            },
             fibre_axis: DVec3::new(si, 0.0, ci),
             cos_accept: th_max_f.cos(),
             dense: (cfg.params.p_bubble > DENSE_ABOVE)

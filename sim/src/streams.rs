@@ -174,7 +174,10 @@ const PCG_JUMPS: [(u64, u64); PCG_LANES + 1] = {
     let mut k = 1;
     while k <= PCG_LANES {
         let (m, g) = t[k - 1];
-        t[k] = (m.wrapping_mul(PCG_MULTIPLIER), g.wrapping_mul(PCG_MULTIPLIER).wrapping_add(1));
+        t[k] = (
+            m.wrapping_mul(PCG_MULTIPLIER),
+            g.wrapping_mul(PCG_MULTIPLIER).wrapping_add(1),
+        );
         k += 1;
     }
     t

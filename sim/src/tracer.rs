@@ -20,7 +20,7 @@ use crate::consts::*;
 use crate::curve::{Curve, CurvePoint};
 use crate::diffuse::{DiffuseLanes, DiffuseRay, reflect_diffuse};
 use crate::geometry::Bundles;
-use crate::kernels::specular_slots;
+use crate::kernels::{LANES, specular_slots};
 use crate::laws::{fr_dielectric, reflect};
 use crate::model::{SensorModel, SourceRay};
 use crate::streams::{
@@ -344,12 +344,16 @@ impl<'m> Accretion<'m> {
         let i_end = first_index(i0, nt, (h0_max - a) * self.inv_step, |i| {
             !(m.thick[i] + a <= h0_max)
         });
-        self.diffuse_draws.resize(i_end - i0, 0);
+        // The lanes padded to whole vectors: the draws go on in the stream, the thicknesses
+        // on their grid; the padding lanes are not counted.
+        let lanes = (i_end - i0).next_multiple_of(LANES);
+        self.diffuse_draws.resize(lanes, 0);
         fill_u32(self.key, diffuse_stream(f.r), &mut self.diffuse_draws);
         reflect_diffuse(
             &dray,
             &self.bundles,
-            &m.thick[i0..i_end],
+            &m.thick_lanes[i0..i0 + lanes],
+            i_end - i0,
             &self.diffuse_draws,
             &mut self.diffuse_out,
         );
@@ -429,19 +433,22 @@ impl<'m> Accretion<'m> {
         let att = (-ALPHA_PER_MM * k_path * (m.thick[i_lo] + a)).exp();
         let att_step = (-ALPHA_PER_MM * k_path * m.cfg.step_mm).exp();
         let n_bub = frozen_before(&self.frozen_by[self.first_wet..i_lo]);
-        self.spec_slot.resize(i_hi - i_lo, 2);
+        // Padded to whole vectors (the thicknesses go on on their grid); the padding lanes
+        // are not added.
+        let lanes = (i_hi - i_lo).next_multiple_of(LANES);
+        self.spec_slot.resize(lanes, 2);
         specular_slots(
             ray.p0,
             w,
             a,
             &self.bundles,
-            &m.thick[i_lo..i_hi],
+            &m.thick_lanes[i_lo..i_lo + lanes],
             &mut self.spec_slot,
         );
         add_specular(
             &mut self.refl[i_lo..i_hi],
             &self.frozen_by[i_lo..i_hi],
-            &self.spec_slot,
+            &self.spec_slot[..i_hi - i_lo],
             &self.fwd_after,
             n_bub,
             [rfl, cpl],
