@@ -23,6 +23,8 @@ pub(crate) struct DiffuseRay {
     pub den: f64,
     /// δ_R ~ U(±diffuse_max), rad.
     pub diffuse_max_rad: f64,
+    /// sin and cos of diffuse_max/2 (the same for every ray of an accretion).
+    pub half_max_sin_cos: (f64, f64),
     /// Take the Fresnel reflectance at the facet's angle (else at the mean surface's).
     pub facet_fresnel: bool,
     /// Refractive indices: the ice, the air above it, the fibre below.
@@ -53,11 +55,11 @@ impl DiffuseRay {
     pub(crate) fn h0_cutoff_mm(&self, reach_mm: f64) -> f64 {
         let (v, n) = (self.v, self.normal);
         let (a, b, c) = (v.x * n.x + v.z * n.z, v.x * n.z - v.z * n.x, v.y * n.y);
-        let (s, co) = (0.5 * self.diffuse_max_rad).sin_cos();
+        let (s, co) = self.half_max_sin_cos;
         // The peak of A cos φ + B sin φ, at φ = atan2(B, A), lies within ±φ_max iff A > 0 and
         // |B| ≤ A tan φ_max (φ_max ≤ 30°).
         let best = if a > 0.0 && b.abs() * co <= a * s {
-            a.hypot(b)
+            (a * a + b * b).sqrt()
         } else {
             (a * co + b * s).max(a * co - b * s)
         };
@@ -341,13 +343,15 @@ mod tests {
         };
         let v = DVec3::new(next() - 0.2, next() - 0.5, 1.0).normalize();
         let normal = DVec3::new(0.3 * (next() - 0.5), 0.3 * (next() - 0.5), 1.0).normalize();
+        let diffuse_max_rad = (60.0 * next()).to_radians();
         let ray = DiffuseRay {
             v,
             normal,
             p0: [-4.0 * next(), 4.0 * (next() - 0.5)],
             a: 2.0 * (next() - 0.5),
             den: 0.5 + next(),
-            diffuse_max_rad: (60.0 * next()).to_radians(),
+            diffuse_max_rad,
+            half_max_sin_cos: (0.5 * diffuse_max_rad).sin_cos(),
             facet_fresnel: next() < 0.5,
             n_medium: 1.31,
             n_air: 1.00028,

@@ -39,6 +39,8 @@ pub struct SensorModel {
     /// The thicknesses continued on their grid by `kernels::LANES` more: the kernels' padded
     /// lanes read them (and their outputs are never used).
     pub(crate) thick_lanes: Vec<f64>,
+    /// sin and cos of half the largest diffuse angle, δ_max/2.
+    pub(crate) half_diffuse_sin_cos: (f64, f64),
     /// Unit vector along the signal fibres' axis (pointing into the medium).
     fibre_axis: DVec3,
     cos_accept: f64,
@@ -103,6 +105,7 @@ impl SensorModel {
             cfg: cfg.clone(),
             rays,
             thick: cfg.thicknesses_mm(),
+            half_diffuse_sin_cos: (0.5 * cfg.params.diffuse_max_rad).sin_cos(),
             thick_lanes: {
                 let n = cfg.thicknesses_mm().len() + LANES;
                 (0..n).map(|i| i as f64 * cfg.step_mm).collect()

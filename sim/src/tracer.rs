@@ -327,6 +327,7 @@ impl<'m> Accretion<'m> {
             a,
             den: f.den,
             diffuse_max_rad: cfg.params.diffuse_max_rad,
+            half_max_sin_cos: m.half_diffuse_sin_cos,
             facet_fresnel: cfg.diffuse_fresnel == DiffuseFresnel::Facet,
             n_medium: cfg.params.n_medium,
             n_air: N_AIR,
