@@ -37,6 +37,10 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let one = pool(Some(1))?;
     let all = pool(threads)?;
     let n = all.current_num_threads();
+    println!(
+        "vector kernels: {} (the best this CPU runs; FOIS_SIM_ISA=avx2|baseline caps it)",
+        fois_sim::isa().name()
+    );
     for ice in media {
         let cfg = SimConfig::new(ice, SensorKind::B, Geometry::ThesisCh5);
         let model = SensorModel::new(&cfg);
