@@ -89,14 +89,30 @@ pub(crate) struct DiffuseLanes {
     cos_fresnel: Vec<f64>,
     /// Path length in the ice, up and back down, mm.
     path_mm: Vec<f64>,
-    /// The lanes that land on a bundle, in order.
-    pub landed: Vec<u32>,
+    /// The lanes that land on a bundle, in order (the first `landed_count`).
+    landed: Vec<u32>,
+    landed_count: usize,
     /// The landed lanes' cosine, −direction z and path, packed.
     packed: [Vec<f64>; 3],
     /// Per landed lane: the fraction of the ray's forward flux that enters the bundle,
     /// Fresnel reflectance at the ice/air surface × Fresnel transmittance ice → fibre ×
     /// Beer–Lambert absorption over the path up and back down.
-    pub weight: Vec<f64>,
+    weight: Vec<f64>,
+}
+
+impl DiffuseLanes {
+    /// The lanes that land on a bundle, in order, and their weights.
+    pub(crate) fn landed(&self) -> (&[u32], &[f64]) {
+        let m = self.landed_count;
+        (&self.landed[..m], &self.weight[..m])
+    }
+}
+
+/// `v` at least `n` long (the buffers only grow: the lanes of a ray are their first n).
+fn grow<T: Clone>(v: &mut Vec<T>, n: usize, fill: T) {
+    if v.len() < n {
+        v.resize(n, fill);
+    }
 }
 
 /// The diffusely reflected ray of one source ray at each thickness `thick_mm[n]` (all with
@@ -115,19 +131,19 @@ pub(crate) fn reflect_diffuse(
 ) {
     let n = thick_mm.len();
     let valid = valid.min(n);
-    out.slot.resize(n, 2);
+    grow(&mut out.slot, n, 2);
     for d in &mut out.dir {
-        d.resize(n, 0.0);
+        grow(d, n, 0.0);
     }
-    out.cos_fresnel.resize(n, 0.0);
-    out.path_mm.resize(n, 0.0);
+    grow(&mut out.cos_fresnel, n, 0.0);
+    grow(&mut out.path_mm, n, 0.0);
     diffuse_landing(ray, bundles, thick_mm, draws, out);
     // The landed lanes among the valid ones and their inputs packed, so that the second
     // pass runs on whole vectors (padded with lanes of normal incidence and no path).
     let room = valid.next_multiple_of(LANES);
-    out.landed.resize(room, 0);
+    grow(&mut out.landed, room, 0);
     for p in &mut out.packed {
-        p.resize(room, 0.0);
+        grow(p, room, 0.0);
     }
     let [cos_p, rdz_p, path_p] = &mut out.packed;
     let (slot, cos_f, dir_z, path) = (
@@ -146,16 +162,15 @@ pub(crate) fn reflect_diffuse(
     cos_p[m..padded].fill(1.0);
     rdz_p[m..padded].fill(1.0);
     path_p[m..padded].fill(0.0);
-    out.landed.truncate(m);
-    out.weight.resize(padded, 0.0);
+    out.landed_count = m;
+    grow(&mut out.weight, padded, 0.0);
     diffuse_weights(
         ray,
         &cos_p[..padded],
         &rdz_p[..padded],
         &path_p[..padded],
-        &mut out.weight,
+        &mut out.weight[..padded],
     );
-    out.weight.truncate(m);
 }
 
 /// The lanes whose `slot` is below 2, packed: their numbers into `landed`, and from
@@ -382,7 +397,7 @@ mod tests {
             let (other, _, other_draws) = case(seed + 1000);
             reflect_diffuse(&other, &bundles, &thick[..77], 77, &other_draws, &mut fast);
             reflect_diffuse(&ray, &bundles, &thick, thick.len(), &draws, &mut fast);
-            assert_eq!(fast.landed, generic.landed);
+            assert_eq!(fast.landed().0, generic.landed().0);
             let cos_mean = ray.v.dot(ray.normal);
             let mut landed_here = 0;
             for k in 0..thick.len() {
@@ -405,10 +420,10 @@ mod tests {
                     * (1.0 - fr_dielectric(-rd.z, ray.n_medium, ray.n_fibre))
                     * (-ray.alpha_per_mm * (t_up + t_down)).exp();
                 if fast.slot[k] < 2 {
-                    let j = fast.landed[landed_here];
+                    let j = fast.landed().0[landed_here];
                     assert_eq!(j as usize, k);
-                    let w = fast.weight[landed_here];
-                    assert_eq!(w.to_bits(), generic.weight[landed_here].to_bits());
+                    let w = fast.landed().1[landed_here];
+                    assert_eq!(w.to_bits(), generic.landed().1[landed_here].to_bits());
                     assert!(
                         (w - want).abs() <= 1e-12 * want,
                         "{seed} {k}: {w} vs {want}"
@@ -416,7 +431,7 @@ mod tests {
                     landed_here += 1;
                 }
             }
-            assert_eq!(landed_here, fast.landed.len());
+            assert_eq!(landed_here, fast.landed().0.len());
             landed += landed_here;
         }
         // The cases land on the bundles often enough to mean something.

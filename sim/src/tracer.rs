@@ -371,7 +371,19 @@ impl<'m> Accretion<'m> {
         }
         let cone = cfg.coupling == Coupling::AcceptanceCone;
         let d = &self.diffuse_out;
-        for (&n, &w) in d.landed.iter().zip(&d.weight) {
+        let (landed, weight) = d.landed();
+        let refl = &mut self.refl[i0..i_end];
+        if !cone && !had_bubbles {
+            // The common case (glazed ice: most rays meet no bubble), without a branch per
+            // lane: the same forward flux for every thickness.
+            let fwd = self.fwd_after[n_bub0];
+            for (&n, &w) in landed.iter().zip(weight) {
+                let n = n as usize;
+                refl[n][d.slot[n] as usize] += fwd * w;
+            }
+            return;
+        }
+        for (&n, &w) in landed.iter().zip(weight) {
             let n = n as usize;
             if cone && !m.in_acceptance_cone(DVec3::new(d.dir[0][n], d.dir[1][n], d.dir[2][n])) {
                 continue;
@@ -381,7 +393,7 @@ impl<'m> Accretion<'m> {
             } else {
                 self.fwd_after[n_bub0]
             };
-            self.refl[i0 + n][d.slot[n] as usize] += fwd * w;
+            refl[n][d.slot[n] as usize] += fwd * w;
         }
     }
 
