@@ -7,6 +7,7 @@ use glam::DVec3;
 
 use crate::geometry::Bundles;
 use crate::kernels::{Fresnel, LANES, exp_small, small_sin_cos, vector_kernel};
+use crate::pack::pack_landed;
 
 /// What the diffuse reflection of one ray needs besides its thicknesses and draws.
 #[derive(Clone, Copy, Debug)]
@@ -171,96 +172,6 @@ pub(crate) fn reflect_diffuse(
         &path_p[..padded],
         &mut out.weight[..padded],
     );
-}
-
-/// The lanes whose `slot` is below 2, packed: their numbers into `landed`, and from
-/// `inputs` (cosine, direction z, path) the cosine, −direction z and path into `packed`.
-/// Returns how many. With AVX-512 eight lanes at a time by compress-stores, else one by one
-/// without a branch: every lane is written at the count, which moves on for the landed ones
-/// only. Both write the same values.
-fn pack_landed(
-    slot: &[u32],
-    inputs: [&[f64]; 3],
-    landed: &mut [u32],
-    packed: [&mut [f64]; 3],
-) -> usize {
-    let n = slot.len();
-    assert!(inputs.iter().all(|x| x.len() >= n) && landed.len() >= n);
-    assert!(packed.iter().all(|x| x.len() >= n));
-    let [cos_f, dir_z, path] = inputs;
-    let [cos_p, rdz_p, path_p] = packed;
-    #[cfg(target_arch = "x86_64")]
-    if crate::kernels::isa() == crate::kernels::Isa::Avx512 {
-        // SAFETY: the CPU has AVX-512 F, DQ and VL (`isa`); every slice holds n lanes.
-        return unsafe {
-            pack_landed_avx512(slot, [cos_f, dir_z, path], landed, [cos_p, rdz_p, path_p])
-        };
-    }
-    let mut m = 0;
-    for (k, &s) in slot.iter().enumerate() {
-        // SAFETY: m ≤ k < n, within every slice (checked above).
-        unsafe {
-            *landed.get_unchecked_mut(m) = k as u32;
-            *cos_p.get_unchecked_mut(m) = *cos_f.get_unchecked(k);
-            *rdz_p.get_unchecked_mut(m) = -*dir_z.get_unchecked(k);
-            *path_p.get_unchecked_mut(m) = *path.get_unchecked(k);
-        }
-        m += usize::from(s < 2);
-    }
-    m
-}
-
-/// [`pack_landed`] by compress-stores, eight lanes at a time.
-///
-/// # Safety
-/// The CPU has AVX-512 F and VL; `inputs`, `landed` and `packed` hold at least `slot.len()`
-/// lanes each.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
-unsafe fn pack_landed_avx512(
-    slot: &[u32],
-    inputs: [&[f64]; 3],
-    landed: &mut [u32],
-    packed: [&mut [f64]; 3],
-) -> usize {
-    use std::arch::x86_64::*;
-    let n = slot.len();
-    let [cos_f, dir_z, path] = inputs;
-    let [cos_p, rdz_p, path_p] = packed;
-    let two = _mm256_set1_epi32(2);
-    let sign = _mm512_set1_pd(-0.0);
-    let mut lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-    let eight = _mm256_set1_epi32(8);
-    let mut m = 0;
-    let mut k = 0;
-    while k + 8 <= n {
-        // SAFETY: k + 8 ≤ n lanes are read from every input; m ≤ k, so at most 8 lanes
-        // from m are written, within n.
-        unsafe {
-            let s = _mm256_loadu_si256(slot.as_ptr().add(k).cast());
-            let hit = _mm256_cmplt_epu32_mask(s, two);
-            _mm256_mask_compressstoreu_epi32(landed.as_mut_ptr().add(m).cast(), hit, lane);
-            let c = _mm512_loadu_pd(cos_f.as_ptr().add(k));
-            _mm512_mask_compressstoreu_pd(cos_p.as_mut_ptr().add(m), hit, c);
-            let z = _mm512_xor_pd(_mm512_loadu_pd(dir_z.as_ptr().add(k)), sign);
-            _mm512_mask_compressstoreu_pd(rdz_p.as_mut_ptr().add(m), hit, z);
-            let p = _mm512_loadu_pd(path.as_ptr().add(k));
-            _mm512_mask_compressstoreu_pd(path_p.as_mut_ptr().add(m), hit, p);
-            m += hit.count_ones() as usize;
-        }
-        lane = _mm256_add_epi32(lane, eight);
-        k += 8;
-    }
-    for k in k..n {
-        if slot[k] < 2 {
-            landed[m] = k as u32;
-            cos_p[m] = cos_f[k];
-            rdz_p[m] = -dir_z[k];
-            path_p[m] = path[k];
-            m += 1;
-        }
-    }
-    m
 }
 
 vector_kernel! {

@@ -24,6 +24,7 @@ mod kernels;
 pub mod laws;
 pub mod model;
 pub mod montecarlo;
+mod pack;
 pub mod streams;
 pub mod table;
 mod tracer;
