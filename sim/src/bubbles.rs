@@ -7,7 +7,7 @@
 //! each bubble's draws come from a counter-based stream ([`CounterStream`]: the words a
 //! bubble uses are fixed by its number, below), so no draw depends on a branch taken before
 //! it. The angles and the landing of all scattered rays of one ray are then computed at once
-//! by [`land_scattered`], loops the compiler vectorises (AVX2 and FMA when the CPU has them,
+//! by [`land_scattered`], loops the compiler vectorises (AVX-512 or AVX2 with FMA when the CPU has them,
 //! with bit-identical results: the same IEEE-754 operations in the same order per lane).
 //!
 //! Layout of the draws of bubble n (the even words hold gaps, the odd words angles):

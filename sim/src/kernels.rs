@@ -1,9 +1,11 @@
-//! The tracer's arithmetic over all thicknesses of one ray at once, written as loops over
-//! slices so that the compiler vectorises them: the divisions and square roots that bound
-//! the scalar loop run four lanes at a time with AVX2 (detected at run time), two with the
-//! SSE2 of every x86-64. Each lane performs the same IEEE-754 operations in the same order
-//! as the scalar formula (Rust never fuses a multiply and an add on its own), so the results
-//! are bit-identical to it; the golden-value tests of the crate check this.
+//! The tracer's arithmetic over many lanes at once (thicknesses of one ray, or its bubbles),
+//! written as loops over slices that the compiler vectorises, and the tiers they are compiled
+//! for ([`Isa`]: eight f64 lanes with AVX-512, four with AVX2, two with the SSE2 of every
+//! x86-64; picked at run time). Each lane performs the same IEEE-754 operations in the same
+//! order as the scalar formula (Rust never fuses a multiply and an add on its own), so the
+//! results are bit-identical on every tier; the golden-value tests of the crate check this.
+//! Here too: the one-division Fresnel factor and the polynomial `exp` that the kernels use,
+//! and the lane padding ([`LANES`]).
 
 use glam::DVec2;
 

@@ -38,7 +38,7 @@ pub fn run(args: BenchArgs) -> Result<()> {
     let all = pool(threads)?;
     let n = all.current_num_threads();
     println!(
-        "vector kernels: {} (the best this CPU runs; FOIS_SIM_ISA=avx2|baseline caps it)",
+        "vector kernels: {} (of avx512, avx2, baseline: the best this CPU runs unless FOIS_SIM_ISA caps it)",
         fois_sim::isa().name()
     );
     for ice in media {
