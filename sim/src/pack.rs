@@ -33,9 +33,32 @@ pub(crate) fn pack_landed(
             pack_landed_avx2(slot, [cos_f, dir_z, path], landed, [cos_p, rdz_p, path_p])
         };
     }
-    let mut m = 0;
-    for (k, &s) in slot.iter().enumerate() {
-        // SAFETY: m ≤ k < n, within every slice (checked above).
+    pack_from(
+        0,
+        0,
+        slot,
+        [cos_f, dir_z, path],
+        landed,
+        [cos_p, rdz_p, path_p],
+    )
+}
+
+/// The lanes from `k` on packed one by one after the `m` packed before them (m ≤ k), without
+/// a branch: every lane is written at the count, which moves on for the landed ones only.
+/// Returns the new count. The caller checked that every slice holds `slot.len()` lanes.
+#[inline(always)]
+fn pack_from(
+    mut k: usize,
+    mut m: usize,
+    slot: &[u32],
+    inputs: [&[f64]; 3],
+    landed: &mut [u32],
+    packed: [&mut [f64]; 3],
+) -> usize {
+    let [cos_f, dir_z, path] = inputs;
+    let [cos_p, rdz_p, path_p] = packed;
+    while let Some(&s) = slot.get(k) {
+        // SAFETY: m ≤ k < n, within every slice (checked by the caller).
         unsafe {
             *landed.get_unchecked_mut(m) = k as u32;
             *cos_p.get_unchecked_mut(m) = *cos_f.get_unchecked(k);
@@ -43,6 +66,7 @@ pub(crate) fn pack_landed(
             *path_p.get_unchecked_mut(m) = *path.get_unchecked(k);
         }
         m += usize::from(s < 2);
+        k += 1;
     }
     m
 }
@@ -88,16 +112,14 @@ unsafe fn pack_landed_avx512(
         lane = _mm256_add_epi32(lane, eight);
         k += 8;
     }
-    for k in k..n {
-        if slot[k] < 2 {
-            landed[m] = k as u32;
-            cos_p[m] = cos_f[k];
-            rdz_p[m] = -dir_z[k];
-            path_p[m] = path[k];
-            m += 1;
-        }
-    }
-    m
+    pack_from(
+        k,
+        m,
+        slot,
+        [cos_f, dir_z, path],
+        landed,
+        [cos_p, rdz_p, path_p],
+    )
 }
 
 /// For each 4-bit mask of landed lanes, the permutation that moves them to the front, as
@@ -172,16 +194,14 @@ unsafe fn pack_landed_avx2(
         }
         k += 4;
     }
-    for k in k..n {
-        if slot[k] < 2 {
-            landed[m] = k as u32;
-            cos_p[m] = cos_f[k];
-            rdz_p[m] = -dir_z[k];
-            path_p[m] = path[k];
-            m += 1;
-        }
-    }
-    m
+    pack_from(
+        k,
+        m,
+        slot,
+        [cos_f, dir_z, path],
+        landed,
+        [cos_p, rdz_p, path_p],
+    )
 }
 
 #[cfg(test)]
