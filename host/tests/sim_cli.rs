@@ -353,6 +353,46 @@ fn bench_reports_ray_evaluations_per_thread_for_each_medium() {
     );
 }
 
+/// `FOIS_SIM_ISA` caps the vector kernels' tier, `sim bench` names the one it ran, the
+/// output does not depend on it, and a misspelt tier is reported and ignored.
+#[test]
+fn the_kernel_tier_is_named_capped_and_does_not_change_the_output() {
+    let run = |isa: &str, out: &PathBuf| {
+        Command::new(env!("CARGO_BIN_EXE_foisctl"))
+            .args([
+                "sim",
+                "montecarlo",
+                "--ice",
+                "glazed",
+                "--runs",
+                "3",
+                "--out",
+            ])
+            .arg(out)
+            .env("FOIS_SIM_ISA", isa)
+            .output()
+            .expect("run foisctl")
+    };
+    let (base, best) = (tmp("tier_baseline.csv"), tmp("tier_best.csv"));
+    assert!(run("baseline", &base).status.success());
+    let o = run("avx3", &best);
+    assert!(o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains("FOIS_SIM_ISA=avx3: not one of avx512, avx2, baseline; ignored"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&base).unwrap(), std::fs::read(&best).unwrap());
+    let o = Command::new(env!("CARGO_BIN_EXE_foisctl"))
+        .args(["sim", "bench", "--runs", "1", "--ice", "water"])
+        .env("FOIS_SIM_ISA", "baseline")
+        .output()
+        .expect("run foisctl");
+    assert!(o.status.success());
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("vector kernels: baseline ("), "{out}");
+}
+
 #[test]
 fn table_writes_the_firmwares_checked_in_table() {
     let out = tmp("table.rs");

@@ -62,7 +62,15 @@ pub fn isa() -> Isa {
         let cap = match std::env::var("FOIS_SIM_ISA").as_deref() {
             Ok("baseline") => Isa::Baseline,
             Ok("avx2") => Isa::Avx2,
-            _ => Isa::Avx512,
+            Ok("avx512") | Ok("") | Err(_) => Isa::Avx512,
+            Ok(other) => {
+                eprintln!(
+                    "FOIS_SIM_ISA={other}: not one of avx512, avx2, baseline; ignored \
+                     (the kernels run on {})",
+                    best.name()
+                );
+                Isa::Avx512
+            }
         };
         best.min(cap)
     });

@@ -17,30 +17,19 @@ pub(crate) fn pack_landed(
     let n = slot.len();
     assert!(inputs.iter().all(|x| x.len() >= n) && landed.len() >= n);
     assert!(packed.iter().all(|x| x.len() >= n));
-    let [cos_f, dir_z, path] = inputs;
-    let [cos_p, rdz_p, path_p] = packed;
     #[cfg(target_arch = "x86_64")]
-    if crate::kernels::isa() == crate::kernels::Isa::Avx512 {
+    match crate::kernels::isa() {
         // SAFETY: the CPU has AVX-512 F, DQ and VL (`isa`); every slice holds n lanes.
-        return unsafe {
-            pack_landed_avx512(slot, [cos_f, dir_z, path], landed, [cos_p, rdz_p, path_p])
-        };
-    }
-    #[cfg(target_arch = "x86_64")]
-    if crate::kernels::isa() == crate::kernels::Isa::Avx2 {
+        crate::kernels::Isa::Avx512 => {
+            return unsafe { pack_landed_avx512(slot, inputs, landed, packed) };
+        }
         // SAFETY: the CPU has AVX2 (`isa`); every slice holds n lanes.
-        return unsafe {
-            pack_landed_avx2(slot, [cos_f, dir_z, path], landed, [cos_p, rdz_p, path_p])
-        };
+        crate::kernels::Isa::Avx2 => {
+            return unsafe { pack_landed_avx2(slot, inputs, landed, packed) };
+        }
+        crate::kernels::Isa::Baseline => {}
     }
-    pack_from(
-        0,
-        0,
-        slot,
-        [cos_f, dir_z, path],
-        landed,
-        [cos_p, rdz_p, path_p],
-    )
+    pack_from(0, 0, slot, inputs, landed, packed)
 }
 
 /// The lanes from `k` on packed one by one after the `m` packed before them (m ≤ k), without
