@@ -21,7 +21,7 @@ use glam::DVec2;
 
 use crate::consts::BUBBLE_LAYER_MM;
 use crate::geometry::Bundles;
-use crate::kernels::{LANES, small_int, u32_to_f64, vector_kernel};
+use crate::kernels::{LANES, grow, small_int, u32_to_f64, vector_kernel};
 use crate::streams::{CounterStream, INV_2_POW_32};
 
 /// Bits of a draw that index the bucket table of [`GapSampler`].
@@ -192,9 +192,7 @@ impl BubbleLanes {
     #[inline(never)]
     pub(crate) fn tally(&self, frozen_by: &mut [u32], landed: &mut Vec<u32>) -> usize {
         let count = self.count;
-        if landed.len() < count {
-            landed.resize(count, 0);
-        }
+        grow(landed, count, 0);
         let mut m = 0;
         let bubbles = self.index[..count].iter().zip(&self.slot[..count]);
         for (n, (&i, &k)) in (0u32..).zip(bubbles) {
@@ -211,9 +209,7 @@ impl BubbleLanes {
         // At most one bubble per layer, plus the padding. The buffer only grows, and is
         // written by index: cheaper than a push.
         let room = j_end as usize + LANES;
-        if self.layer.len() < room {
-            self.layer.resize(room, 0.0);
-        }
+        grow(&mut self.layer, room, 0.0);
         let layer = &mut self.layer[..room];
         let mut j: u32 = 0;
         let mut n: usize = 0;
@@ -319,9 +315,7 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
     // The output buffers only grow (their tails are stale and never read).
     let n = lanes.count.next_multiple_of(LANES);
     for out in [&mut lanes.index, &mut lanes.slot] {
-        if out.len() < n {
-            out.resize(n, 0);
-        }
+        grow(out, n, 0);
     }
     for out in [
         &mut lanes.out_z_mm,
@@ -330,9 +324,7 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
         &mut lanes.out_cos_b,
         &mut lanes.out_reach_mm,
     ] {
-        if out.len() < n {
-            out.resize(n, 0.0);
-        }
+        grow(out, n, 0.0);
     }
     land_scattered_lanes(
         ray,

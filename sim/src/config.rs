@@ -198,8 +198,13 @@ impl SimConfig {
 
     /// The output thicknesses 0, step, 2·step, … ≤ max_mm.
     pub fn thicknesses_mm(&self) -> Vec<f64> {
+        self.thickness_grid_mm(0)
+    }
+
+    /// [`SimConfig::thicknesses_mm`] continued on their grid by `extra` more.
+    pub(crate) fn thickness_grid_mm(&self, extra: usize) -> Vec<f64> {
         let n = (self.max_mm / self.step_mm + 1e-9).floor() as usize;
-        (0..=n).map(|i| i as f64 * self.step_mm).collect()
+        (0..=n + extra).map(|i| i as f64 * self.step_mm).collect()
     }
 }
 

@@ -6,7 +6,7 @@
 use glam::DVec3;
 
 use crate::geometry::Bundles;
-use crate::kernels::{Fresnel, LANES, exp_small, small_sin_cos, vector_kernel};
+use crate::kernels::{Fresnel, LANES, exp_small, grow, small_sin_cos, vector_kernel};
 use crate::pack::pack_landed;
 
 /// What the diffuse reflection of one ray needs besides its thicknesses and draws.
@@ -106,13 +106,6 @@ impl DiffuseLanes {
     pub(crate) fn landed(&self) -> (&[u32], &[f64]) {
         let m = self.landed_count;
         (&self.landed[..m], &self.weight[..m])
-    }
-}
-
-/// `v` at least `n` long (the buffers only grow: the lanes of a ray are their first n).
-fn grow<T: Clone>(v: &mut Vec<T>, n: usize, fill: T) {
-    if v.len() < n {
-        v.resize(n, fill);
     }
 }
 

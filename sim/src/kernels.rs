@@ -135,6 +135,15 @@ pub(crate) use vector_kernel;
 /// values that are never read.
 pub(crate) const LANES: usize = 8;
 
+/// `v` at least `n` long, filled with `fill` where it grows. The kernels' buffers only grow:
+/// a ray uses their first lanes, so no fill runs per ray.
+#[inline(always)]
+pub(crate) fn grow<T: Clone>(v: &mut Vec<T>, n: usize, fill: T) {
+    if v.len() < n {
+        v.resize(n, fill);
+    }
+}
+
 /// A small non-negative integer held in an f64 (an index or a slot), as i32 in a way that
 /// vectorises: `as i32` saturates and handles NaN lane by lane, which the compiler does
 /// with scalar instructions.

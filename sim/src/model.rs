@@ -106,10 +106,7 @@ impl SensorModel {
             rays,
             thick: cfg.thicknesses_mm(),
             half_diffuse_sin_cos: (0.5 * cfg.params.diffuse_max_rad).sin_cos(),
-            thick_lanes: {
-                let n = cfg.thicknesses_mm().len() + LANES;
-                (0..n).map(|i| i as f64 * cfg.step_mm).collect()
-            },
+            thick_lanes: cfg.thickness_grid_mm(LANES),
             fibre_axis: DVec3::new(si, 0.0, ci),
             cos_accept: th_max_f.cos(),
             dense: (cfg.params.p_bubble > DENSE_ABOVE)

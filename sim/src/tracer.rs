@@ -20,7 +20,7 @@ use crate::consts::*;
 use crate::curve::{Curve, CurvePoint};
 use crate::diffuse::{DiffuseLanes, DiffuseRay, reflect_diffuse};
 use crate::geometry::Bundles;
-use crate::kernels::{LANES, specular_slots};
+use crate::kernels::{LANES, grow, specular_slots};
 use crate::laws::{fr_dielectric, reflect};
 use crate::model::{SensorModel, SourceRay};
 use crate::streams::{
@@ -348,14 +348,18 @@ impl<'m> Accretion<'m> {
         // The lanes padded to whole vectors: the draws go on in the stream, the thicknesses
         // on their grid; the padding lanes are not counted.
         let lanes = (i_end - i0).next_multiple_of(LANES);
-        self.diffuse_draws.resize(lanes, 0);
-        fill_u32(self.key, diffuse_stream(f.r), &mut self.diffuse_draws);
+        grow(&mut self.diffuse_draws, lanes, 0);
+        fill_u32(
+            self.key,
+            diffuse_stream(f.r),
+            &mut self.diffuse_draws[..lanes],
+        );
         reflect_diffuse(
             &dray,
             &self.bundles,
             &m.thick_lanes[i0..i0 + lanes],
             i_end - i0,
-            &self.diffuse_draws,
+            &self.diffuse_draws[..lanes],
             &mut self.diffuse_out,
         );
         // The bubbles frozen in up to each landed thickness: a running maximum
@@ -449,14 +453,14 @@ impl<'m> Accretion<'m> {
         // Padded to whole vectors (the thicknesses go on on their grid); the padding lanes
         // are not added.
         let lanes = (i_hi - i_lo).next_multiple_of(LANES);
-        self.spec_slot.resize(lanes, 2);
+        grow(&mut self.spec_slot, lanes, 2);
         specular_slots(
             ray.p0,
             w,
             a,
             &self.bundles,
             &m.thick_lanes[i_lo..i_lo + lanes],
-            &mut self.spec_slot,
+            &mut self.spec_slot[..lanes],
         );
         add_specular(
             &mut self.refl[i_lo..i_hi],
@@ -504,7 +508,6 @@ fn layers_covered(q_of: &impl Fn(u32) -> f64, first_wet: usize, nt: usize) -> u3
         return 0;
     }
     let last = (nt - 1) as f64;
-    let beyond = |j: u32| q_of(j) > last;
     // q is linear in j up to rounding: start from the straight-line estimate, then settle
     // on the exact first j with the same comparisons as a walk layer by layer.
     let (q0, q1) = (q_of(0), q_of(1));
@@ -514,6 +517,7 @@ fn layers_covered(q_of: &impl Fn(u32) -> f64, first_wet: usize, nt: usize) -> u3
     } else {
         0
     };
+    let beyond = |j: u32| q_of(j) > last;
     while j > 0 && beyond(j - 1) {
         j -= 1;
     }
@@ -527,6 +531,8 @@ fn layers_covered(q_of: &impl Fn(u32) -> f64, first_wet: usize, nt: usize) -> u3
 /// predicate that holds from some index on: searched from the guess `near` (an index as
 /// an f64, any value), so that it costs the distance from the guess, not a scan or a
 /// binary search. The same answer as `(from..to).find(beyond)`.
+// `layers_covered` searches the same way, written out: through this function it cost 5 %
+// of rime's time (measured).
 #[inline]
 fn first_index(from: usize, to: usize, near: f64, beyond: impl Fn(usize) -> bool) -> usize {
     if from >= to {
@@ -600,4 +606,64 @@ fn reflect_setup(v: DVec3, nrm: DVec3, n_med: f64) -> Option<(f64, DVec3)> {
         return None;
     }
     Some((fr_dielectric(cos_i, n_med, N_AIR), rd))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `first_index` answers as a scan from `from` does, whatever its guess (far off, on
+    /// either side, NaN, infinite) and for predicates that never or always hold.
+    #[test]
+    fn first_index_finds_what_a_scan_finds_from_any_guess() {
+        let guesses = [
+            f64::NAN,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            -5.0,
+            0.0,
+            3.7,
+            17.0,
+            40.0,
+            1e9,
+        ];
+        for (from, to) in [(0, 0), (0, 1), (3, 3), (0, 30), (5, 30), (12, 13)] {
+            for edge in 0..=32 {
+                let beyond = |i: usize| i >= edge;
+                let want = (from..to).find(|&i| beyond(i)).unwrap_or(to);
+                for near in guesses {
+                    assert_eq!(
+                        first_index(from, to, near, beyond),
+                        want,
+                        "{from}..{to}, edge {edge}, guess {near}"
+                    );
+                }
+            }
+        }
+    }
+
+    /// The layers a ray meets: the first layer beyond the last output index, by a scan.
+    #[test]
+    fn layers_covered_matches_a_walk_layer_by_layer() {
+        for (q0, dq) in [
+            (-3.0, 0.97),
+            (0.4, 1.0),
+            (-0.2, 0.013),
+            (2.0, 0.0),
+            (5.0, -1.0),
+        ] {
+            let q = |j: u32| q0 + dq * f64::from(j);
+            for (first_wet, nt) in [(1, 151), (0, 40), (151, 151)] {
+                let got = layers_covered(&q, first_wet, nt);
+                let want = if first_wet >= nt {
+                    0
+                } else {
+                    (0..MAX_LAYERS_PER_RAY)
+                        .find(|&j| q(j) > (nt - 1) as f64)
+                        .unwrap_or(MAX_LAYERS_PER_RAY)
+                };
+                assert_eq!(got, want, "q0 {q0}, dq {dq}, {first_wet}..{nt}");
+            }
+        }
+    }
 }
