@@ -6,8 +6,14 @@ use std::path::PathBuf;
 use std::process::{Command, Output};
 
 fn foisctl(args: &[&str]) -> Output {
+    foisctl_env(args, &[])
+}
+
+/// `foisctl` with these environment variables set.
+fn foisctl_env(args: &[&str], env: &[(&str, &str)]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_foisctl"))
         .args(args)
+        .envs(env.iter().copied())
         .output()
         .expect("run foisctl")
 }
@@ -358,20 +364,17 @@ fn bench_reports_ray_evaluations_per_thread_for_each_medium() {
 #[test]
 fn the_kernel_tier_is_named_capped_and_does_not_change_the_output() {
     let run = |isa: &str, out: &PathBuf| {
-        Command::new(env!("CARGO_BIN_EXE_foisctl"))
-            .args([
-                "sim",
-                "montecarlo",
-                "--ice",
-                "glazed",
-                "--runs",
-                "3",
-                "--out",
-            ])
-            .arg(out)
-            .env("FOIS_SIM_ISA", isa)
-            .output()
-            .expect("run foisctl")
+        let args = [
+            "sim",
+            "montecarlo",
+            "--ice",
+            "glazed",
+            "--runs",
+            "3",
+            "--out",
+        ];
+        let out = out.to_str().unwrap();
+        foisctl_env(&[&args[..], &[out]].concat(), &[("FOIS_SIM_ISA", isa)])
     };
     let (base, best) = (tmp("tier_baseline.csv"), tmp("tier_best.csv"));
     assert!(run("baseline", &base).status.success());
@@ -383,11 +386,10 @@ fn the_kernel_tier_is_named_capped_and_does_not_change_the_output() {
         "{err}"
     );
     assert_eq!(std::fs::read(&base).unwrap(), std::fs::read(&best).unwrap());
-    let o = Command::new(env!("CARGO_BIN_EXE_foisctl"))
-        .args(["sim", "bench", "--runs", "1", "--ice", "water"])
-        .env("FOIS_SIM_ISA", "baseline")
-        .output()
-        .expect("run foisctl");
+    let o = foisctl_env(
+        &["sim", "bench", "--runs", "1", "--ice", "water"],
+        &[("FOIS_SIM_ISA", "baseline")],
+    );
     assert!(o.status.success());
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("vector kernels: baseline ("), "{out}");
