@@ -300,32 +300,13 @@ pub struct StatusJson {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fois_protocol::{
-        DetectorState, Event, EventKind, GainEstimate, IceEstimate, Measurement, Medium, flags,
-    };
+    use fois_protocol::{Event, EventKind, GainEstimate, flags};
 
-    fn meas() -> Measurement {
-        Measurement {
-            uptime_ms: 12_345,
-            i1_na: 1_500,
-            i2_na: -250,
-            ambient1_na: 20_000,
-            ambient2_na: 0,
-            temperature_centi_c: -512,
-            vdda_mv: 3300,
-            flags: flags::ALARM | flags::NTC_OPEN | flags::ALARM_ACKED,
-            state: DetectorState::Ice,
-        }
-    }
+    use fois_link::fixtures::{iced_measurement as meas, rime_estimate};
 
     #[test]
     fn measurement_keys_carry_units_values_and_the_gain() {
-        let est = IceEstimate {
-            thickness_um: 1_250,
-            sigma_um: 80,
-            medium: Medium::Rime,
-            probability_permille: 930,
-        };
+        let est = rime_estimate();
         let mut m = meas();
         m.flags |= flags::GAIN_OUT_OF_BAND;
         let gain = GainEstimate {

@@ -8,7 +8,11 @@
 //! - [`text`]: one-line texts of protocol messages.
 //! - [`timefmt`]: host timestamps (Unix ms, ISO 8601 UTC).
 //! - [`numbers`]: finite-number parsers for command lines.
+//! - `fixtures` (feature `fixtures`): test data, one iced node's measurement, estimate and
+//!   gain.
 
+#[cfg(any(test, feature = "fixtures"))]
+pub mod fixtures;
 pub mod link;
 pub mod numbers;
 pub mod reading;

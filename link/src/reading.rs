@@ -232,32 +232,18 @@ impl EventReading {
 mod tests {
     use super::*;
 
+    use crate::fixtures::{gain_estimate, iced_measurement, rime_estimate};
+
+    /// The iced node, its gain out of band.
     fn meas() -> Measurement {
-        Measurement {
-            uptime_ms: 12_345,
-            i1_na: 1_500,
-            i2_na: -250,
-            ambient1_na: 20_000,
-            ambient2_na: 0,
-            temperature_centi_c: -512,
-            vdda_mv: 3300,
-            flags: flags::ALARM | flags::NTC_OPEN | flags::ALARM_ACKED | flags::GAIN_OUT_OF_BAND,
-            state: DetectorState::Ice,
-        }
+        let mut m = iced_measurement();
+        m.flags |= flags::GAIN_OUT_OF_BAND;
+        m
     }
 
     #[test]
     fn a_measurement_in_the_units_people_read() {
-        let est = IceEstimate {
-            thickness_um: 1_250,
-            sigma_um: 80,
-            medium: Medium::Rime,
-            probability_permille: 930,
-        };
-        let gain = GainEstimate {
-            gain_ppm: 1_150_260,
-            sigma_ppm: 61_000,
-        };
+        let (est, gain) = (rime_estimate(), gain_estimate());
         let r = Reading::new(&meas(), Some(&est), Some(&gain));
         assert_eq!((r.i1_ua, r.i2_ua, r.ambient1_ua), (1.5, -0.25, 20.0));
         assert_eq!(r.temperature_c, -5.12);

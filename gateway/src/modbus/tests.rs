@@ -1,7 +1,8 @@
 use std::time::{Duration, Instant};
 
 use fois_link::Reading;
-use fois_protocol::{DetectorState, GainEstimate, IceEstimate, Measurement, Medium, flags};
+use fois_link::fixtures::{gain_estimate, iced_measurement, rime_estimate};
+use fois_protocol::{Medium, flags};
 
 use super::*;
 use crate::snapshot::NodeSnapshot;
@@ -9,27 +10,7 @@ use crate::snapshot::NodeSnapshot;
 const STALE: Duration = Duration::from_secs(2);
 
 fn iced(t: Instant) -> NodeSnapshot {
-    let m = Measurement {
-        uptime_ms: 12_345,
-        i1_na: 1_500,
-        i2_na: -250,
-        ambient1_na: 20_000,
-        ambient2_na: 0,
-        temperature_centi_c: -512,
-        vdda_mv: 3300,
-        flags: flags::ALARM | flags::ALARM_ACKED | flags::NTC_OPEN,
-        state: DetectorState::Ice,
-    };
-    let e = IceEstimate {
-        thickness_um: 1_250,
-        sigma_um: 80,
-        medium: Medium::Rime,
-        probability_permille: 930,
-    };
-    let g = GainEstimate {
-        gain_ppm: 1_150_260,
-        sigma_ppm: 61_000,
-    };
+    let (m, e, g) = (iced_measurement(), rime_estimate(), gain_estimate());
     let mut n = NodeSnapshot::new(0, Some("tower-3".into()), "/dev/x".into());
     n.link_up = true;
     n.reading = Some(Reading::new(&m, Some(&e), Some(&g)));
