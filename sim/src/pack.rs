@@ -1,11 +1,11 @@
 //! The landed lanes of the glazed path packed (`diffuse::reflect_diffuse`, between its
-//! two passes), so that the second pass runs on whole vectors: compress-stores with
+//! two passes), so that the second pass runs on whole vectors: compress instructions with
 //! AVX-512, a table of permutations with AVX2, a branchless loop otherwise; all three
 //! write the same values (tested).
 
 /// The lanes whose `slot` is below 2, packed: their numbers into `landed`, and from
 /// `inputs` (cosine, direction z, path) the cosine, −direction z and path into `packed`.
-/// Returns how many. With AVX-512 eight lanes at a time by compress-stores, with AVX2 four
+/// Returns how many. With AVX-512 eight lanes at a time by compress instructions, with AVX2 four
 /// at a time by a table of permutations, else one by one without a branch: every lane is
 /// written at the count, which moves on for the landed ones only. All write the same values.
 pub(crate) fn pack_landed(
@@ -60,7 +60,10 @@ fn pack_from(
     m
 }
 
-/// [`pack_landed`] by compress-stores, eight lanes at a time.
+/// [`pack_landed`] by compress instructions, eight lanes at a time: compressed in a
+/// register, then stored whole (a compress straight to memory is microcoded and slow on
+/// some CPUs, e.g. AMD Zen 4); the lanes beyond the count are overwritten by the next store
+/// or left stale.
 ///
 /// # Safety
 /// The CPU has AVX-512 F and VL; `inputs`, `landed` and `packed` hold at least `slot.len()`
@@ -84,18 +87,19 @@ unsafe fn pack_landed_avx512(
     let mut m = 0;
     let mut k = 0;
     while k + 8 <= n {
-        // SAFETY: k + 8 ≤ n lanes are read from every input; m ≤ k, so at most 8 lanes
-        // from m are written, within n.
+        // SAFETY: k + 8 ≤ n lanes are read from every input; m ≤ k, so the 8 lanes written
+        // from m lie within n.
         unsafe {
             let s = _mm256_loadu_si256(slot.as_ptr().add(k).cast());
             let hit = _mm256_cmplt_epu32_mask(s, two);
-            _mm256_mask_compressstoreu_epi32(landed.as_mut_ptr().add(m).cast(), hit, lane);
+            let kept = _mm256_maskz_compress_epi32(hit, lane);
+            _mm256_storeu_si256(landed.as_mut_ptr().add(m).cast(), kept);
             let c = _mm512_loadu_pd(cos_f.as_ptr().add(k));
-            _mm512_mask_compressstoreu_pd(cos_p.as_mut_ptr().add(m), hit, c);
+            _mm512_storeu_pd(cos_p.as_mut_ptr().add(m), _mm512_maskz_compress_pd(hit, c));
             let z = _mm512_xor_pd(_mm512_loadu_pd(dir_z.as_ptr().add(k)), sign);
-            _mm512_mask_compressstoreu_pd(rdz_p.as_mut_ptr().add(m), hit, z);
+            _mm512_storeu_pd(rdz_p.as_mut_ptr().add(m), _mm512_maskz_compress_pd(hit, z));
             let p = _mm512_loadu_pd(path.as_ptr().add(k));
-            _mm512_mask_compressstoreu_pd(path_p.as_mut_ptr().add(m), hit, p);
+            _mm512_storeu_pd(path_p.as_mut_ptr().add(m), _mm512_maskz_compress_pd(hit, p));
             m += hit.count_ones() as usize;
         }
         lane = _mm256_add_epi32(lane, eight);
