@@ -39,7 +39,7 @@ pub(crate) struct GapSampler {
     /// smallest gap g in the bucket (bits 32–63) and the threshold below which the gap is
     /// g + 1 (bits 0–31; 0 if the whole bucket has gap g). `MANY` in bits 32–63 marks the
     /// few buckets near a draw of 0 that straddle more than one threshold.
-    bucket: Vec<u64>,
+    bucket: Box<[u64; 1 << GAP_BUCKET_BITS]>,
 }
 
 /// Marks a bucket whose gaps are counted threshold by threshold.
@@ -62,19 +62,19 @@ impl GapSampler {
         threshold.push(0);
         let count = |u: u32| threshold.iter().take_while(|&&t| u < t).count() as u64;
         let width = 1u64 << (32 - GAP_BUCKET_BITS);
-        let bucket = (0..1u64 << GAP_BUCKET_BITS)
-            .map(|b| {
-                let (least, most) = (
-                    count(((b + 1) * width - 1) as u32),
-                    count((b * width) as u32),
-                );
-                match most - least {
-                    0 => least << 32,
-                    1 => (least << 32) | u64::from(threshold[least as usize]),
-                    _ => MANY,
-                }
-            })
-            .collect();
+        // A fixed-size table: the index (the draw's upper bits) needs no bounds check.
+        let bucket = Box::new(std::array::from_fn(|b| {
+            let b = b as u64;
+            let (least, most) = (
+                count(((b + 1) * width - 1) as u32),
+                count((b * width) as u32),
+            );
+            match most - least {
+                0 => least << 32,
+                1 => (least << 32) | u64::from(threshold[least as usize]),
+                _ => MANY,
+            }
+        }));
         GapSampler { threshold, bucket }
     }
 
@@ -216,11 +216,14 @@ impl BubbleLanes {
         'walk: for m in 0.. {
             let w = stream.word(2 * m);
             for u in gap_draws(w) {
-                j = j.saturating_add(gaps.gap(u));
+                // No overflow: j < j_end ≤ MAX_LAYERS_PER_RAY before, and a gap is below
+                // the length of the threshold table (≈ 1100 for P_B = 0.02).
+                j = j.wrapping_add(gaps.gap(u));
                 if j >= j_end {
                     break 'walk;
                 }
-                layer[n] = f64::from(j);
+                // SAFETY: every bubble takes a layer of its own, so n ≤ j < j_end < room.
+                unsafe { *layer.get_unchecked_mut(n) = f64::from(j) };
                 j += 1;
                 n += 1;
             }
