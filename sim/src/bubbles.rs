@@ -23,71 +23,7 @@ use crate::consts::BUBBLE_LAYER_MM;
 use crate::geometry::Bundles;
 use crate::kernels::{LANES, grow, small_int, u32_to_f64, vector_kernel};
 use crate::streams::{CounterStream, INV_2_POW_32};
-
-/// Bits of a draw that index the bucket table of [`GapSampler`].
-const GAP_BUCKET_BITS: u32 = 12;
-
-/// Geometric gaps from one 32-bit draw: the number of layers without a bubble before the
-/// next bubble, P(gap ≥ k) = (1 − P_B)^k, by inversion against a table of thresholds.
-#[derive(Clone, Debug)]
-pub(crate) struct GapSampler {
-    /// threshold[k − 1] = round((1 − P_B)^k · 2³²): gap ≥ k iff the draw is below it.
-    /// Non-increasing, ends with a 0 (no draw is below it), so that every gap g has a
-    /// threshold[g].
-    threshold: Vec<u32>,
-    /// Per bucket of the draw's upper `GAP_BUCKET_BITS` bits, one load answers: the
-    /// smallest gap g in the bucket (bits 32–63) and the threshold below which the gap is
-    /// g + 1 (bits 0–31; 0 if the whole bucket has gap g). `MANY` in bits 32–63 marks the
-    /// few buckets near a draw of 0 that straddle more than one threshold.
-    bucket: Box<[u64; 1 << GAP_BUCKET_BITS]>,
-}
-
-/// Marks a bucket whose gaps are counted threshold by threshold.
-const MANY: u64 = u64::MAX << 32;
-
-impl GapSampler {
-    /// The sampler for P_B = `p_bubble` (`DENSE_ABOVE` < P_B ≤ 1).
-    pub(crate) fn new(p_bubble: f64) -> Self {
-        let q = 1.0 - p_bubble;
-        let mut threshold = Vec::new();
-        let mut qk = q;
-        loop {
-            let t = (qk * 4_294_967_296.0).round().min(u32::MAX as f64);
-            if t < 1.0 {
-                break;
-            }
-            threshold.push(t as u32);
-            qk *= q;
-        }
-        threshold.push(0);
-        let count = |u: u32| threshold.iter().take_while(|&&t| u < t).count() as u64;
-        let width = 1u64 << (32 - GAP_BUCKET_BITS);
-        // A fixed-size table: the index (the draw's upper bits) needs no bounds check.
-        let bucket = Box::new(std::array::from_fn(|b| {
-            let b = b as u64;
-            let (least, most) = (
-                count(((b + 1) * width - 1) as u32),
-                count((b * width) as u32),
-            );
-            match most - least {
-                0 => least << 32,
-                1 => (least << 32) | u64::from(threshold[least as usize]),
-                _ => MANY,
-            }
-        }));
-        GapSampler { threshold, bucket }
-    }
-
-    /// The gap for the draw `u`: #{k ≥ 1 : u < threshold of k}.
-    #[inline(always)]
-    pub(crate) fn gap(&self, u: u32) -> u32 {
-        let entry = self.bucket[(u >> (32 - GAP_BUCKET_BITS)) as usize];
-        if entry == MANY {
-            return self.threshold.iter().take_while(|&&t| u < t).count() as u32;
-        }
-        (entry >> 32) as u32 + u32::from(u < entry as u32)
-    }
-}
+use crate::walk::{GapSampler, WALK_BLOCK, walk_layers};
 
 /// The point on the unit circle at azimuth φ = 2π (u + ½)/2³² for a 32-bit draw u (given
 /// as an f64, exactly): the quadrant from its upper 2 bits, the angle within it from the
@@ -203,43 +139,19 @@ impl BubbleLanes {
         m
     }
 
-    /// Walk the layers j < `j_end` of one ray: where its bubbles are.
+    /// Walk the layers j < `j_end` of one ray: where its bubbles are (walk.rs).
     pub(crate) fn walk(&mut self, stream: CounterStream, gaps: &GapSampler, j_end: u32) {
         self.stream = stream;
-        // At most one bubble per layer, plus the padding. The buffer only grows, and is
-        // written by index: cheaper than a push.
-        let room = j_end as usize + LANES;
+        // At most one bubble per layer, plus a block of the walk. The buffer only grows.
+        let room = j_end as usize + WALK_BLOCK.max(LANES);
         grow(&mut self.layer, room, 0.0);
         let layer = &mut self.layer[..room];
-        let mut j: u32 = 0;
-        let mut n: usize = 0;
-        'walk: for m in 0.. {
-            let w = stream.word(2 * m);
-            for u in gap_draws(w) {
-                // No overflow: j < j_end ≤ MAX_LAYERS_PER_RAY before, and a gap is below
-                // the length of the threshold table (≈ 1100 for P_B = 0.02).
-                j = j.wrapping_add(gaps.gap(u));
-                if j >= j_end {
-                    break 'walk;
-                }
-                // SAFETY: every bubble takes a layer of its own, so n ≤ j < j_end < room.
-                unsafe { *layer.get_unchecked_mut(n) = f64::from(j) };
-                j += 1;
-                n += 1;
-            }
-        }
+        let n = walk_layers(stream, gaps, j_end, layer);
         self.count = n;
         // Pad to whole vectors with copies of the last bubble (or of zeros).
         let last = layer[n.saturating_sub(1)];
         layer[n..n.next_multiple_of(LANES)].fill(last);
     }
-}
-
-/// The draws of the gaps before bubbles 2m and 2m + 1 from word 2m: its upper, then its
-/// lower 32 bits.
-#[inline(always)]
-fn gap_draws(w: u64) -> [u32; 2] {
-    [(w >> 32) as u32, w as u32]
 }
 
 /// The draws of the scattering angles of bubble n, as f64 (exactly): cos θ_B from the lower
@@ -405,51 +317,6 @@ fn land_scattered_lanes(
 mod tests {
     use super::*;
     use crate::geometry::Geometry;
-
-    #[test]
-    fn gap_table_matches_counting_every_threshold() {
-        for p in [0.021, 0.21, 0.5, 0.99, 1.0] {
-            let g = GapSampler::new(p);
-            let brute = |u: u32| g.threshold.iter().filter(|&&t| u < t).count() as u32;
-            assert_eq!(g.threshold.last(), Some(&0));
-            // Every threshold, each side of it, and a spread of other draws.
-            let mut us: Vec<u32> = vec![0, 1, u32::MAX, u32::MAX - 1];
-            for &t in &g.threshold {
-                us.extend([t.wrapping_sub(1), t, t.wrapping_add(1)]);
-            }
-            us.extend((0..100_000u32).map(|k| k.wrapping_mul(0x9E37_79B9)));
-            for u in us {
-                assert_eq!(g.gap(u), brute(u), "p {p}, u {u}");
-            }
-        }
-    }
-
-    #[test]
-    fn gaps_are_geometric() {
-        // P_B = 0.21 (rime): mean gap (1 − p)/p = 3.762, P(gap = 0) = 0.21, P(gap ≥ 10) = 0.79¹⁰.
-        let p: f64 = 0.21;
-        let g = GapSampler::new(p);
-        let s = CounterStream::new(7, 2);
-        let n = 200_000u64;
-        let gaps: Vec<u32> = (0..n).map(|k| g.gap((s.word(k) >> 32) as u32)).collect();
-        let mean = gaps.iter().map(|&x| f64::from(x)).sum::<f64>() / n as f64;
-        let sd_of_mean = ((1.0 - p).sqrt() / p) / (n as f64).sqrt(); // 0.0095
-        assert!((mean - 3.7619).abs() < 4.0 * sd_of_mean, "{mean}");
-        let zero = gaps.iter().filter(|&&x| x == 0).count() as f64 / n as f64;
-        assert!(
-            (zero - 0.21).abs() < 4.0 * (0.21f64 * 0.79 / n as f64).sqrt(),
-            "{zero}"
-        );
-        let ten = gaps.iter().filter(|&&x| x >= 10).count() as f64 / n as f64;
-        let want = 0.79f64.powi(10); // 0.0947
-        assert!(
-            (ten - want).abs() < 4.0 * (want * (1.0 - want) / n as f64).sqrt(),
-            "{ten}"
-        );
-        // P_B = 1: every layer holds a bubble.
-        let all = GapSampler::new(1.0);
-        assert!((0..1000).all(|k| all.gap((s.word(k) >> 32) as u32) == 0));
-    }
 
     #[test]
     fn unit_circle_is_unit_and_uniform_in_angle() {

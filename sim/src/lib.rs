@@ -28,6 +28,7 @@ mod pack;
 pub mod streams;
 pub mod table;
 mod tracer;
+mod walk;
 
 pub use analytic::analytic_curve;
 pub use geometry::{Geometry, Region};

@@ -4,7 +4,6 @@
 use glam::{DVec2, DVec3};
 use rand_pcg::Pcg32;
 
-use crate::bubbles::GapSampler;
 pub use crate::config::{
     Coupling, DiffuseFresnel, IceKind, IceParams, SensorKind, SimConfig, SimError,
 };
@@ -14,6 +13,7 @@ use crate::kernels::LANES;
 use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
 use crate::streams::{mix64, std_normal, uniform};
 use crate::tracer::Accretion;
+use crate::walk::GapSampler;
 
 /// One source fibre's ray, fixed at model set-up.
 #[derive(Clone, Copy, Debug)]
@@ -48,7 +48,7 @@ pub struct SensorModel {
     pub(crate) dense: Option<GapSampler>,
 }
 
-/// Above this P_B the bubbles are walked by `bubbles::GapSampler` from counter-based
+/// Above this P_B the bubbles are walked by `walk::GapSampler` from counter-based
 /// streams; at or below it by `geometric_gap` (one `ln` per bubble) from a PCG stream.
 const DENSE_ABOVE: f64 = 0.02;
 

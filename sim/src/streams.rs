@@ -37,13 +37,16 @@ pub(crate) fn diffuse_stream(ray: usize) -> u64 {
     3 + 2 * ray as u64
 }
 
+/// The multipliers of the SplitMix64 finaliser, in order.
+pub(crate) const MIX64_MULTIPLIERS: [u64; 2] = [0xBF58_476D_1CE4_E5B9, 0x94D0_49BB_1331_11EB];
+
 /// SplitMix64 finaliser (Steele, Lea & Flood, "Fast splittable pseudorandom number
 /// generators", OOPSLA 2014), one step included: spreads a seed into a generator state.
 #[inline(always)]
 pub fn mix64(mut z: u64) -> u64 {
     z = z.wrapping_add(GOLDEN_GAMMA);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z = (z ^ (z >> 30)).wrapping_mul(MIX64_MULTIPLIERS[0]);
+    z = (z ^ (z >> 27)).wrapping_mul(MIX64_MULTIPLIERS[1]);
     z ^ (z >> 31)
 }
 
@@ -92,10 +95,16 @@ impl CounterStream {
         }
     }
 
-    /// Word n of the stream.
+    /// Word n of the stream: [`mix64`] of its counter.
     #[inline(always)]
     pub(crate) fn word(self, n: u64) -> u64 {
-        mix64(self.start.wrapping_add(n.wrapping_mul(GOLDEN_GAMMA)))
+        mix64(self.counter(n))
+    }
+
+    /// The counter of word n, start + n·γ.
+    #[inline(always)]
+    pub(crate) fn counter(self, n: u64) -> u64 {
+        self.start.wrapping_add(n.wrapping_mul(GOLDEN_GAMMA))
     }
 }
 

@@ -14,7 +14,7 @@
 use glam::{DVec2, DVec3};
 use rand_pcg::Pcg32;
 
-use crate::bubbles::{BubbleLanes, BubbleRay, GapSampler, land_scattered};
+use crate::bubbles::{BubbleLanes, BubbleRay, land_scattered};
 use crate::config::{Coupling, DiffuseFresnel, SensorKind};
 use crate::consts::*;
 use crate::curve::{Curve, CurvePoint};
@@ -27,6 +27,7 @@ use crate::streams::{
     CounterStream, STREAM_ACCRETION, accretion_key, bubble_stream, diffuse_stream, fill_u32,
     geometric_gap, uniform, uniform32, unit_circle_unnormalised,
 };
+use crate::walk::GapSampler;
 
 /// Most bubble layers one ray walks through (20 000 × 0.1 mm = 2 m of ice along z).
 const MAX_LAYERS_PER_RAY: u32 = 20_000;
