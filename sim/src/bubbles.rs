@@ -1,10 +1,8 @@
-//! The dense bubble walk of rime ice (thesis §3.2.2–§3.2.3, Fig. 3.11): where along a ray
-//! the bubbles lie, which way each scatters, and where its scattered ray lands on the face.
+//! The dense bubbles of rime ice (thesis §3.2.2–§3.2.3, Fig. 3.11): after the walk has found
+//! where along a ray they lie (walk.rs), which way each scatters and where its scattered ray
+//! lands on the face.
 //!
-//! Every layer of Δ_Ice holds a bubble with probability P_B, independently, so the numbers
-//! of empty layers between bubbles are geometric. Instead of one draw per layer, the walk
-//! draws one gap per bubble ([`GapSampler`], exact up to the 2⁻³² resolution of a draw), and
-//! each bubble's draws come from a counter-based stream ([`CounterStream`]: the words a
+//! Each bubble's draws come from a counter-based stream ([`CounterStream`]: the words a
 //! bubble uses are fixed by its number, below), so no draw depends on a branch taken before
 //! it. The angles and the landing of all scattered rays of one ray are then computed at once
 //! by [`land_scattered`], loops the compiler vectorises (AVX-512 or AVX2 with FMA when the CPU has them,

@@ -61,7 +61,7 @@ pub(crate) struct Accretion<'m> {
     scat_delta: Vec<[f64; 2]>,
     /// Flux reflected at the fibre face per thickness (Sensor A), W.
     leak: Vec<f64>,
-    /// Per ray: the forward flux after n bubbles (fwd_after[n]) and, at each thickness index
+    /// Per ray: the forward flux after n bubbles (`fwd_after[n]`) and, at each thickness index
     /// where bubbles are frozen in, how many are frozen in up to it (`frozen_by`, 0 at the
     /// other indices: the bubbles are frozen in in walk order, so the number frozen in at
     /// indices ≤ i is the running maximum). The forward flux at thickness i is

@@ -18,7 +18,7 @@ const GAP_BUCKET_BITS: u32 = 12;
 pub(crate) struct GapSampler {
     /// threshold[k − 1] = round((1 − P_B)^k · 2³²): gap ≥ k iff the draw is below it.
     /// Non-increasing, ends with a 0 (no draw is below it), so that every gap g has a
-    /// threshold[g].
+    /// `threshold[g]`.
     threshold: Vec<u32>,
     /// Per bucket of the draw's upper `GAP_BUCKET_BITS` bits, one load answers: the
     /// smallest gap g in the bucket (bits 32–63) and the threshold below which the gap is
