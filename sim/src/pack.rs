@@ -7,7 +7,9 @@
 /// `inputs` (cosine, direction z, path) the cosine, −direction z and path into `packed`.
 /// Returns how many. With AVX-512 eight lanes at a time by compress instructions, with AVX2 four
 /// at a time by a table of permutations, else one by one without a branch: every lane is
-/// written at the count, which moves on for the landed ones only. All write the same values.
+/// written at the count, which moves on for the landed ones only. All write the same values
+/// below the count; the entries of `landed` and `packed` from the count up to `slot.len()`
+/// are scratch (whole vectors are stored), for the caller to overwrite.
 pub(crate) fn pack_landed(
     slot: &[u32],
     inputs: [&[f64]; 3],
