@@ -115,6 +115,10 @@ impl LongRun {
     }
 }
 
+/// How long the long run's feeder waits for the monitor to read the last
+/// bytes, and then for it to stop.
+const DRAIN_DEADLINE: std::time::Duration = std::time::Duration::from_secs(60);
+
 /// The host pipeline for `frames` frames of the firmware node at its
 /// 10 Hz, in virtual time as fast as the machine goes: virtual node →
 /// pty → `monitor::run` (decoder, sequence tracking, CSV log to `log`).
@@ -159,8 +163,13 @@ pub fn long_run(frames: u64, log: &std::path::Path) -> anyhow::Result<LongRun> {
         [(Cover::Rime, curve)],
         [0.0; 2],
     ));
+    // The feeder watches the slave's input queue to know when the monitor
+    // has read every byte (the monitor opens the same pty by its path).
+    let queue = slave.try_clone_native()?;
     let stop = Arc::new(AtomicBool::new(false));
     let feeder_stop = stop.clone();
+    let monitor_done = Arc::new(AtomicBool::new(false));
+    let feeder_done = monitor_done.clone();
     let start = Instant::now();
     let feeder = std::thread::spawn(move || -> Vec<(u64, u64)> {
         let mut node = VirtualNode::new(env, NodeOptions::default());
@@ -196,11 +205,19 @@ pub fn long_run(frames: u64, log: &std::path::Path) -> anyhow::Result<LongRun> {
             writer(&mut master, &out);
             out.clear();
         }
-        // Let the monitor drain the pty (the last batch), then stop it. 2 s:
-        // on a loaded 2-core CI machine 0.5 s once left the last 64 frames
-        // unread.
-        std::thread::sleep(Duration::from_secs(2));
+        // Stop the monitor once it has read every byte: a fixed wait is not
+        // enough on a loaded CI machine (2 s once left 125 frames unread).
+        // The monitor handles what it read before it looks at `stop` again.
+        let t = Instant::now();
+        while t.elapsed() < DRAIN_DEADLINE && queue.bytes_to_read().is_ok_and(|n| n > 0) {
+            std::thread::sleep(Duration::from_millis(20));
+        }
         feeder_stop.store(true, Ordering::Relaxed);
+        // Keep the master end open until the monitor has stopped: closing it
+        // first reads as a lost link.
+        while !feeder_done.load(Ordering::Relaxed) && t.elapsed() < DRAIN_DEADLINE {
+            std::thread::sleep(Duration::from_millis(20));
+        }
         rss
     });
     let mut opts = crate::monitor::MonitorOptions::new(path);
@@ -208,6 +225,7 @@ pub fn long_run(frames: u64, log: &std::path::Path) -> anyhow::Result<LongRun> {
     opts.log = Some(log.to_path_buf());
     let summary = crate::monitor::run(&opts, &stop);
     stop.store(true, Ordering::Relaxed);
+    monitor_done.store(true, Ordering::Relaxed);
     let rss = feeder
         .join()
         .map_err(|_| anyhow::anyhow!("feeder thread panicked"))?;

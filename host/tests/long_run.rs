@@ -19,6 +19,7 @@ fn check(frames: u64) {
     );
     assert_eq!(r.summary.lost, 0);
     assert_eq!(r.summary.rejected, 0);
+    assert_eq!(r.summary.disconnects, 0, "the pty stays open to the end");
     assert!(r.summary.measurements >= frames - 10, "{:?}", r.summary);
     assert!(
         r.summary.ice_onsets >= 1,
