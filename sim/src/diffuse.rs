@@ -36,9 +36,6 @@ pub(crate) struct DiffuseRay {
     pub n_fibre: f64,
     /// Absorption coefficient of the ice, 1/mm (Beer–Lambert, eq. 3.15).
     pub alpha_per_mm: f64,
-    /// Keep the x and y of every reflected direction (`DiffuseLanes::dir`; the acceptance
-    /// cone needs them), not only z.
-    pub keep_dir: bool,
 }
 
 impl DiffuseRay {
@@ -84,7 +81,7 @@ pub(crate) struct DiffuseLanes {
     /// 0 or 1 for the bundle the reflected ray lands on, 2 for none (also when it does not
     /// meet the surface from below or does not come back down).
     pub slot: Vec<u32>,
-    /// The reflected direction (x, y and z apart; x and y only with `DiffuseRay::keep_dir`).
+    /// The reflected direction (x, y and z apart).
     pub dir: [Vec<f64>; 3],
     /// Cosine of the angle of incidence of the Fresnel reflectance.
     cos_fresnel: Vec<f64>,
@@ -181,31 +178,48 @@ fn diffuse_landing(
     let cos_mean = v.dot(normal);
     let inv_den = 1.0 / ray.den;
     let half_max = 0.5 * ray.diffuse_max_rad;
+    let half_max_per_draw = half_max * (2.0 / 4_294_967_296.0);
     let draws = &draws[..n];
     let slot = &mut out.slot[..n];
     let [dir_x, dir_y, dir_z] = &mut out.dir;
     let (dir_x, dir_y, dir_z) = (&mut dir_x[..n], &mut dir_y[..n], &mut dir_z[..n]);
     let cos_fresnel = &mut out.cos_fresnel[..n];
     let path = &mut out.path_mm[..n];
+    // Three passes of shorter chains, so that the processor overlaps more lanes (one loop
+    // body waited on its long chain and on the division: −12 % of glazed's time with AVX2,
+    // −7 % with AVX-512). The direction arrays hold the intermediate values.
+    // 1. The micro-facet's turn: sin and cos of δ_R/2 (into x and y).
     for k in 0..n {
-        // Reflection at the ice/air surface, h0 = d + a above the fibre.
-        let h0 = thick_mm[k] + ray.a;
-        let t_up = h0 * inv_den;
-        let z_hit = v.z * t_up;
-        // u ∈ [0, 1) from the draw; δ_R/2 = δ_max/2 · (2u − 1).
-        let u = draws[k] as f64 * (2.0 / 4_294_967_296.0);
+        // u ∈ [0, 1) from the draw; δ_R/2 = δ_max/2 · (2u − 1), by one fused multiply-add:
+        // draw·(δ_max/2·2⁻³¹) − δ_max/2 has the exact value δ_max/2·(2u − 1) (the factor is
+        // δ_max/2 scaled by a power of two), rounded once, as the product was before.
+        let x = (draws[k] as f64).mul_add(half_max_per_draw, -half_max);
         // δ_R deflects the reflected ray by δ_R (eq. 3.22): micro-facet normal turned by
         // δ_R/2 about the y axis (`laws::facet_normal`, without the libm call).
-        let (sh, ch) = small_sin_cos(half_max * (u - 1.0));
+        let (sh, ch) = small_sin_cos(x);
+        dir_x[k] = sh;
+        dir_y[k] = ch;
+    }
+    // 2. The reflected direction.
+    for k in 0..n {
+        let (sh, ch) = (dir_x[k], dir_y[k]);
         let nrm_x = normal.x.mul_add(ch, normal.z * sh);
         let nrm_y = normal.y;
         let nrm_z = normal.z.mul_add(ch, -normal.x * sh);
         // v · n and the law of reflection (`laws::reflect`), written out.
         let cos_i = v.x.mul_add(nrm_x, v.y.mul_add(nrm_y, v.z * nrm_z));
         let twice = -2.0 * cos_i;
-        let rd_x = twice.mul_add(nrm_x, v.x);
-        let rd_y = twice.mul_add(nrm_y, v.y);
-        let rd_z = twice.mul_add(nrm_z, v.z);
+        cos_fresnel[k] = cos_i;
+        dir_x[k] = twice.mul_add(nrm_x, v.x);
+        dir_y[k] = twice.mul_add(nrm_y, v.y);
+        dir_z[k] = twice.mul_add(nrm_z, v.z);
+    }
+    // 3. Where it lands, h0 = d + a above the fibre.
+    for k in 0..n {
+        let (rd_x, rd_y, rd_z, cos_i) = (dir_x[k], dir_y[k], dir_z[k], cos_fresnel[k]);
+        let h0 = thick_mm[k] + ray.a;
+        let t_up = h0 * inv_den;
+        let z_hit = v.z * t_up;
         let t_down = z_hit / -rd_z;
         let land_x = rd_x.mul_add(t_down, v.x.mul_add(t_up, ray.p0[0]));
         let land_y = rd_y.mul_add(t_down, v.y.mul_add(t_up, ray.p0[1]));
@@ -214,11 +228,6 @@ fn diffuse_landing(
         slot[k] = if meets { bundle } else { 2 };
         cos_fresnel[k] = if ray.facet_fresnel { cos_i } else { cos_mean };
         path[k] = t_up + t_down;
-        if ray.keep_dir {
-            dir_x[k] = rd_x;
-            dir_y[k] = rd_y;
-        }
-        dir_z[k] = rd_z;
     }
 }
 }
@@ -276,7 +285,6 @@ mod tests {
             n_air: 1.00028,
             n_fibre: 1.581,
             alpha_per_mm: 0.012,
-            keep_dir: true,
         };
         let thick: Vec<f64> = (0..151).map(|i| i as f64 * 0.1).collect();
         let draws: Vec<u32> = (0..151)

@@ -334,7 +334,6 @@ impl<'m> Accretion<'m> {
             n_air: N_AIR,
             n_fibre: N_FIBRE,
             alpha_per_mm: ALPHA_PER_MM,
-            keep_dir: cfg.coupling == Coupling::AcceptanceCone,
         };
         // Beyond a thickness that depends on the ray no diffuse angle brings the reflection
         // back onto the face: those thicknesses are not traced, nor their angles drawn (the
