@@ -366,24 +366,31 @@ impl<'m> Accretion<'m> {
         // (`frozen_by`), needed only when the ray met bubbles.
         let n_bub0 = frozen_before(&self.frozen_by[first_wet..i0]);
         if had_bubbles {
-            self.diffuse_bubbles.clear();
-            self.diffuse_bubbles
-                .extend(self.frozen_by[i0..i_end].iter().scan(n_bub0, |b, &f| {
-                    *b = (*b).max(f as usize);
-                    Some(*b)
-                }));
+            // Into a buffer that only grows, by plain stores (a `Vec` push per entry stored
+            // its length every time).
+            grow(&mut self.diffuse_bubbles, i_end - i0, 0);
+            let mut b = n_bub0;
+            for (o, &f) in self.diffuse_bubbles[..i_end - i0]
+                .iter_mut()
+                .zip(&self.frozen_by[i0..i_end])
+            {
+                b = b.max(f as usize);
+                *o = b;
+            }
         }
         let cone = cfg.coupling == Coupling::AcceptanceCone;
         let d = &self.diffuse_out;
         let (landed, weight) = d.landed();
+        let slot = &d.slot[..];
         let refl = &mut self.refl[i0..i_end];
         if !cone && !had_bubbles {
             // The common case (glazed ice: most rays meet no bubble), without a branch per
-            // lane: the same forward flux for every thickness.
+            // lane: the same forward flux for every thickness. A landed lane's slot is 0 or
+            // 1, so `& 1` keeps it and spares the bounds check.
             let fwd = self.fwd_after[n_bub0];
             for (&n, &w) in landed.iter().zip(weight) {
                 let n = n as usize;
-                refl[n][d.slot[n] as usize] += fwd * w;
+                refl[n][(slot[n] & 1) as usize] += fwd * w;
             }
             return;
         }
@@ -397,7 +404,7 @@ impl<'m> Accretion<'m> {
             } else {
                 self.fwd_after[n_bub0]
             };
-            refl[n][d.slot[n] as usize] += fwd * w;
+            refl[n][(slot[n] & 1) as usize] += fwd * w;
         }
     }
 
