@@ -80,7 +80,7 @@ impl DiffuseRay {
 pub(crate) struct DiffuseLanes {
     /// 0 or 1 for the bundle the reflected ray lands on, 2 for none (also when it does not
     /// meet the surface from below or does not come back down).
-    pub slot: Vec<u32>,
+    pub slot: Vec<u64>,
     /// The reflected direction (x, y and z apart).
     pub dir: [Vec<f64>; 3],
     /// Cosine of the angle of incidence of the Fresnel reflectance.
@@ -223,7 +223,7 @@ fn diffuse_landing(
         let t_down = z_hit / -rd_z;
         let land_x = rd_x.mul_add(t_down, v.x.mul_add(t_up, ray.p0[0]));
         let land_y = rd_y.mul_add(t_down, v.y.mul_add(t_up, ray.p0[1]));
-        let bundle = bundles.slot(land_x, land_y) as u32;
+        let bundle = bundles.slot(land_x, land_y) as u64;
         let meets = cos_i > 0.0 && rd_z < -1e-9;
         slot[k] = if meets { bundle } else { 2 };
         cos_fresnel[k] = if ray.facet_fresnel { cos_i } else { cos_mean };

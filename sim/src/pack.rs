@@ -11,7 +11,7 @@
 /// below the count; the entries of `landed` and `packed` from the count up to `slot.len()`
 /// are scratch (whole vectors are stored), for the caller to overwrite.
 pub(crate) fn pack_landed(
-    slot: &[u32],
+    slot: &[u64],
     inputs: [&[f64]; 3],
     landed: &mut [u32],
     packed: [&mut [f64]; 3],
@@ -41,7 +41,7 @@ pub(crate) fn pack_landed(
 fn pack_from(
     mut k: usize,
     mut m: usize,
-    slot: &[u32],
+    slot: &[u64],
     inputs: [&[f64]; 3],
     landed: &mut [u32],
     packed: [&mut [f64]; 3],
@@ -73,7 +73,7 @@ fn pack_from(
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
 unsafe fn pack_landed_avx512(
-    slot: &[u32],
+    slot: &[u64],
     inputs: [&[f64]; 3],
     landed: &mut [u32],
     packed: [&mut [f64]; 3],
@@ -82,7 +82,7 @@ unsafe fn pack_landed_avx512(
     let n = slot.len();
     let [cos_f, dir_z, path] = inputs;
     let [cos_p, rdz_p, path_p] = packed;
-    let two = _mm256_set1_epi32(2);
+    let two = _mm512_set1_epi64(2);
     let sign = _mm512_set1_pd(-0.0);
     let mut lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
     let eight = _mm256_set1_epi32(8);
@@ -92,8 +92,8 @@ unsafe fn pack_landed_avx512(
         // SAFETY: k + 8 ≤ n lanes are read from every input; m ≤ k, so the 8 lanes written
         // from m lie within n.
         unsafe {
-            let s = _mm256_loadu_si256(slot.as_ptr().add(k).cast());
-            let hit = _mm256_cmplt_epu32_mask(s, two);
+            let s = _mm512_loadu_si512(slot.as_ptr().add(k).cast());
+            let hit = _mm512_cmplt_epu64_mask(s, two);
             let kept = _mm256_maskz_compress_epi32(hit, lane);
             _mm256_storeu_si256(landed.as_mut_ptr().add(m).cast(), kept);
             let c = _mm512_loadu_pd(cos_f.as_ptr().add(k));
@@ -144,7 +144,7 @@ const PACK4_F64: [[i32; 8]; 16] = {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2,fma")]
 unsafe fn pack_landed_avx2(
-    slot: &[u32],
+    slot: &[u64],
     inputs: [&[f64]; 3],
     landed: &mut [u32],
     packed: [&mut [f64]; 3],
@@ -153,7 +153,7 @@ unsafe fn pack_landed_avx2(
     let n = slot.len();
     let [cos_f, dir_z, path] = inputs;
     let [cos_p, rdz_p, path_p] = packed;
-    let two = _mm_set1_epi32(2);
+    let two = _mm256_set1_epi64x(2);
     let sign = _mm256_set1_pd(-0.0);
     let mut m = 0;
     let mut k = 0;
@@ -161,9 +161,9 @@ unsafe fn pack_landed_avx2(
         // SAFETY: k + 4 ≤ n lanes are read from every input; m ≤ k, so the 4 lanes written
         // from m lie within n.
         unsafe {
-            let s = _mm_loadu_si128(slot.as_ptr().add(k).cast());
+            let s = _mm256_loadu_si256(slot.as_ptr().add(k).cast());
             // The slots are 0, 1 or 2: a signed comparison is exact.
-            let hit = _mm_movemask_ps(_mm_castsi128_ps(_mm_cmplt_epi32(s, two))) as usize;
+            let hit = _mm256_movemask_pd(_mm256_castsi256_pd(_mm256_cmpgt_epi64(two, s))) as usize;
             let perm = _mm256_loadu_si256(PACK4_F64[hit].as_ptr().cast());
             let pack =
                 |v: __m256d| _mm256_castps_pd(_mm256_permutevar8x32_ps(_mm256_castpd_ps(v), perm));
@@ -217,7 +217,7 @@ mod tests {
         };
         for len in [0usize, 1, 3, 4, 5, 8, 9, 15, 16, 17, 63, 151] {
             for _ in 0..20 {
-                let slot: Vec<u32> = (0..len).map(|_| (next() % 3) as u32).collect();
+                let slot: Vec<u64> = (0..len).map(|_| next() % 3).collect();
                 let inputs: [Vec<f64>; 3] = std::array::from_fn(|_| {
                     (0..len).map(|_| next() as f64 * 1e-19 - 0.9).collect()
                 });
