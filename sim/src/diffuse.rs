@@ -226,7 +226,9 @@ fn diffuse_landing(
         let bundle = bundles.slot(land_x, land_y) as u64;
         let meets = cos_i > 0.0 && rd_z < -1e-9;
         slot[k] = if meets { bundle } else { 2 };
-        cos_fresnel[k] = if ray.facet_fresnel { cos_i } else { cos_mean };
+        if !ray.facet_fresnel {
+            cos_fresnel[k] = cos_mean;
+        }
         path[k] = t_up + t_down;
     }
 }
