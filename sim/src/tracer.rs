@@ -390,6 +390,7 @@ impl<'m> Accretion<'m> {
             let fwd = self.fwd_after[n_bub0];
             for (&n, &w) in landed.iter().zip(weight) {
                 let n = n as usize;
+                debug_assert!(slot[n] < 2, "a landed lane has a bundle");
                 refl[n][(slot[n] & 1) as usize] += fwd * w;
             }
             return;
@@ -404,6 +405,7 @@ impl<'m> Accretion<'m> {
             } else {
                 self.fwd_after[n_bub0]
             };
+            debug_assert!(slot[n] < 2, "a landed lane has a bundle");
             refl[n][(slot[n] & 1) as usize] += fwd * w;
         }
     }
