@@ -254,6 +254,24 @@ fn queued_in_status(line: &str) -> Option<u64> {
     before.rsplit(' ').next()?.parse().ok()
 }
 
+/// The drain check reads the queued count of a status line, and nothing from other lines
+/// (the reconnection's "sending N queued record(s)" included).
+#[test]
+fn queued_in_status_reads_only_status_lines() {
+    let status = " INFO status: 2/2 node(s) online, 3294 frame(s) received, 3286 record(s) \
+                  acknowledged, 2 queued, 0 lost by the queue; broker connected";
+    assert_eq!(queued_in_status(status), Some(2));
+    let backlog = status.replace(" 2 queued,", " 2980 queued,");
+    assert_eq!(queued_in_status(&backlog), Some(2980));
+    assert_eq!(
+        queued_in_status(
+            " INFO connected to the broker 127.0.0.1:1; sending 3008 queued record(s)"
+        ),
+        None
+    );
+    assert_eq!(queued_in_status(" WARN broker lost"), None);
+}
+
 #[test]
 fn broker_stopped_for_30_s_and_restarted_nothing_is_lost() {
     let dir = tempfile::tempdir().unwrap();
