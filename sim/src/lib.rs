@@ -25,6 +25,7 @@ pub mod laws;
 pub mod model;
 pub mod montecarlo;
 mod pack;
+mod setup;
 pub mod streams;
 pub mod table;
 mod tracer;

@@ -11,6 +11,7 @@ use crate::consts::*;
 pub use crate::curve::{Curve, CurvePoint};
 use crate::kernels::LANES;
 use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
+use crate::setup::RayLanes;
 use crate::streams::{mix64, std_normal, uniform};
 use crate::tracer::Accretion;
 use crate::walk::GapSampler;
@@ -34,7 +35,9 @@ pub(crate) struct SourceRay {
 #[derive(Clone, Debug)]
 pub struct SensorModel {
     pub(crate) cfg: SimConfig,
-    rays: Vec<SourceRay>,
+    pub(crate) rays: Vec<SourceRay>,
+    /// The rays' positions and directions as a structure of arrays (the set-up's kernels).
+    pub(crate) ray_lanes: RayLanes,
     pub(crate) thick: Vec<f64>,
     /// The thicknesses continued on their grid by `kernels::LANES` more: the kernels' padded
     /// lanes read them (and their outputs are never used).
@@ -100,9 +103,10 @@ impl SensorModel {
                     refl_med_w: flux_ray * fr_dielectric(cos_i, N_FIBRE, n_med),
                 }
             })
-            .collect();
+            .collect::<Vec<SourceRay>>();
         SensorModel {
             cfg: cfg.clone(),
+            ray_lanes: RayLanes::new(rays.iter().map(|r| (r.p0, r.dir))),
             rays,
             thick: cfg.thicknesses_mm(),
             half_diffuse_sin_cos: (0.5 * cfg.params.diffuse_max_rad).sin_cos(),

@@ -1,7 +1,9 @@
 //! One accretion traced ray by ray (thesis §3.2, §5.3), in phases:
 //!
-//! 1. [`Accretion::new`]: the accretion's surface (slopes δ_S,x, δ_S,y from stream 0) and
-//!    the sums per thickness;
+//! 1. [`Accretion::new`]: the accretion's surface (slopes δ_S,x, δ_S,y from stream 0), the
+//!    sums per thickness, and every ray's set-up against the surface, all rays at once
+//!    (setup.rs: where the plane lies above the ray, the bubble layers the ice covers, the
+//!    specular reflection's Fresnel factors, landing line, visited thicknesses, absorption);
 //! 2. per ray, [`Accretion::trace`]: its frame against the surface ([`RayFrame`]), then
 //!    pass 1, the bubbles ([`Accretion::bubbles_dense`] for rime, [`Accretion::bubbles_sparse`]
 //!    for glazed), which leaves the forward flux after each bubble and where it is frozen in,
@@ -21,16 +23,13 @@ use crate::curve::{Curve, CurvePoint};
 use crate::diffuse::{DiffuseLanes, DiffuseRay, reflect_diffuse};
 use crate::geometry::Bundles;
 use crate::kernels::{LANES, grow, specular_slots};
-use crate::laws::{fr_dielectric, reflect};
 use crate::model::{SensorModel, SourceRay};
+use crate::setup::{MAX_LAYERS_PER_RAY, RaySetups, Surface};
 use crate::streams::{
     CounterStream, STREAM_ACCRETION, accretion_key, bubble_stream, diffuse_stream, fill_u32,
     geometric_gap, uniform, uniform32, unit_circle_unnormalised,
 };
 use crate::walk::GapSampler;
-
-/// Most bubble layers one ray walks through (20 000 × 0.1 mm = 2 m of ice along z).
-const MAX_LAYERS_PER_RAY: u32 = 20_000;
 
 /// One accretion being traced: its surface, the sums per thickness and the scratch buffers
 /// the rays share.
@@ -76,6 +75,8 @@ pub(crate) struct Accretion<'m> {
     diffuse_draws: Vec<u32>,
     diffuse_out: DiffuseLanes,
     diffuse_bubbles: Vec<usize>,
+    /// Every ray's set-up against this surface (setup.rs).
+    setup: RaySetups,
 }
 
 /// One ray against this accretion's surface.
@@ -141,7 +142,32 @@ impl<'m> Accretion<'m> {
             diffuse_draws: Vec::with_capacity(nt),
             diffuse_out: DiffuseLanes::default(),
             diffuse_bubbles: Vec::with_capacity(nt),
+            setup: RaySetups::default(),
         }
+        .with_setup()
+    }
+
+    /// Phase 1 continued: every ray's set-up against the surface (setup.rs).
+    fn with_setup(mut self) -> Self {
+        let m = self.m;
+        let geo = m.cfg.geometry;
+        let surf = Surface {
+            tx: self.tx,
+            ty: self.ty,
+            normal: self.normal,
+            centre_x_mm: geo.centre_x_mm(),
+            n_medium: m.cfg.params.n_medium,
+            step_mm: m.cfg.step_mm,
+            inv_step: self.inv_step,
+            first_wet: self.first_wet,
+            nt: self.nt,
+            x_hi: self.x_hi,
+            y_hi: self.y_hi,
+        };
+        let bubbles = m.cfg.params.p_bubble > 0.0;
+        let specular = m.cfg.params.diffuse_max_rad <= 0.0; // validated: not NaN
+        self.setup.compute(&m.ray_lanes, &surf, bubbles, specular);
+        self
     }
 
     /// Phase 2, one ray: its bubbles, then the surface at every thickness.
@@ -154,14 +180,14 @@ impl<'m> Accretion<'m> {
                 *l += ray.refl_air_w;
             }
         }
-        let v = ray.dir;
-        let cx = m.cfg.geometry.centre_x_mm();
-        let a = self.tx * (ray.p0.x - cx) + self.ty * ray.p0.y;
-        let den = v.z - self.tx * v.x - self.ty * v.y;
+        let su = &self.setup;
+        let (a, den) = (su.a[r], su.den[r]);
         if ray.flux_in_w <= 0.0 || den <= 1e-9 {
             return;
         }
-        let slope_xy = DVec2::new(v.x, v.y) / v.z;
+        let slope_xy = DVec2::new(su.slope_x[r], su.slope_y[r]);
+        let off1 = su.off1[r];
+        let layers = su.layers[r];
         // Pass 1, bubbles: layer j (z from jΔ to (j+1)Δ, bubble at its middle) is frozen in
         // once the local surface above the bubble is at least (j+1)Δ high, i.e. from the mean
         // thickness d_j = (j+1)Δ − off(z_b), where off is the plane's local offset at the
@@ -177,7 +203,7 @@ impl<'m> Accretion<'m> {
                 p0: ray.p0,
                 slope_xy,
                 a,
-                off1: self.tx * slope_xy.x + self.ty * slope_xy.y,
+                off1,
                 inv_step: self.inv_step,
                 first_wet: self.first_wet as u32,
             },
@@ -185,15 +211,17 @@ impl<'m> Accretion<'m> {
         // The layers that the ice covers within max_mm: j < j_end. Beyond, the bubbles are
         // not drawn. A ray almost parallel to a tilted surface would walk very many layers
         // before the surface covers them: at most MAX_LAYERS_PER_RAY (2 m).
-        let j_end = if p.p_bubble > 0.0 {
+        let j_end = if p.p_bubble <= 0.0 {
+            0
+        } else if layers >= 0.0 {
+            layers as u32
+        } else {
             let bray = f.bubble;
             layers_covered(
                 &|j: u32| bray.cover_steps(f64::from(j)),
                 self.first_wet,
                 self.nt,
             )
-        } else {
-            0
         };
         self.fwd_after.clear();
         self.fwd_after.push(ray.flux_in_w);
@@ -416,48 +444,27 @@ impl<'m> Accretion<'m> {
     /// too): cost per ray O(visited), not O(thicknesses).
     fn surface_specular(&mut self, f: &RayFrame) {
         let m = self.m;
-        let (ray, a, den, nt) = (&f.ray, f.a, f.den, self.nt);
-        let v = ray.dir;
-        let Some((rfl, rd)) = reflect_setup(v, self.normal, m.cfg.params.n_medium) else {
+        let (ray, a, r) = (&f.ray, f.a, f.r);
+        // The reflection's set-up (setup.rs): the reflected ray returns toward the face, and
+        // the visited thicknesses are those whose landing point lies in the face's bounding
+        // box (one index of margin each side; the exact test is the bundle slot below).
+        let su = &self.setup;
+        if su.spec_ok[r] == 0.0 {
             return;
+        }
+        let cpl = if m.cfg.coupling == Coupling::AcceptanceCone
+            && !m.in_acceptance_cone(DVec3::new(su.rd_x[r], su.rd_y[r], su.rd_z[r]))
+        {
+            0.0
+        } else {
+            su.fibre_t[r]
         };
-        let cpl = m.couple(rd);
         if cpl <= 0.0 {
             return;
         }
-        let back = v.z / -rd.z;
-        let w = (DVec2::new(v.x, v.y) + DVec2::new(rd.x, rd.y) * back) / den;
-        let base = ray.p0 + w * a;
-        let (mut d_lo, mut d_hi) = (-a, f64::INFINITY); // h0 = d + a > 0
-        for (p0, w0, lo, hi) in [
-            (base.x, w.x, 0.0, self.x_hi),
-            (base.y, w.y, -self.y_hi, self.y_hi),
-        ] {
-            if w0.abs() < 1e-12 {
-                if p0 < lo || p0 > hi {
-                    d_hi = f64::NEG_INFINITY;
-                }
-            } else {
-                let (u, t) = ((lo - p0) / w0, (hi - p0) / w0);
-                d_lo = d_lo.max(u.min(t));
-                d_hi = d_hi.min(u.max(t));
-            }
-        }
-        if d_hi.is_nan() || d_lo.is_nan() || d_hi < d_lo {
-            return;
-        }
-        // One index of margin each side; the exact test is the bundle slot below.
-        let i_lo = ((d_lo * self.inv_step).max(0.0).min(nt as f64) as usize)
-            .saturating_sub(1)
-            .max(self.first_wet);
-        let i_hi = ((d_hi * self.inv_step).max(0.0).min(nt as f64) as usize + 2).min(nt);
-        if i_lo >= i_hi {
-            return;
-        }
-        // Up and back: path (d + a)·k_path, absorbed by the same ratio every step.
-        let k_path = (1.0 + back) / den;
-        let att = (-ALPHA_PER_MM * k_path * (m.thick[i_lo] + a)).exp();
-        let att_step = (-ALPHA_PER_MM * k_path * m.cfg.step_mm).exp();
+        let (rfl, w) = (su.rfl[r], DVec2::new(su.w_x[r], su.w_y[r]));
+        let (i_lo, i_hi) = (su.i_lo[r] as usize, su.i_hi[r] as usize);
+        let (att, att_step) = (su.att[r], su.att_step[r]);
         let n_bub = frozen_before(&self.frozen_by[self.first_wet..i_lo]);
         // Padded to whole vectors (the thicknesses go on on their grid); the padding lanes
         // are not added.
@@ -512,7 +519,7 @@ impl<'m> Accretion<'m> {
 /// whose q(j) (its thickness in output steps, non-decreasing in j) lies beyond the last
 /// output index, at most `MAX_LAYERS_PER_RAY`. Layer j is frozen in at the first index
 /// i ≥ `first_wet` with i ≥ q(j); j_end is the first layer for which that index is ≥ `nt`.
-fn layers_covered(q_of: &impl Fn(u32) -> f64, first_wet: usize, nt: usize) -> u32 {
+pub(crate) fn layers_covered(q_of: &impl Fn(u32) -> f64, first_wet: usize, nt: usize) -> u32 {
     if first_wet >= nt {
         return 0;
     }
@@ -599,22 +606,6 @@ fn add_specular(
             flux[k] += fwd_after[n_bub] * rfl * cpl * att_i;
         }
     }
-}
-
-/// Reflection of `v` at a surface with upward normal `nrm`: (Fresnel reflectance, reflected
-/// direction), `None` if the ray does not meet the surface from below or does not return
-/// toward the face.
-#[inline]
-fn reflect_setup(v: DVec3, nrm: DVec3, n_med: f64) -> Option<(f64, DVec3)> {
-    let cos_i = v.dot(nrm);
-    if cos_i <= 0.0 {
-        return None;
-    }
-    let rd = reflect(v, nrm);
-    if rd.z >= -1e-9 {
-        return None;
-    }
-    Some((fr_dielectric(cos_i, n_med, N_AIR), rd))
 }
 
 #[cfg(test)]
