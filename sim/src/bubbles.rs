@@ -4,9 +4,12 @@
 //!
 //! Each bubble's draws come from a counter-based stream ([`CounterStream`]: the words a
 //! bubble uses are fixed by its number, below), so no draw depends on a branch taken before
-//! it. The angles and the landing of all scattered rays of one ray are then computed at once
-//! by [`land_scattered`], loops the compiler vectorises (AVX-512 or AVX2 with FMA when the CPU has them,
-//! with bit-identical results: the same IEEE-754 operations in the same order per lane).
+//! it. Where the scattered rays of one ray land is then decided at once by [`land_scattered`],
+//! loops the compiler vectorises (AVX-512 or AVX2 with FMA when the CPU has them): in single
+//! precision, sixteen lanes to a vector, with a margin ten times its error bound; the few
+//! bubbles whose landing point lies within the margin of an edge are decided again in double
+//! precision, so every slot is the double-precision one, on every tier. The scattered rays
+//! that land are then computed in double precision ([`BubbleLanes::scattered`]).
 //!
 //! Layout of the draws of bubble n (the even words hold gaps, the odd words angles):
 //! - the gap of empty layers before it: word 2⌊n/2⌋, its upper 32 bits for even n, its
@@ -93,13 +96,15 @@ pub(crate) struct BubbleLanes {
     pub index: Vec<i32>,
     /// Output: 0 or 1 for the bundle the scattered ray lands on, 2 for none.
     pub slot: Vec<i32>,
-    /// Output: the scattered rays, `Scattered` as a structure of arrays (z, dir x, dir y,
-    /// cos θ_B, reach).
-    out_z_mm: Vec<f64>,
-    out_dir_x: Vec<f64>,
-    out_dir_y: Vec<f64>,
-    out_cos_b: Vec<f64>,
-    out_reach_mm: Vec<f64>,
+    /// The draws of cos θ_B and φ (32-bit integers held exactly as f64).
+    draw_cos: Vec<f64>,
+    draw_phi: Vec<f64>,
+    /// The single-precision test's inputs (`landing_inputs_f32`).
+    f32_z: Vec<f32>,
+    f32_t: Vec<f32>,
+    f32_cos: Vec<f32>,
+    f32_a: Vec<f32>,
+    f32_q: Vec<f32>,
 }
 
 impl BubbleLanes {
@@ -108,12 +113,21 @@ impl BubbleLanes {
         self.count
     }
 
-    /// The scattered ray of bubble `n`, as [`land_scattered`] found it.
-    pub(crate) fn scattered(&self, n: usize) -> Scattered {
-        Scattered {
-            z_mm: self.out_z_mm[n],
-            dir: [self.out_dir_x[n], self.out_dir_y[n], -self.out_cos_b[n]],
-            reach_mm: self.out_reach_mm[n],
+    /// The scattered ray of bubble `n` (after [`land_scattered`]), in double precision:
+    /// its direction's sideways part only if `sideways` (else 0: the thesis's coupling
+    /// needs only cos θ_B).
+    pub(crate) fn scattered(&self, n: usize, sideways: bool) -> Scattered {
+        let (j, cos_b) = (self.layer[n], cos_b_of(self.draw_cos[n]));
+        if sideways {
+            let (c_phi, s_phi) = unit_circle_of(self.draw_phi[n]);
+            scattered_ray(j, cos_b, c_phi, s_phi)
+        } else {
+            let z_mm = (j + 0.5) * BUBBLE_LAYER_MM;
+            Scattered {
+                z_mm,
+                dir: [0.0, 0.0, -cos_b],
+                reach_mm: z_mm / cos_b,
+            }
         }
     }
 
@@ -222,6 +236,126 @@ fn landing(ray: &BubbleRay, z_mm: f64, dir_x: f64, dir_y: f64, reach_mm: f64) ->
     ]
 }
 
+/// cos θ_B from its draw u: 1 − u·2⁻³², in (0, 1] (isotropic over the lower hemisphere).
+#[inline(always)]
+fn cos_b_of(draw: f64) -> f64 {
+    1.0 - draw * INV_2_POW_32
+}
+
+/// The bundle slot (0, 1; 2 for none) where the scattered ray of the bubble of layer `j`
+/// with angle draws (`draw_cos`, `draw_phi`) lands, in double precision: the rule the
+/// single-precision test reproduces.
+#[inline(always)]
+fn landing_slot_exact(
+    ray: &BubbleRay,
+    bundles: &Bundles,
+    j: f64,
+    draw_cos: f64,
+    draw_phi: f64,
+) -> i32 {
+    let (c_phi, s_phi) = unit_circle_of(draw_phi);
+    let s = scattered_ray(j, cos_b_of(draw_cos), c_phi, s_phi);
+    let land = landing(ray, s.z_mm, s.dir[0], s.dir[1], s.reach_mm);
+    small_int(bundles.slot_f64(land[0], land[1]))
+}
+
+/// A ray and the bundles in single precision, for [`landing_slot_f32`].
+#[derive(Clone, Copy)]
+struct LandingF32 {
+    p0: [f32; 2],
+    slope: [f32; 2],
+    r: f32,
+    b: f32,
+}
+
+/// The inputs of [`landing_slot_f32`] for the bubble of layer `j` with angle draws
+/// (`draw_cos`, `draw_phi`), each computed exactly in double precision and rounded once to
+/// single: the bubble's height z, 1 − cos θ, cos θ (both keep their relative precision
+/// however small), the angle a within φ's quadrant about its middle (|a| ≤ π/4, as in
+/// `unit_circle_of`) and the quadrant.
+#[inline(always)]
+fn landing_inputs_f32(j: f64, draw_cos: f64, draw_phi: f64) -> [f32; 5] {
+    use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
+    const QUARTER: f64 = 1_073_741_824.0; // 2³⁰
+    let quadrant = (draw_phi * (1.0 / QUARTER)).floor();
+    [
+        ((j + 0.5) * BUBBLE_LAYER_MM) as f32,
+        (draw_cos * INV_2_POW_32) as f32,
+        ((4_294_967_296.0 - draw_cos) * INV_2_POW_32) as f32,
+        ((draw_phi - quadrant * QUARTER + 0.5) * (FRAC_PI_2 / QUARTER) - FRAC_PI_4) as f32,
+        quadrant as f32,
+    ]
+}
+
+/// Where the scattered ray of a bubble lands, decided in single precision (sixteen lanes
+/// to a vector) from [`landing_inputs_f32`]: the slot as [`landing_slot_exact`] finds it,
+/// or 3 where the landing point lies so near an edge of the bundles (the lines |y| = R,
+/// x = 0, x = B, the arc) that the rounding of single precision could put it on the other
+/// side; those are decided again in double precision.
+///
+/// Error bound: every input is rounded once to single precision (relative error
+/// u = 2⁻²⁴ ≈ 6·10⁻⁸) and each operation adds at most u: the sideways travel
+/// ρ = z·sin θ/cos θ carries ≲ 6u of relative error, (cos φ, sin φ) from the series below
+/// ≲ 2·10⁻⁷, the bubble's position ≲ 3u of (|b| + z), the landing point ≲ 10⁻⁶·(ρ + |b| + z)
+/// in all, and double precision differs from exact by ≈ 10⁻¹⁵. The margin is ten times that.
+#[inline(always)]
+fn landing_slot_f32(l: &LandingF32, [z, t, cos_b, a, quadrant]: [f32; 5]) -> i32 {
+    let sin_b = (t * (2.0 - t)).sqrt(); // sin² θ = 1 − cos² θ = t (2 − t)
+    let rho = z * sin_b / cos_b;
+    // sin and cos of a by their series to a⁹ and a¹⁰ (error below 2·10⁻⁹), then turned
+    // into φ's quadrant as `unit_circle_of` does.
+    let a2 = a * a;
+    let s = (1.0f32 / 362_880.0)
+        .mul_add(a2, -1.0 / 5_040.0)
+        .mul_add(a2, 1.0 / 120.0)
+        .mul_add(a2, -1.0 / 6.0);
+    let s = (a * a2).mul_add(s, a);
+    let c = (-1.0f32 / 3_628_800.0)
+        .mul_add(a2, 1.0 / 40_320.0)
+        .mul_add(a2, -1.0 / 720.0)
+        .mul_add(a2, 1.0 / 24.0)
+        .mul_add(a2, -0.5)
+        .mul_add(a2, 1.0);
+    let (x, y) = (
+        (c - s) * std::f32::consts::FRAC_1_SQRT_2,
+        (c + s) * std::f32::consts::FRAC_1_SQRT_2,
+    );
+    let odd = (quadrant == 1.0) | (quadrant == 3.0);
+    let (x, y) = (if odd { -y } else { x }, if odd { x } else { y });
+    let half = quadrant >= 2.0;
+    let (c_phi, s_phi) = (if half { -x } else { x }, if half { -y } else { y });
+    // The landing point and its side of every edge.
+    let bx = l.slope[0].mul_add(z, l.p0[0]);
+    let by = l.slope[1].mul_add(z, l.p0[1]);
+    let x = rho.mul_add(c_phi, bx);
+    let y = rho.mul_add(s_phi, by);
+    let margin = 1e-5 * (rho + bx.abs() + by.abs() + z + 1.0);
+    let (r, b) = (l.r, l.b);
+    let dx = x - b;
+    let d2 = dx.mul_add(dx, y * y);
+    let near = ((y.abs() - r).abs() < margin)
+        | (x.abs() < margin)
+        | (dx.abs() < margin)
+        | ((d2 - r * r).abs() < margin * (2.0 * r + margin));
+    // `Bundles::slot_f64`; a NaN fails every comparison and goes to double precision.
+    let face = (y.abs() <= r) & (x >= 0.0);
+    let off_face = (y.abs() > r) | (x < 0.0);
+    let on = if x <= b {
+        0
+    } else if d2 <= r * r {
+        1
+    } else {
+        2
+    };
+    if near | !(face | off_face) {
+        3
+    } else if face {
+        on
+    } else {
+        2
+    }
+}
+
 /// Per bubble: the output index at which it is frozen in (the first index ≥ its cover
 /// thickness, not before the first wet one) and the bundle its scattered ray lands on.
 pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
@@ -230,15 +364,19 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
     for out in [&mut lanes.index, &mut lanes.slot] {
         grow(out, n, 0);
     }
+    for out in [&mut lanes.draw_cos, &mut lanes.draw_phi] {
+        grow(out, n, 0.0);
+    }
     for out in [
-        &mut lanes.out_z_mm,
-        &mut lanes.out_dir_x,
-        &mut lanes.out_dir_y,
-        &mut lanes.out_cos_b,
-        &mut lanes.out_reach_mm,
+        &mut lanes.f32_z,
+        &mut lanes.f32_t,
+        &mut lanes.f32_cos,
+        &mut lanes.f32_a,
+        &mut lanes.f32_q,
     ] {
         grow(out, n, 0.0);
     }
+    let mut any_near = [0];
     land_scattered_lanes(
         ray,
         bundles,
@@ -246,12 +384,30 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
         &lanes.layer[..n],
         &mut lanes.index[..n],
         &mut lanes.slot[..n],
-        &mut lanes.out_z_mm[..n],
-        &mut lanes.out_dir_x[..n],
-        &mut lanes.out_dir_y[..n],
-        &mut lanes.out_cos_b[..n],
-        &mut lanes.out_reach_mm[..n],
+        &mut lanes.draw_cos[..n],
+        &mut lanes.draw_phi[..n],
+        &mut lanes.f32_z[..n],
+        &mut lanes.f32_t[..n],
+        &mut lanes.f32_cos[..n],
+        &mut lanes.f32_a[..n],
+        &mut lanes.f32_q[..n],
+        &mut any_near,
     );
+    // The few lanes too near an edge for single precision, in double precision.
+    if any_near[0] == 0 {
+        return;
+    }
+    for k in 0..n {
+        if lanes.slot[k] == 3 {
+            lanes.slot[k] = landing_slot_exact(
+                ray,
+                bundles,
+                lanes.layer[k],
+                lanes.draw_cos[k],
+                lanes.draw_phi[k],
+            );
+        }
+    }
 }
 
 vector_kernel! {
@@ -264,50 +420,50 @@ fn land_scattered_lanes(
     layer: &[f64],
     index: &mut [i32],
     slot: &mut [i32],
-    out_z_mm: &mut [f64],
-    out_dir_x: &mut [f64],
-    out_dir_y: &mut [f64],
-    out_cos_b: &mut [f64],
-    out_reach_mm: &mut [f64],
+    draw_cos: &mut [f64],
+    draw_phi: &mut [f64],
+    f32_z: &mut [f32],
+    f32_t: &mut [f32],
+    f32_cos: &mut [f32],
+    f32_a: &mut [f32],
+    f32_q: &mut [f32],
+    any_near: &mut [i32; 1],
 ) {
     let n = layer.len();
+    let (f32_z, f32_t, f32_cos) = (&mut f32_z[..n], &mut f32_t[..n], &mut f32_cos[..n]);
+    let (f32_a, f32_q) = (&mut f32_a[..n], &mut f32_q[..n]);
     let (index, slot) = (&mut index[..n], &mut slot[..n]);
-    let (out_z_mm, out_reach_mm) = (&mut out_z_mm[..n], &mut out_reach_mm[..n]);
-    let (out_dir_x, out_dir_y) = (&mut out_dir_x[..n], &mut out_dir_y[..n]);
-    let out_cos_b = &mut out_cos_b[..n];
+    let (draw_cos, draw_phi) = (&mut draw_cos[..n], &mut draw_phi[..n]);
     // Passes of short chains of dependent operations, so that the processor overlaps many
-    // bubbles (one long loop body is bound by the latency of its chain: 8.8 against 6.6 ns
-    // per bubble measured). The output arrays hold the intermediate values.
-    // 1. The draws of the angles (cos θ_B's into `out_cos_b`, φ's into `out_dir_x`).
+    // bubbles (one long loop body is bound by the latency of its chain).
+    // 1. The draws of the angles.
     for k in 0..n {
-        let (cos_draw, phi_draw) = angle_draws(stream, k as u64);
-        out_cos_b[k] = cos_draw;
-        out_dir_x[k] = phi_draw;
+        (draw_cos[k], draw_phi[k]) = angle_draws(stream, k as u64);
     }
-    // 2. cos θ_B in (0, 1] (isotropic over the lower hemisphere), (cos φ, sin φ).
-    for k in 0..n {
-        let (c_phi, s_phi) = unit_circle_of(out_dir_x[k]);
-        out_cos_b[k] = 1.0 - out_cos_b[k] * INV_2_POW_32;
-        out_dir_x[k] = c_phi;
-        out_dir_y[k] = s_phi;
-    }
-    // 3. The freeze-in index, 4. the scattered ray, 5. where it lands.
+    // 2. The freeze-in index.
     let first_wet = f64::from(ray.first_wet);
     for k in 0..n {
         // ceil is exact; the walk keeps j below the layer whose index would pass the last.
         index[k] = small_int(ray.cover_steps(layer[k]).ceil().max(first_wet));
     }
+    // 3. Where the scattered ray lands, in single precision (3: too near an edge to tell):
+    // its inputs from double precision, eight lanes to a vector, then sixteen.
     for k in 0..n {
-        let s = scattered_ray(layer[k], out_cos_b[k], out_dir_x[k], out_dir_y[k]);
-        out_z_mm[k] = s.z_mm;
-        out_dir_x[k] = s.dir[0];
-        out_dir_y[k] = s.dir[1];
-        out_reach_mm[k] = s.reach_mm;
+        let [z, t, c, a, q] = landing_inputs_f32(layer[k], draw_cos[k], draw_phi[k]);
+        (f32_z[k], f32_t[k], f32_cos[k], f32_a[k], f32_q[k]) = (z, t, c, a, q);
     }
+    let l = LandingF32 {
+        p0: [ray.p0.x as f32, ray.p0.y as f32],
+        slope: [ray.slope_xy.x as f32, ray.slope_xy.y as f32],
+        r: bundles.radius_mm() as f32,
+        b: bundles.length_b_mm() as f32,
+    };
+    let mut near = 0;
     for k in 0..n {
-        let land = landing(ray, out_z_mm[k], out_dir_x[k], out_dir_y[k], out_reach_mm[k]);
-        slot[k] = small_int(bundles.slot_f64(land[0], land[1]));
+        slot[k] = landing_slot_f32(&l, [f32_z[k], f32_t[k], f32_cos[k], f32_a[k], f32_q[k]]);
+        near |= i32::from(slot[k] == 3);
     }
+    any_near[0] = near;
 }
 }
 
@@ -344,6 +500,116 @@ mod tests {
         assert!((x - 1.0).abs() < 1e-9 && y.abs() < 1e-8);
         let (x, y) = unit_circle_of(f64::from(1u32 << 30));
         assert!(x.abs() < 1e-8 && (y - 1.0).abs() < 1e-9);
+    }
+
+    /// The single-precision landing test with its fallback gives the double-precision slot
+    /// for every bubble of 20 000 random rays (positions over and around the face, slopes up
+    /// to 60°, bubbles up to 15 mm high), on every tier; its margin sends a few lanes to the
+    /// fallback and no more.
+    #[test]
+    fn single_precision_landing_gives_the_exact_slot() {
+        use crate::kernels::{Isa, isa, with_isa};
+        use crate::streams::uniform;
+        use rand_pcg::Pcg32;
+        let mut rng = Pcg32::new(3, 5);
+        let gaps = GapSampler::new(0.21);
+        let mut lanes = BubbleLanes::default();
+        let (mut bubbles, mut near, mut landed) = (0usize, 0usize, 0usize);
+        for geo in [Geometry::ThesisCh3, Geometry::ThesisCh5] {
+            let bundles = geo.bundles();
+            for r in 0..10_000u64 {
+                let mut u = |lo: f64, hi: f64| lo + (hi - lo) * uniform(&mut rng);
+                let ray = BubbleRay {
+                    p0: DVec2::new(u(-6.0, 10.0), u(-6.0, 6.0)),
+                    slope_xy: DVec2::new(u(-1.7, 1.7), u(-1.7, 1.7)),
+                    a: u(-1.0, 1.0),
+                    off1: u(-0.3, 0.3),
+                    inv_step: 10.0,
+                    first_wet: 1,
+                };
+                let stream = CounterStream::new(77, r);
+                for tier in [Isa::Baseline, Isa::Avx2, Isa::Avx512] {
+                    if tier > isa() {
+                        continue;
+                    }
+                    lanes.walk(stream, &gaps, 150);
+                    with_isa(tier, || land_scattered(&ray, &bundles, &mut lanes));
+                    for n in 0..lanes.len() {
+                        let (j, dc, dp) = (lanes.layer[n], lanes.draw_cos[n], lanes.draw_phi[n]);
+                        let want = landing_slot_exact(&ray, &bundles, j, dc, dp);
+                        assert_eq!(lanes.slot[n], want, "{geo:?} ray {r} bubble {n} {tier:?}");
+                        let inputs = landing_inputs_f32(j, dc, dp);
+                        let l = LandingF32 {
+                            p0: [ray.p0.x as f32, ray.p0.y as f32],
+                            slope: [ray.slope_xy.x as f32, ray.slope_xy.y as f32],
+                            r: bundles.radius_mm() as f32,
+                            b: bundles.length_b_mm() as f32,
+                        };
+                        near += usize::from(landing_slot_f32(&l, inputs) == 3);
+                        landed += usize::from(want < 2);
+                        bubbles += 1;
+                    }
+                }
+            }
+        }
+        assert!(landed * 20 > bubbles, "{landed} of {bubbles} land");
+        assert!(
+            near > 0 && near * 1000 < bubbles,
+            "{near} of {bubbles} near an edge"
+        );
+        // Rays moved so that one bubble's scattered ray lands within 10⁻⁷–10⁻⁵ mm of an
+        // edge (either side): single precision alone would misjudge some of these.
+        let (r_mm, b_mm) = (4.0, 3.2);
+        let bundles = Geometry::ThesisCh5.bundles();
+        let mut hits = [0usize; 3];
+        for r in 0..4_000u64 {
+            let mut u = |lo: f64, hi: f64| lo + (hi - lo) * uniform(&mut rng);
+            let mut ray = BubbleRay {
+                p0: DVec2::new(u(-2.0, 6.0), u(-3.0, 3.0)),
+                slope_xy: DVec2::new(u(-1.2, 1.2), u(-1.2, 1.2)),
+                a: 0.0,
+                off1: 0.0,
+                inv_step: 10.0,
+                first_wet: 1,
+            };
+            let stream = CounterStream::new(78, r);
+            lanes.walk(stream, &gaps, 150);
+            let k = (r as usize) % lanes.len().max(1);
+            if lanes.len() == 0 {
+                continue;
+            }
+            land_scattered(&ray, &bundles, &mut lanes);
+            let sc = lanes.scattered(k, true);
+            let land = DVec2::from(landing(&ray, sc.z_mm, sc.dir[0], sc.dir[1], sc.reach_mm));
+            let delta = [-1e-5, -1e-6, -1e-7, 1e-7, 1e-6, 1e-5][(r / 4) as usize % 6];
+            let target = match r % 4 {
+                0 => DVec2::new(delta, u(-r_mm, r_mm)),
+                1 => DVec2::new(b_mm + delta, u(-r_mm, r_mm)),
+                2 => DVec2::new(u(0.0, b_mm), r_mm + delta),
+                _ => {
+                    let alpha = u(-1.5, 1.5);
+                    DVec2::new(b_mm, 0.0) + DVec2::new(alpha.cos(), alpha.sin()) * (r_mm + delta)
+                }
+            };
+            ray.p0 += target - land;
+            for tier in [Isa::Baseline, Isa::Avx2, Isa::Avx512] {
+                if tier > isa() {
+                    continue;
+                }
+                with_isa(tier, || land_scattered(&ray, &bundles, &mut lanes));
+                let (j, dc, dp) = (lanes.layer[k], lanes.draw_cos[k], lanes.draw_phi[k]);
+                let want = landing_slot_exact(&ray, &bundles, j, dc, dp);
+                assert_eq!(
+                    lanes.slot[k],
+                    want,
+                    "ray {r}, bubble {k}, edge {}, {tier:?}",
+                    r % 4
+                );
+                hits[want as usize] += 1;
+            }
+        }
+        // Both sides of the edges were met.
+        assert!(hits.iter().all(|&h| h > 500), "{hits:?}");
     }
 
     #[test]
@@ -394,7 +660,7 @@ mod tests {
                 _ => 2,
             };
             assert_eq!(lanes.slot[n], want, "bubble {n}");
-            let sc = lanes.scattered(n);
+            let sc = lanes.scattered(n, true);
             assert_eq!(sc.z_mm.to_bits(), z.to_bits());
             assert_eq!(sc.reach_mm.to_bits(), reach.to_bits());
             assert_eq!(sc.dir, [sin_b * c, sin_b * s, -cos_b]);

@@ -127,6 +127,16 @@ pub(crate) struct Bundles {
 }
 
 impl Bundles {
+    /// R, mm.
+    pub(crate) fn radius_mm(&self) -> f64 {
+        self.r
+    }
+
+    /// B, mm.
+    pub(crate) fn length_b_mm(&self) -> f64 {
+        self.b
+    }
+
     /// 0 on signal bundle 1, 1 on signal bundle 2, 2 elsewhere (source, outside).
     #[inline(always)]
     pub(crate) fn slot(&self, x_mm: f64, y_mm: f64) -> usize {

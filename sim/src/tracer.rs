@@ -286,9 +286,11 @@ impl<'m> Accretion<'m> {
         self.fwd_after
             .extend(self.forward_pow[1..=count].iter().map(|&p| flux * p));
         let landed_count = self.lanes.tally(&mut self.frozen_by, &mut self.landed);
+        // The thesis's coupling needs only cos θ_B; the acceptance cone the whole direction.
+        let sideways = self.m.cfg.coupling == Coupling::AcceptanceCone;
         for l in 0..landed_count {
             let n = self.landed[l] as usize;
-            let sc = self.lanes.scattered(n);
+            let sc = self.lanes.scattered(n, sideways);
             let at = (self.lanes.index[n] as usize, self.lanes.slot[n] as usize);
             let fwd = self.fwd_after[n];
             self.scatter(f, at, fwd, DVec3::from(sc.dir), sc.z_mm, sc.reach_mm);
