@@ -132,11 +132,7 @@ impl RaySetups {
         }
         plane_setup(
             surf,
-            &rays.p0_x,
-            &rays.p0_y,
-            &rays.dir_x,
-            &rays.dir_y,
-            &rays.dir_z,
+            rays,
             &mut self.a[..n],
             &mut self.den[..n],
             &mut self.slope_x[..n],
@@ -146,8 +142,7 @@ impl RaySetups {
         if bubbles {
             layers_covered_lanes(
                 surf,
-                &rays.p0_x,
-                &rays.p0_y,
+                rays,
                 &self.a[..n],
                 &self.slope_x[..n],
                 &self.slope_y[..n],
@@ -178,11 +173,7 @@ impl RaySetups {
         grow(&mut self.i_hi, n, 0);
         specular_setup(
             surf,
-            &rays.p0_x,
-            &rays.p0_y,
-            &rays.dir_x,
-            &rays.dir_y,
-            &rays.dir_z,
+            rays,
             &self.a[..n],
             &self.den[..n],
             &mut self.spec_ok[..n],
@@ -219,11 +210,7 @@ vector_kernel! {
 #[allow(clippy::too_many_arguments)]
 fn plane_setup(
     surf: &Surface,
-    p0_x: &[f64],
-    p0_y: &[f64],
-    dir_x: &[f64],
-    dir_y: &[f64],
-    dir_z: &[f64],
+    rays: &RayLanes,
     a: &mut [f64],
     den: &mut [f64],
     slope_x: &mut [f64],
@@ -231,8 +218,8 @@ fn plane_setup(
     off1: &mut [f64],
 ) {
     let n = a.len();
-    let (p0_x, p0_y) = (&p0_x[..n], &p0_y[..n]);
-    let (dir_x, dir_y, dir_z) = (&dir_x[..n], &dir_y[..n], &dir_z[..n]);
+    let (p0_x, p0_y) = (&rays.p0_x[..n], &rays.p0_y[..n]);
+    let (dir_x, dir_y, dir_z) = (&rays.dir_x[..n], &rays.dir_y[..n], &rays.dir_z[..n]);
     let (den, slope_x, slope_y, off1) = (&mut den[..n], &mut slope_x[..n], &mut slope_y[..n], &mut off1[..n]);
     let (tx, ty, cx) = (surf.tx, surf.ty, surf.centre_x_mm);
     for k in 0..n {
@@ -253,8 +240,7 @@ vector_kernel! {
 #[allow(clippy::too_many_arguments)]
 fn layers_covered_lanes(
     surf: &Surface,
-    p0_x: &[f64],
-    p0_y: &[f64],
+    rays: &RayLanes,
     a: &[f64],
     slope_x: &[f64],
     slope_y: &[f64],
@@ -262,7 +248,7 @@ fn layers_covered_lanes(
     layers: &mut [f64],
 ) {
     let n = layers.len();
-    let (p0_x, p0_y, a) = (&p0_x[..n], &p0_y[..n], &a[..n]);
+    let (p0_x, p0_y, a) = (&rays.p0_x[..n], &rays.p0_y[..n], &a[..n]);
     let (slope_x, slope_y, off1) = (&slope_x[..n], &slope_y[..n], &off1[..n]);
     if surf.first_wet >= surf.nt {
         layers.fill(0.0);
@@ -304,11 +290,7 @@ vector_kernel! {
 #[allow(clippy::too_many_arguments)]
 fn specular_setup(
     surf: &Surface,
-    p0_x: &[f64],
-    p0_y: &[f64],
-    dir_x: &[f64],
-    dir_y: &[f64],
-    dir_z: &[f64],
+    rays: &RayLanes,
     a: &[f64],
     den: &[f64],
     ok: &mut [f64],
@@ -325,8 +307,8 @@ fn specular_setup(
     att_step: &mut [f64],
 ) {
     let n = ok.len();
-    let (p0_x, p0_y, a, den) = (&p0_x[..n], &p0_y[..n], &a[..n], &den[..n]);
-    let (dir_x, dir_y, dir_z) = (&dir_x[..n], &dir_y[..n], &dir_z[..n]);
+    let (p0_x, p0_y, a, den) = (&rays.p0_x[..n], &rays.p0_y[..n], &a[..n], &den[..n]);
+    let (dir_x, dir_y, dir_z) = (&rays.dir_x[..n], &rays.dir_y[..n], &rays.dir_z[..n]);
     let (rd_x, rd_y, rd_z) = (&mut rd_x[..n], &mut rd_y[..n], &mut rd_z[..n]);
     let (rfl, fibre_t, w_x, w_y) = (&mut rfl[..n], &mut fibre_t[..n], &mut w_x[..n], &mut w_y[..n]);
     let (i_lo, i_hi, att, att_step) = (&mut i_lo[..n], &mut i_hi[..n], &mut att[..n], &mut att_step[..n]);
