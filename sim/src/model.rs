@@ -139,7 +139,13 @@ impl SensorModel {
     pub(crate) fn couple(&self, s: DVec3) -> f64 {
         let n_med = self.cfg.params.n_medium;
         let cos_i = -s.z;
-        let t = fresnel_transmittance(cos_i, n_med, N_FIBRE);
+        self.couple_transmitted(s, fresnel_transmittance(cos_i, n_med, N_FIBRE))
+    }
+
+    /// [`SensorModel::couple`] with the Fresnel transmittance `t` into the fibre already
+    /// known: `t`, or 0 outside the acceptance cone when that coupling is chosen.
+    #[inline]
+    pub(crate) fn couple_transmitted(&self, s: DVec3, t: f64) -> f64 {
         match self.cfg.coupling {
             Coupling::ThesisLiteral => t,
             Coupling::AcceptanceCone if self.in_acceptance_cone(s) => t,

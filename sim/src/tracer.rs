@@ -454,13 +454,8 @@ impl<'m> Accretion<'m> {
         if su.spec_ok[r] == 0.0 {
             return;
         }
-        let cpl = if m.cfg.coupling == Coupling::AcceptanceCone
-            && !m.in_acceptance_cone(DVec3::new(su.rd_x[r], su.rd_y[r], su.rd_z[r]))
-        {
-            0.0
-        } else {
-            su.fibre_t[r]
-        };
+        let rd = DVec3::new(su.rd_x[r], su.rd_y[r], su.rd_z[r]);
+        let cpl = m.couple_transmitted(rd, su.fibre_t[r]);
         if cpl <= 0.0 {
             return;
         }
