@@ -18,6 +18,8 @@
 //!   scattered ray is isotropic over the lower hemisphere, as in the thesis's bubble model);
 //! - the azimuth φ: the upper 32 bits of word 2n + 1 (2 bits of quadrant, 30 of angle).
 
+use std::ops::{Add, Mul, Neg, Sub};
+
 use glam::DVec2;
 
 use crate::consts::BUBBLE_LAYER_MM;
@@ -31,18 +33,39 @@ use crate::walk::{GapSampler, WALK_BLOCK, walk_layers};
 /// other 30, by polynomials; float operations only, so that it vectorises.
 #[inline(always)]
 pub(crate) fn unit_circle_of(u: f64) -> (f64, f64) {
-    use std::f64::consts::{FRAC_1_SQRT_2, FRAC_PI_2, FRAC_PI_4};
+    let (quadrant, t) = quadrant_and_angle(u);
+    let (s, c) = sin_cos_octant(t);
+    into_quadrant(quadrant, c, s, std::f64::consts::FRAC_1_SQRT_2)
+}
+
+/// The quadrant of φ = 2π (u + ½)/2³² (0 to 3, from u's upper 2 bits) and the angle t
+/// within it about its middle, |t| ≤ π/4 (from the other 30 bits).
+#[inline(always)]
+fn quadrant_and_angle(u: f64) -> (f64, f64) {
+    use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
     const QUARTER: f64 = 1_073_741_824.0; // 2³⁰
     let quadrant = (u * (1.0 / QUARTER)).floor();
     let within = u - quadrant * QUARTER; // exact
-    let t = (within + 0.5) * (FRAC_PI_2 / QUARTER) - FRAC_PI_4;
-    let (s, c) = sin_cos_octant(t);
-    // Angle π/4 + t, in [0, π/2).
-    let (x, y) = ((c - s) * FRAC_1_SQRT_2, (c + s) * FRAC_1_SQRT_2);
-    // Turned by quadrant·π/2: by π/2 in quadrants 1 and 3, then by π in 2 and 3.
-    let odd = (quadrant == 1.0) | (quadrant == 3.0);
+    (quadrant, (within + 0.5) * (FRAC_PI_2 / QUARTER) - FRAC_PI_4)
+}
+
+/// The point at angle π/4 + t (from cos t, sin t), turned by `quadrant`·π/2: by π/2 in
+/// quadrants 1 and 3, then by π in 2 and 3. In f64 or f32.
+#[inline(always)]
+fn into_quadrant<T>(quadrant: T, c: T, s: T, frac_1_sqrt_2: T) -> (T, T)
+where
+    T: Copy
+        + PartialOrd
+        + From<u8>
+        + Neg<Output = T>
+        + Add<Output = T>
+        + Sub<Output = T>
+        + Mul<Output = T>,
+{
+    let (x, y) = ((c - s) * frac_1_sqrt_2, (c + s) * frac_1_sqrt_2);
+    let odd = (quadrant == T::from(1)) | (quadrant == T::from(3));
     let (x, y) = (if odd { -y } else { x }, if odd { x } else { y });
-    let half = quadrant >= 2.0;
+    let half = quadrant >= T::from(2);
     (if half { -x } else { x }, if half { -y } else { y })
 }
 
@@ -275,14 +298,12 @@ struct LandingF32 {
 /// `unit_circle_of`) and the quadrant.
 #[inline(always)]
 fn landing_inputs_f32(j: f64, draw_cos: f64, draw_phi: f64) -> [f32; 5] {
-    use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
-    const QUARTER: f64 = 1_073_741_824.0; // 2³⁰
-    let quadrant = (draw_phi * (1.0 / QUARTER)).floor();
+    let (quadrant, a) = quadrant_and_angle(draw_phi);
     [
         ((j + 0.5) * BUBBLE_LAYER_MM) as f32,
         (draw_cos * INV_2_POW_32) as f32,
         ((4_294_967_296.0 - draw_cos) * INV_2_POW_32) as f32,
-        ((draw_phi - quadrant * QUARTER + 0.5) * (FRAC_PI_2 / QUARTER) - FRAC_PI_4) as f32,
+        a as f32,
         quadrant as f32,
     ]
 }
@@ -303,7 +324,7 @@ fn landing_slot_f32(l: &LandingF32, [z, t, cos_b, a, quadrant]: [f32; 5]) -> i32
     let sin_b = (t * (2.0 - t)).sqrt(); // sin² θ = 1 − cos² θ = t (2 − t)
     let rho = z * sin_b / cos_b;
     // sin and cos of a by their series to a⁹ and a¹⁰ (error below 2·10⁻⁹), then turned
-    // into φ's quadrant as `unit_circle_of` does.
+    // into φ's quadrant as in `unit_circle_of`.
     let a2 = a * a;
     let s = (1.0f32 / 362_880.0)
         .mul_add(a2, -1.0 / 5_040.0)
@@ -316,14 +337,7 @@ fn landing_slot_f32(l: &LandingF32, [z, t, cos_b, a, quadrant]: [f32; 5]) -> i32
         .mul_add(a2, 1.0 / 24.0)
         .mul_add(a2, -0.5)
         .mul_add(a2, 1.0);
-    let (x, y) = (
-        (c - s) * std::f32::consts::FRAC_1_SQRT_2,
-        (c + s) * std::f32::consts::FRAC_1_SQRT_2,
-    );
-    let odd = (quadrant == 1.0) | (quadrant == 3.0);
-    let (x, y) = (if odd { -y } else { x }, if odd { x } else { y });
-    let half = quadrant >= 2.0;
-    let (c_phi, s_phi) = (if half { -x } else { x }, if half { -y } else { y });
+    let (c_phi, s_phi) = into_quadrant(quadrant, c, s, std::f32::consts::FRAC_1_SQRT_2);
     // The landing point and its side of every edge.
     let bx = l.slope[0].mul_add(z, l.p0[0]);
     let by = l.slope[1].mul_add(z, l.p0[1]);
