@@ -291,6 +291,18 @@ struct LandingF32 {
     b: f32,
 }
 
+impl LandingF32 {
+    #[inline(always)]
+    fn new(ray: &BubbleRay, bundles: &Bundles) -> Self {
+        LandingF32 {
+            p0: [ray.p0.x as f32, ray.p0.y as f32],
+            slope: [ray.slope_xy.x as f32, ray.slope_xy.y as f32],
+            r: bundles.radius_mm() as f32,
+            b: bundles.length_b_mm() as f32,
+        }
+    }
+}
+
 /// The inputs of [`landing_slot_f32`] for the bubble of layer `j` with angle draws
 /// (`draw_cos`, `draw_phi`), each computed exactly in double precision and rounded once to
 /// single: the bubble's height z, 1 − cos θ, cos θ (both keep their relative precision
@@ -466,12 +478,7 @@ fn land_scattered_lanes(
         let [z, t, c, a, q] = landing_inputs_f32(layer[k], draw_cos[k], draw_phi[k]);
         (f32_z[k], f32_t[k], f32_cos[k], f32_a[k], f32_q[k]) = (z, t, c, a, q);
     }
-    let l = LandingF32 {
-        p0: [ray.p0.x as f32, ray.p0.y as f32],
-        slope: [ray.slope_xy.x as f32, ray.slope_xy.y as f32],
-        r: bundles.radius_mm() as f32,
-        b: bundles.length_b_mm() as f32,
-    };
+    let l = LandingF32::new(ray, bundles);
     let mut near = 0;
     for k in 0..n {
         slot[k] = landing_slot_f32(&l, [f32_z[k], f32_t[k], f32_cos[k], f32_a[k], f32_q[k]]);
@@ -553,12 +560,7 @@ mod tests {
                         let want = landing_slot_exact(&ray, &bundles, j, dc, dp);
                         assert_eq!(lanes.slot[n], want, "{geo:?} ray {r} bubble {n} {tier:?}");
                         let inputs = landing_inputs_f32(j, dc, dp);
-                        let l = LandingF32 {
-                            p0: [ray.p0.x as f32, ray.p0.y as f32],
-                            slope: [ray.slope_xy.x as f32, ray.slope_xy.y as f32],
-                            r: bundles.radius_mm() as f32,
-                            b: bundles.length_b_mm() as f32,
-                        };
+                        let l = LandingF32::new(&ray, &bundles);
                         near += usize::from(landing_slot_f32(&l, inputs) == 3);
                         landed += usize::from(want < 2);
                         bubbles += 1;
