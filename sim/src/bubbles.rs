@@ -26,7 +26,7 @@ use crate::consts::BUBBLE_LAYER_MM;
 use crate::geometry::Bundles;
 use crate::kernels::{LANES, grow, small_int, u32_to_f64, vector_kernel};
 use crate::streams::{CounterStream, INV_2_POW_32};
-use crate::walk::{GapSampler, WALK_BLOCK, walk_layers};
+use crate::walk::{GROUP_RAYS, GapSampler, GroupWalk};
 
 /// The point on the unit circle at azimuth φ = 2π (u + ½)/2³² for a 32-bit draw u (given
 /// as an f64, exactly): the quadrant from its upper 2 bits, the angle within it from the
@@ -113,8 +113,9 @@ pub(crate) struct BubbleLanes {
     count: usize,
     /// The stream of the ray's bubbles.
     stream: CounterStream,
-    /// Layer index j of the bubble.
-    layer: Vec<f64>,
+    /// The walks of a group of rays (layer index j of each bubble), and the ray's lane.
+    walk: GroupWalk,
+    lane: usize,
     /// Output: the output index (thickness) from which the bubble is frozen in.
     pub index: Vec<i32>,
     /// Output: 0 or 1 for the bundle the scattered ray lands on, 2 for none.
@@ -140,7 +141,7 @@ impl BubbleLanes {
     /// its direction's sideways part only if `sideways` (else 0: the thesis's coupling
     /// needs only cos θ_B).
     pub(crate) fn scattered(&self, n: usize, sideways: bool) -> Scattered {
-        let (j, cos_b) = (self.layer[n], cos_b_of(self.draw_cos[n]));
+        let (j, cos_b) = (self.layer()[n], cos_b_of(self.draw_cos[n]));
         if sideways {
             let (c_phi, s_phi) = unit_circle_of(self.draw_phi[n]);
             scattered_ray(j, cos_b, c_phi, s_phi)
@@ -174,18 +175,42 @@ impl BubbleLanes {
         m
     }
 
-    /// Walk the layers j < `j_end` of one ray: where its bubbles are (walk.rs).
-    pub(crate) fn walk(&mut self, stream: CounterStream, gaps: &GapSampler, j_end: u32) {
+    /// Walk the layers j < `j_end[ℓ]` of a group of rays, one to a lane ℓ with stream
+    /// `streams[ℓ]`: where their bubbles are (walk.rs). Then [`BubbleLanes::select`] one.
+    pub(crate) fn walk_group(
+        &mut self,
+        streams: [CounterStream; GROUP_RAYS],
+        gaps: &GapSampler,
+        j_end: [u32; GROUP_RAYS],
+    ) {
+        self.walk.walk(streams, gaps, j_end);
+    }
+
+    /// The bubbles of the ray of lane `lane` of the group walked last, whose stream is
+    /// `stream`.
+    pub(crate) fn select(&mut self, lane: usize, stream: CounterStream) {
         self.stream = stream;
-        // At most one bubble per layer, plus a block of the walk. The buffer only grows.
-        let room = j_end as usize + WALK_BLOCK.max(LANES);
-        grow(&mut self.layer, room, 0.0);
-        let layer = &mut self.layer[..room];
-        let n = walk_layers(stream, gaps, j_end, layer);
+        self.lane = lane;
+        let n = self.walk.len(lane);
         self.count = n;
         // Pad to whole vectors with copies of the last bubble (or of zeros).
-        let last = layer[n.saturating_sub(1)];
-        layer[n..n.next_multiple_of(LANES)].fill(last);
+        let column = self.walk.column_mut(lane);
+        let last = column[n.saturating_sub(1)];
+        column[n..n.next_multiple_of(LANES)].fill(last);
+    }
+
+    /// Walk one ray (in a group of its own): its layers j < `j_end`.
+    #[cfg(test)]
+    pub(crate) fn walk(&mut self, stream: CounterStream, gaps: &GapSampler, j_end: u32) {
+        let mut j_ends = [0; GROUP_RAYS];
+        j_ends[0] = j_end;
+        self.walk_group([stream; GROUP_RAYS], gaps, j_ends);
+        self.select(0, stream);
+    }
+
+    /// Layer index j of each bubble, then the padding.
+    fn layer(&self) -> &[f64] {
+        self.walk.column(self.lane)
     }
 }
 
@@ -407,7 +432,7 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
         ray,
         bundles,
         lanes.stream,
-        &lanes.layer[..n],
+        &lanes.walk.column(lanes.lane)[..n],
         &mut lanes.index[..n],
         &mut lanes.slot[..n],
         &mut lanes.draw_cos[..n],
@@ -428,7 +453,7 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
             lanes.slot[k] = landing_slot_exact(
                 ray,
                 bundles,
-                lanes.layer[k],
+                lanes.layer()[k],
                 lanes.draw_cos[k],
                 lanes.draw_phi[k],
             );
@@ -556,7 +581,7 @@ mod tests {
                     lanes.walk(stream, &gaps, 150);
                     with_isa(tier, || land_scattered(&ray, &bundles, &mut lanes));
                     for n in 0..lanes.len() {
-                        let (j, dc, dp) = (lanes.layer[n], lanes.draw_cos[n], lanes.draw_phi[n]);
+                        let (j, dc, dp) = (lanes.layer()[n], lanes.draw_cos[n], lanes.draw_phi[n]);
                         let want = landing_slot_exact(&ray, &bundles, j, dc, dp);
                         assert_eq!(lanes.slot[n], want, "{geo:?} ray {r} bubble {n} {tier:?}");
                         let inputs = landing_inputs_f32(j, dc, dp);
@@ -613,7 +638,7 @@ mod tests {
                     continue;
                 }
                 with_isa(tier, || land_scattered(&ray, &bundles, &mut lanes));
-                let (j, dc, dp) = (lanes.layer[k], lanes.draw_cos[k], lanes.draw_phi[k]);
+                let (j, dc, dp) = (lanes.layer()[k], lanes.draw_cos[k], lanes.draw_phi[k]);
                 let want = landing_slot_exact(&ray, &bundles, j, dc, dp);
                 assert_eq!(
                     lanes.slot[k],
@@ -658,7 +683,7 @@ mod tests {
             });
             let w1 = stream.word(2 * n as u64 + 1);
             let (u_cos, u_phi) = (f64::from(w1 as u32), f64::from((w1 >> 32) as u32));
-            assert_eq!(lanes.layer[n], f64::from(j), "bubble {n}");
+            assert_eq!(lanes.layer()[n], f64::from(j), "bubble {n}");
             let z = (f64::from(j) + 0.5) * 0.1;
             let q = ((f64::from(j) + 1.0) * 0.1 + 0.3 - 0.05 * z) * 10.0 - 1e-9;
             assert_eq!(f64::from(lanes.index[n]), q.ceil().max(1.0), "bubble {n}");

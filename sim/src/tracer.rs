@@ -29,7 +29,7 @@ use crate::streams::{
     CounterStream, STREAM_ACCRETION, accretion_key, bubble_stream, diffuse_stream, fill_u32,
     geometric_gap, uniform, uniform32, unit_circle_unnormalised,
 };
-use crate::walk::GapSampler;
+use crate::walk::{GROUP_RAYS, GapSampler};
 
 /// One accretion being traced: its surface, the sums per thickness and the scratch buffers
 /// the rays share.
@@ -77,6 +77,8 @@ pub(crate) struct Accretion<'m> {
     diffuse_bubbles: Vec<usize>,
     /// Every ray's set-up against this surface (setup.rs).
     setup: RaySetups,
+    /// The first ray of the group whose dense bubbles `lanes` holds (walked side by side).
+    group_first: Option<usize>,
 }
 
 /// One ray against this accretion's surface.
@@ -143,6 +145,7 @@ impl<'m> Accretion<'m> {
             diffuse_out: DiffuseLanes::default(),
             diffuse_bubbles: Vec::with_capacity(nt),
             setup: RaySetups::default(),
+            group_first: None,
         }
         .with_setup()
     }
@@ -211,23 +214,11 @@ impl<'m> Accretion<'m> {
         // The layers that the ice covers within max_mm: j < j_end. Beyond, the bubbles are
         // not drawn. A ray almost parallel to a tilted surface would walk very many layers
         // before the surface covers them: at most MAX_LAYERS_PER_RAY (2 m).
-        let j_end = if p.p_bubble <= 0.0 {
-            0
-        } else if layers >= 0.0 {
-            layers as u32
-        } else {
-            let bray = f.bubble;
-            layers_covered(
-                &|j: u32| bray.cover_steps(f64::from(j)),
-                self.first_wet,
-                self.nt,
-            )
-        };
         self.fwd_after.clear();
         self.fwd_after.push(ray.flux_in_w);
         match &m.dense {
-            Some(gaps) => self.bubbles_dense(&f, gaps, j_end),
-            None => self.bubbles_sparse(&f, j_end),
+            Some(gaps) => self.bubbles_dense(&f, gaps),
+            None => self.bubbles_sparse(&f, self.layers_of(&f.bubble, layers)),
         }
         let had_bubbles = self.fwd_after.len() > 1;
 
@@ -252,6 +243,53 @@ impl<'m> Accretion<'m> {
         }
     }
 
+    /// The layers j < j_end that the ice covers within max_mm along a ray (`bubble`), from
+    /// its set-up's `layers` (negative where the set-up's search did not settle). A ray
+    /// almost parallel to a tilted surface would walk very many layers before the surface
+    /// covers them: at most MAX_LAYERS_PER_RAY (2 m). Beyond, the bubbles are not drawn.
+    fn layers_of(&self, bubble: &BubbleRay, layers: f64) -> u32 {
+        if self.m.cfg.params.p_bubble <= 0.0 {
+            0
+        } else if layers >= 0.0 {
+            layers as u32
+        } else {
+            layers_covered(
+                &|j: u32| bubble.cover_steps(f64::from(j)),
+                self.first_wet,
+                self.nt,
+            )
+        }
+    }
+
+    /// Walk the dense bubbles of the group of rays from `first` on, side by side
+    /// (walk.rs); a ray that is not traced (no flux, or not steeper than the plane) walks
+    /// no layer.
+    fn walk_group(&mut self, first: usize, gaps: &GapSampler) {
+        let (rays, su) = (&self.m.rays, &self.setup);
+        let j_end = std::array::from_fn(|l| {
+            let r = first + l;
+            match rays.get(r) {
+                // The negation of `trace`'s test, NaN included.
+                Some(ray) if !(ray.flux_in_w <= 0.0 || su.den[r] <= 1e-9) => {
+                    let bubble = BubbleRay {
+                        p0: ray.p0,
+                        slope_xy: DVec2::new(su.slope_x[r], su.slope_y[r]),
+                        a: su.a[r],
+                        off1: su.off1[r],
+                        inv_step: self.inv_step,
+                        first_wet: self.first_wet as u32,
+                    };
+                    self.layers_of(&bubble, su.layers[r])
+                }
+                _ => 0,
+            }
+        });
+        let streams =
+            std::array::from_fn(|l| CounterStream::new(self.key, bubble_stream(first + l)));
+        self.lanes.walk_group(streams, gaps, j_end);
+        self.group_first = Some(first);
+    }
+
     /// The scattered part of a bubble: 5 % deflected toward the face (Fig. 3.11), attenuated
     /// along the ray up to the bubble and down to the face (Beer–Lambert, eq. 3.21), entering
     /// bundle `k` with the coupling of eqs. 3.24–3.25, frozen in at thickness index `i`.
@@ -272,9 +310,13 @@ impl<'m> Accretion<'m> {
 
     /// Pass 1, dense bubbles (rime): the walk draws one geometric gap per bubble from a
     /// counter-based stream, then lands all scattered rays at once (bubbles.rs).
-    fn bubbles_dense(&mut self, f: &RayFrame, gaps: &GapSampler, j_end: u32) {
-        let stream = CounterStream::new(self.key, bubble_stream(f.r));
-        self.lanes.walk(stream, gaps, j_end);
+    fn bubbles_dense(&mut self, f: &RayFrame, gaps: &GapSampler) {
+        let (lane, first) = (f.r % GROUP_RAYS, f.r - f.r % GROUP_RAYS);
+        if self.group_first != Some(first) {
+            self.walk_group(first, gaps);
+        }
+        self.lanes
+            .select(lane, CounterStream::new(self.key, bubble_stream(f.r)));
         land_scattered(&f.bubble, &self.bundles, &mut self.lanes);
         let count = self.lanes.len();
         // Forward flux after n bubbles: Φ·F^n (F = FORWARD_FRACTION).

@@ -1,12 +1,14 @@
-//! The rime walk of one ray (thesis §3.2.2–§3.2.3): where along the ray its bubbles lie.
+//! The rime walk (thesis §3.2.2–§3.2.3): where along a ray its bubbles lie.
 //! Every layer of Δ_Ice holds a bubble with probability P_B, independently, so the numbers
 //! of empty layers between bubbles are geometric: one draw per bubble ([`GapSampler`]), not
 //! one per layer. The gap before bubble n is drawn from word 2⌊n/2⌋ of the ray's
 //! counter-based stream (its upper 32 bits for even n, its lower 32 bits for odd n; the
-//! layout is in bubbles.rs), so the gaps of many bubbles can be drawn at once: with AVX-512
-//! sixteen at a time, their layers by a prefix sum ([`walk_layers`]); otherwise one by one.
+//! layout is in bubbles.rs). Eight rays are walked side by side ([`GroupWalk`]): with
+//! AVX-512 one ray to a lane, two bubbles of each per step, then the rows turned into a
+//! column per ray; otherwise ray after ray, gap by gap.
 //! Both find the same layers (integers: exact on every tier; tested).
 
+use crate::kernels::grow;
 use crate::streams::CounterStream;
 
 /// Bits of a draw that index the bucket table of [`GapSampler`].
@@ -81,29 +83,88 @@ fn gap_draws(w: u64) -> [u32; 2] {
     [(w >> 32) as u32, w as u32]
 }
 
-/// Bubbles one step of the vectorised walk finds at most; the walk may write this many
-/// layers beyond the last bubble.
-pub(crate) const WALK_BLOCK: usize = 16;
+/// Rays walked side by side, one to a lane of an AVX-512 vector.
+pub(crate) const GROUP_RAYS: usize = 8;
 
-/// The layers j < `j_end` that hold a bubble along one ray, in order, as f64 (exactly) into
-/// `layer`, which has room for `j_end` + [`WALK_BLOCK`] entries (those beyond the count are
-/// overwritten freely). Returns the number of bubbles.
-pub(crate) fn walk_layers(
-    stream: CounterStream,
-    gaps: &GapSampler,
-    j_end: u32,
-    layer: &mut [f64],
-) -> usize {
-    assert!(layer.len() >= j_end as usize + WALK_BLOCK);
-    #[cfg(target_arch = "x86_64")]
-    if crate::kernels::isa() == crate::kernels::Isa::Avx512 {
-        // SAFETY: the CPU has AVX-512 F and DQ (`isa`); `layer` has room checked above.
-        return unsafe { walk_avx512(stream, gaps, j_end, layer) };
-    }
-    walk_scalar(stream, gaps, j_end, layer)
+/// The walks of [`GROUP_RAYS`] rays ([`GroupWalk::walk`]): each lane's layers, in order,
+/// in a column of its own.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct GroupWalk {
+    /// Lane ℓ's bubble n at `columns[ℓ·stride + n]` (as f64, exactly).
+    columns: Vec<f64>,
+    stride: usize,
+    count: [usize; GROUP_RAYS],
+    /// AVX-512: the walk's rows, bubble n of lane ℓ at `rows[n·8 + ℓ]`, before they are
+    /// turned into columns.
+    rows: Vec<f64>,
 }
 
-/// [`walk_layers`] one bubble at a time.
+impl GroupWalk {
+    /// Walk the layers j < `j_end[ℓ]` of eight rays, one to a lane ℓ with stream
+    /// `streams[ℓ]`. The same layers on every tier (integers: exact; tested).
+    ///
+    /// One ray at a time, each step of a walk waits on the one before it (hash, table
+    /// lookup, the test for the end); side by side, the eight rays' steps are independent:
+    /// with AVX-512 two bubbles of every lane per step, otherwise lane after lane.
+    pub(crate) fn walk(
+        &mut self,
+        streams: [CounterStream; GROUP_RAYS],
+        gaps: &GapSampler,
+        j_end: [u32; GROUP_RAYS],
+    ) {
+        // Every bubble takes a layer of its own (at most j_end of them); the AVX-512 walk
+        // writes rows in pairs, and turns blocks of eight rows into columns.
+        let most = j_end.iter().copied().max().unwrap_or(0) as usize;
+        self.stride = (most + 2).next_multiple_of(GROUP_RAYS);
+        grow(&mut self.columns, self.stride * GROUP_RAYS, 0.0);
+        #[cfg(target_arch = "x86_64")]
+        if crate::kernels::isa() == crate::kernels::Isa::Avx512 {
+            grow(&mut self.rows, self.stride * GROUP_RAYS, 0.0);
+            // SAFETY: the CPU has AVX-512 F and DQ (`isa`); both buffers hold `stride`
+            // rows of eight, stride ≥ max(j_end) + 2.
+            self.count = unsafe {
+                walk_rows_avx512(
+                    streams,
+                    gaps,
+                    j_end,
+                    &mut self.rows[..self.stride * GROUP_RAYS],
+                )
+            };
+            let blocks = self
+                .count
+                .iter()
+                .copied()
+                .max()
+                .unwrap_or(0)
+                .div_ceil(GROUP_RAYS);
+            // SAFETY: as above; blocks·8 ≤ stride (count ≤ max(j_end)).
+            unsafe { rows_to_columns_avx512(&self.rows, blocks, self.stride, &mut self.columns) };
+            return;
+        }
+        for (lane, count) in self.count.iter_mut().enumerate() {
+            let column = &mut self.columns[lane * self.stride..(lane + 1) * self.stride];
+            *count = walk_scalar(streams[lane], gaps, j_end[lane], column);
+        }
+    }
+
+    /// Number of bubbles of lane `lane`.
+    pub(crate) fn len(&self, lane: usize) -> usize {
+        self.count[lane]
+    }
+
+    /// Lane `lane`'s column: its layers, then room for at least `LANES` − 1 more.
+    pub(crate) fn column(&self, lane: usize) -> &[f64] {
+        &self.columns[lane * self.stride..(lane + 1) * self.stride]
+    }
+
+    /// [`GroupWalk::column`], to write the padding after its layers.
+    pub(crate) fn column_mut(&mut self, lane: usize) -> &mut [f64] {
+        &mut self.columns[lane * self.stride..(lane + 1) * self.stride]
+    }
+}
+
+/// One ray's walk, one bubble at a time, its layers into `layer` (room for `j_end`).
+/// Returns the number of bubbles.
 fn walk_scalar(stream: CounterStream, gaps: &GapSampler, j_end: u32, layer: &mut [f64]) -> usize {
     let mut j: u32 = 0;
     let mut n: usize = 0;
@@ -116,9 +177,8 @@ fn walk_scalar(stream: CounterStream, gaps: &GapSampler, j_end: u32, layer: &mut
             if j >= j_end {
                 break 'walk;
             }
-            // SAFETY: every bubble takes a layer of its own, so n ≤ j < j_end < len
-            // (checked by the caller).
-            unsafe { *layer.get_unchecked_mut(n) = f64::from(j) };
+            // Every bubble takes a layer of its own, so n ≤ j < j_end: within the room.
+            layer[n] = f64::from(j);
             j += 1;
             n += 1;
         }
@@ -126,94 +186,143 @@ fn walk_scalar(stream: CounterStream, gaps: &GapSampler, j_end: u32, layer: &mut
     n
 }
 
-/// [`walk_layers`] sixteen bubbles at a time: eight words hashed at once, their sixteen
-/// draws turned into gaps by two gathers from the bucket table (a bucket that straddles
-/// several thresholds is counted one by one), the layers by a prefix sum of gap + 1, and
-/// the bubbles below `j_end` (a prefix of the sixteen: the layers grow) counted.
+/// The walk of eight rays side by side: per step, bubbles 2m and 2m + 1 of every lane
+/// from its word 2m, into rows 2m and 2m + 1 of `rows` (bubble n of lane ℓ at n·8 + ℓ).
+/// Returns each lane's number of bubbles.
 ///
 /// # Safety
-/// The CPU has AVX-512 F and DQ; `layer` has room for `j_end` + 16 entries.
+/// The CPU has AVX-512 F and DQ; `rows` holds max(`j_end`) + 2 rows of eight.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
-unsafe fn walk_avx512(
-    stream: CounterStream,
+unsafe fn walk_rows_avx512(
+    streams: [CounterStream; GROUP_RAYS],
     gaps: &GapSampler,
-    j_end: u32,
-    layer: &mut [f64],
-) -> usize {
+    j_end: [u32; GROUP_RAYS],
+    rows: &mut [f64],
+) -> [usize; GROUP_RAYS] {
     use crate::streams::{GOLDEN_GAMMA, MIX64_MULTIPLIERS};
     use std::arch::x86_64::*;
     let splat64 = |x: u64| _mm512_set1_epi64(x as i64);
     let [mul_a, mul_b] = MIX64_MULTIPLIERS.map(splat64);
     let gamma = splat64(GOLDEN_GAMMA);
-    // The counters of words 0, 2, …, 14, then 16 words on per step.
-    let even = _mm512_setr_epi64(0, 2, 4, 6, 8, 10, 12, 14);
-    let mut counter = _mm512_add_epi64(splat64(stream.counter(0)), _mm512_mullo_epi64(even, gamma));
-    let step = splat64(16u64.wrapping_mul(GOLDEN_GAMMA));
-    // The halves of eight 64-bit bucket entries as sixteen 32-bit lanes, in bubble order.
-    let upper = _mm512_setr_epi32(1, 3, 5, 7, 9, 11, 13, 15, 17, 19, 21, 23, 25, 27, 29, 31);
-    let lower = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
-    let (zero, one) = (_mm512_setzero_si512(), _mm512_set1_epi32(1));
-    let many = _mm512_set1_epi32(-1); // the upper half of `MANY`
-    let end = _mm512_set1_epi32(j_end as i32);
+    let starts = streams.map(|s| s.counter(0));
+    // SAFETY: eight u64 and eight u32 are loaded.
+    let (mut counter, end) = unsafe {
+        (
+            _mm512_loadu_si512(starts.as_ptr().cast()),
+            _mm512_cvtepu32_epi64(_mm256_loadu_si256(j_end.as_ptr().cast())),
+        )
+    };
+    let step = splat64(2u64.wrapping_mul(GOLDEN_GAMMA));
+    let low32 = splat64(0xFFFF_FFFF);
+    let one = splat64(1);
+    let many = splat64(MANY);
     let bucket = gaps.bucket.as_ptr().cast::<i64>();
-    // The layer before which the next gap starts, and the bubbles found.
-    let mut j0: u32 = 0;
-    let mut n: usize = 0;
-    loop {
-        // SplitMix64 of the eight counters (`streams::mix64`).
+    // Per lane: the layer before which the next gap starts, and the bubbles found.
+    let (mut j, mut count) = (_mm512_setzero_si512(), _mm512_setzero_si512());
+    let mut active: __mmask8 = 0xFF;
+    let out = rows.as_mut_ptr();
+    let mut m = 0;
+    while active != 0 {
+        // SplitMix64 of each lane's word 2m (`streams::mix64`).
         let mut z = _mm512_add_epi64(counter, gamma);
         z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64::<30>(z)), mul_a);
         z = _mm512_mullo_epi64(_mm512_xor_si512(z, _mm512_srli_epi64::<27>(z)), mul_b);
         z = _mm512_xor_si512(z, _mm512_srli_epi64::<31>(z));
         counter = _mm512_add_epi64(counter, step);
-        // Sixteen draws in bubble order: each word's upper half, then its lower half.
-        let u = _mm512_shuffle_epi32::<0xB1>(z);
-        let index = _mm512_srli_epi32::<{ 32 - GAP_BUCKET_BITS }>(u);
+        // The draws of bubbles 2m (upper half) and 2m + 1 (lower half): `GapSampler::gap`.
+        let (u_a, u_b) = (_mm512_srli_epi64::<32>(z), _mm512_and_si512(z, low32));
+        let bucket_of = |u: __m512i| _mm512_srli_epi64::<{ 32 - GAP_BUCKET_BITS }>(u);
         // SAFETY: the indices are below 2^GAP_BUCKET_BITS, the table's length.
-        let (entries_a, entries_b) = unsafe {
+        let (e_a, e_b) = unsafe {
             (
-                _mm512_i32gather_epi64::<8>(_mm512_castsi512_si256(index), bucket),
-                _mm512_i32gather_epi64::<8>(_mm512_extracti64x4_epi64::<1>(index), bucket),
+                _mm512_i64gather_epi64::<8>(bucket_of(u_a), bucket),
+                _mm512_i64gather_epi64::<8>(bucket_of(u_b), bucket),
             )
         };
-        let least = _mm512_permutex2var_epi32(entries_a, upper, entries_b);
-        let below = _mm512_permutex2var_epi32(entries_a, lower, entries_b);
-        let gap = if _mm512_cmpeq_epi32_mask(least, many) == 0 {
-            // `GapSampler::gap`: the bucket's least gap, one more below its threshold.
-            _mm512_mask_add_epi32(least, _mm512_cmplt_epu32_mask(u, below), least, one)
-        } else {
-            let mut draws = [0u32; WALK_BLOCK];
-            // SAFETY: sixteen u32 are stored into and loaded from the array.
-            unsafe {
-                _mm512_storeu_si512(draws.as_mut_ptr().cast(), u);
-                let gap = draws.map(|u| gaps.gap(u));
-                _mm512_loadu_si512(gap.as_ptr().cast())
-            }
+        let gap_of = |u: __m512i, e: __m512i| {
+            let least = _mm512_srli_epi64::<32>(e);
+            let below = _mm512_cmplt_epu64_mask(u, _mm512_and_si512(e, low32));
+            _mm512_mask_add_epi64(least, below, least, one)
         };
-        // The layer of each bubble: j0 + (the sum of gap + 1 up to it) − 1. No overflow: j0
-        // < j_end ≤ 20 000, and sixteen gaps are below 16 × 1100.
-        let mut sum = _mm512_add_epi32(gap, one);
-        sum = _mm512_add_epi32(sum, _mm512_alignr_epi32::<15>(sum, zero));
-        sum = _mm512_add_epi32(sum, _mm512_alignr_epi32::<14>(sum, zero));
-        sum = _mm512_add_epi32(sum, _mm512_alignr_epi32::<12>(sum, zero));
-        sum = _mm512_add_epi32(sum, _mm512_alignr_epi32::<8>(sum, zero));
-        let layers = _mm512_add_epi32(sum, _mm512_set1_epi32(j0.wrapping_sub(1) as i32));
-        let found = _mm512_cmplt_epu32_mask(layers, end).count_ones() as usize;
-        // SAFETY: n ≤ j_end (each bubble below j_end has a layer of its own), so the sixteen
-        // entries from n lie within the room the caller checked.
+        let (mut g_a, mut g_b) = (gap_of(u_a, e_a), gap_of(u_b, e_b));
+        if (_mm512_cmpeq_epi64_mask(e_a, many) | _mm512_cmpeq_epi64_mask(e_b, many)) != 0 {
+            // A bucket that straddles several thresholds: counted one by one.
+            let (mut ua, mut ub) = ([0u64; GROUP_RAYS], [0u64; GROUP_RAYS]);
+            // SAFETY: eight u64 are stored into and loaded from each array.
+            unsafe {
+                _mm512_storeu_si512(ua.as_mut_ptr().cast(), u_a);
+                _mm512_storeu_si512(ub.as_mut_ptr().cast(), u_b);
+                let ga = ua.map(|u| u64::from(gaps.gap(u as u32)));
+                let gb = ub.map(|u| u64::from(gaps.gap(u as u32)));
+                g_a = _mm512_loadu_si512(ga.as_ptr().cast());
+                g_b = _mm512_loadu_si512(gb.as_ptr().cast());
+            }
+        }
+        // `walk_scalar`'s steps, lane by lane. No overflow: an active lane has j < j_end
+        // ≤ 20 000 and gaps below 2³²; an inactive lane's values are not used.
+        let j_a = _mm512_add_epi64(j, g_a);
+        let ok_a = _mm512_mask_cmplt_epu64_mask(active, j_a, end);
+        let j_b = _mm512_add_epi64(_mm512_add_epi64(j_a, one), g_b);
+        let ok_b = _mm512_mask_cmplt_epu64_mask(ok_a, j_b, end);
+        // SAFETY: a lane is active at step m only with 2m bubbles below its j_end, each in
+        // a layer of its own, so 2m + 1 ≤ max(j_end) + 1: within the rows (caller).
         unsafe {
-            let out = layer.as_mut_ptr().add(n);
-            _mm512_storeu_pd(out, _mm512_cvtepu32_pd(_mm512_castsi512_si256(layers)));
-            let upper_half = _mm512_extracti64x4_epi64::<1>(layers);
-            _mm512_storeu_pd(out.add(8), _mm512_cvtepu32_pd(upper_half));
+            let row = out.add(2 * m * GROUP_RAYS);
+            _mm512_storeu_pd(row, _mm512_cvtepu64_pd(j_a));
+            _mm512_storeu_pd(row.add(GROUP_RAYS), _mm512_cvtepu64_pd(j_b));
         }
-        n += found;
-        if found < WALK_BLOCK {
-            return n;
+        count = _mm512_mask_add_epi64(count, ok_a, count, one);
+        count = _mm512_mask_add_epi64(count, ok_b, count, one);
+        active = ok_b;
+        j = _mm512_add_epi64(j_b, one);
+        m += 1;
+    }
+    let mut counts = [0u64; GROUP_RAYS];
+    // SAFETY: eight u64 are stored.
+    unsafe { _mm512_storeu_si512(counts.as_mut_ptr().cast(), count) };
+    counts.map(|c| c as usize)
+}
+
+/// The first `blocks` blocks of eight rows of `rows` (bubble n of lane ℓ at n·8 + ℓ) into
+/// columns (at ℓ·`stride` + n), an 8×8 transpose per block.
+///
+/// # Safety
+/// The CPU has AVX-512 F; `rows` holds 8·`blocks` rows of eight, `columns` eight columns of
+/// `stride` ≥ 8·`blocks`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
+unsafe fn rows_to_columns_avx512(rows: &[f64], blocks: usize, stride: usize, columns: &mut [f64]) {
+    use std::arch::x86_64::*;
+    debug_assert!(rows.len() >= blocks * 64 && stride >= blocks * 8 && columns.len() >= 8 * stride);
+    // Within 128-bit pairs of lanes: even pairs (0, 2) then odd (1, 3) of each source.
+    const EVEN: i32 = 0b10_00_10_00;
+    const ODD: i32 = 0b11_01_11_01;
+    let base = columns.as_mut_ptr();
+    for b in 0..blocks {
+        // SAFETY: rows 8b..8b + 8 and entries 8b..8b + 8 of each column are in bounds
+        // (caller).
+        unsafe {
+            let src = rows.as_ptr().add(b * 64);
+            let r: [__m512d; 8] = std::array::from_fn(|k| _mm512_loadu_pd(src.add(8 * k)));
+            // Pairs of rows interleaved: lo = (r_2i[0], r_2i+1[0], r_2i[2], …), hi the odd.
+            let lo: [__m512d; 4] =
+                std::array::from_fn(|i| _mm512_unpacklo_pd(r[2 * i], r[2 * i + 1]));
+            let hi: [__m512d; 4] =
+                std::array::from_fn(|i| _mm512_unpackhi_pd(r[2 * i], r[2 * i + 1]));
+            for (t, first) in [(lo, 0), (hi, 1)] {
+                // Lanes {0, 4} (EVEN) and {2, 6} (ODD) of rows 0–3, and of rows 4–7.
+                let u0 = _mm512_shuffle_f64x2::<EVEN>(t[0], t[1]);
+                let u1 = _mm512_shuffle_f64x2::<ODD>(t[0], t[1]);
+                let u2 = _mm512_shuffle_f64x2::<EVEN>(t[2], t[3]);
+                let u3 = _mm512_shuffle_f64x2::<ODD>(t[2], t[3]);
+                let column = |lane: usize| base.add((first + lane) * stride + 8 * b);
+                _mm512_storeu_pd(column(0), _mm512_shuffle_f64x2::<EVEN>(u0, u2));
+                _mm512_storeu_pd(column(4), _mm512_shuffle_f64x2::<ODD>(u0, u2));
+                _mm512_storeu_pd(column(2), _mm512_shuffle_f64x2::<EVEN>(u1, u3));
+                _mm512_storeu_pd(column(6), _mm512_shuffle_f64x2::<ODD>(u1, u3));
+            }
         }
-        let last = _mm512_extracti32x4_epi32::<3>(sum);
-        j0 = j0.wrapping_add(_mm_extract_epi32::<3>(last) as u32);
     }
 }
 
@@ -294,23 +403,35 @@ mod tests {
             (out, near_0)
         };
         let mut counted_one_by_one = 0;
+        // Groups of eight rays, each lane with its own stream and end (among them 0, a
+        // block's edge, and a lane far longer than the others), the groups one after
+        // another in the same buffers (so that a short group follows a long one).
+        let ends = [0, 1, 15, 16, 17, 150, 1000, 2];
+        let mut group = GroupWalk::default();
         for p in [0.021, 0.21, 0.5, 1.0] {
             let gaps = GapSampler::new(p);
-            for id in 0..300 {
-                let stream = CounterStream::new(42, id);
-                for j_end in [0, 1, 15, 16, 17, 150, 1000] {
-                    let (want, near_0) = by_definition(&gaps, stream, j_end);
+            for g in 0..300u64 {
+                let streams = std::array::from_fn(|l| CounterStream::new(42, 8 * g + l as u64));
+                // Rotated per group: every lane meets every end.
+                let j_end: [u32; GROUP_RAYS] =
+                    std::array::from_fn(|l| ends[(l + g as usize) % ends.len()]);
+                let want: [Vec<f64>; GROUP_RAYS] = std::array::from_fn(|l| {
+                    let (want, near_0) = by_definition(&gaps, streams[l], j_end[l]);
                     counted_one_by_one += usize::from(near_0 && p < 1.0);
-                    for tier in [Isa::Baseline, Isa::Avx2, Isa::Avx512] {
-                        if tier > isa() {
-                            continue;
-                        }
-                        let mut layer = vec![f64::NAN; j_end as usize + WALK_BLOCK];
-                        let n = with_isa(tier, || walk_layers(stream, &gaps, j_end, &mut layer));
+                    want
+                });
+                for tier in [Isa::Baseline, Isa::Avx2, Isa::Avx512] {
+                    if tier > isa() {
+                        continue;
+                    }
+                    with_isa(tier, || group.walk(streams, &gaps, j_end));
+                    for (l, want) in want.iter().enumerate() {
+                        let n = group.len(l);
                         assert_eq!(
-                            layer[..n],
+                            group.column(l)[..n],
                             want[..],
-                            "P_B {p}, stream {id}, j_end {j_end}, {tier:?}"
+                            "P_B {p}, group {g}, lane {l}, j_end {}, {tier:?}",
+                            j_end[l]
                         );
                     }
                 }
