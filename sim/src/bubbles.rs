@@ -307,6 +307,9 @@ fn landing_slot_exact(
     small_int(bundles.slot_f64(land[0], land[1]))
 }
 
+/// Lanes of a vector of f32 with AVX-512: the single-precision pass runs over whole ones.
+const F32_LANES: usize = 2 * LANES;
+
 /// A ray and the bundles in single precision, for [`landing_slot_f32`].
 #[derive(Clone, Copy)]
 struct LandingF32 {
@@ -410,11 +413,14 @@ fn landing_slot_f32(l: &LandingF32, [z, t, cos_b, a, quadrant]: [f32; 5]) -> i32
 /// Per bubble: the output index at which it is frozen in (the first index ≥ its cover
 /// thickness, not before the first wet one) and the bundle its scattered ray lands on.
 pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut BubbleLanes) {
-    // The output buffers only grow (their tails are stale and never read).
+    // The output buffers only grow (their tails are stale and never read). The passes in
+    // double precision run over whole vectors of eight, the one in single precision over
+    // whole vectors of sixteen (its last eight lanes may hold stale inputs; their slots are
+    // never read): no lane is left to a remainder loop.
     let n = lanes.count.next_multiple_of(LANES);
-    for out in [&mut lanes.index, &mut lanes.slot] {
-        grow(out, n, 0);
-    }
+    let n_f32 = lanes.count.next_multiple_of(F32_LANES);
+    grow(&mut lanes.index, n, 0);
+    grow(&mut lanes.slot, n_f32, 0);
     for out in [&mut lanes.draw_cos, &mut lanes.draw_phi] {
         grow(out, n, 0.0);
     }
@@ -425,7 +431,7 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
         &mut lanes.f32_a,
         &mut lanes.f32_q,
     ] {
-        grow(out, n, 0.0);
+        grow(out, n_f32, 0.0);
     }
     let mut any_near = [0];
     land_scattered_lanes(
@@ -434,14 +440,14 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
         lanes.stream,
         &lanes.walk.column(lanes.lane)[..n],
         &mut lanes.index[..n],
-        &mut lanes.slot[..n],
+        &mut lanes.slot[..n_f32],
         &mut lanes.draw_cos[..n],
         &mut lanes.draw_phi[..n],
-        &mut lanes.f32_z[..n],
-        &mut lanes.f32_t[..n],
-        &mut lanes.f32_cos[..n],
-        &mut lanes.f32_a[..n],
-        &mut lanes.f32_q[..n],
+        &mut lanes.f32_z[..n_f32],
+        &mut lanes.f32_t[..n_f32],
+        &mut lanes.f32_cos[..n_f32],
+        &mut lanes.f32_a[..n_f32],
+        &mut lanes.f32_q[..n_f32],
         &mut any_near,
     );
     // The few lanes too near an edge for single precision, in double precision.
@@ -481,33 +487,64 @@ fn land_scattered_lanes(
     any_near: &mut [i32; 1],
 ) {
     let n = layer.len();
-    let (f32_z, f32_t, f32_cos) = (&mut f32_z[..n], &mut f32_t[..n], &mut f32_cos[..n]);
-    let (f32_a, f32_q) = (&mut f32_a[..n], &mut f32_q[..n]);
-    let (index, slot) = (&mut index[..n], &mut slot[..n]);
+    let n_f32 = slot.len().max(n);
+    let (f32_z, f32_t, f32_cos) = (&mut f32_z[..n_f32], &mut f32_t[..n_f32], &mut f32_cos[..n_f32]);
+    let (f32_a, f32_q) = (&mut f32_a[..n_f32], &mut f32_q[..n_f32]);
+    let (index, slot) = (&mut index[..n], &mut slot[..n_f32]);
     let (draw_cos, draw_phi) = (&mut draw_cos[..n], &mut draw_phi[..n]);
     // Passes of short chains of dependent operations, so that the processor overlaps many
     // bubbles (one long loop body is bound by the latency of its chain).
+    // Each pass vector by vector: the compiler then leaves no lane to a narrower remainder
+    // loop.
+    const W: usize = LANES;
     // 1. The draws of the angles.
-    for k in 0..n {
-        (draw_cos[k], draw_phi[k]) = angle_draws(stream, k as u64);
+    let draws = draw_cos.chunks_exact_mut(W).zip(draw_phi.chunks_exact_mut(W));
+    for (first, (dc, dp)) in (0u64..).step_by(W).zip(draws) {
+        for k in 0..W {
+            (dc[k], dp[k]) = angle_draws(stream, first + k as u64);
+        }
     }
     // 2. The freeze-in index.
     let first_wet = f64::from(ray.first_wet);
-    for k in 0..n {
-        // ceil is exact; the walk keeps j below the layer whose index would pass the last.
-        index[k] = small_int(ray.cover_steps(layer[k]).ceil().max(first_wet));
+    for (j, i) in layer.chunks_exact(W).zip(index.chunks_exact_mut(W)) {
+        for k in 0..W {
+            // ceil is exact; the walk keeps j below the layer whose index would pass the
+            // last.
+            i[k] = small_int(ray.cover_steps(j[k]).ceil().max(first_wet));
+        }
     }
     // 3. Where the scattered ray lands, in single precision (3: too near an edge to tell):
     // its inputs from double precision, eight lanes to a vector, then sixteen.
-    for k in 0..n {
-        let [z, t, c, a, q] = landing_inputs_f32(layer[k], draw_cos[k], draw_phi[k]);
-        (f32_z[k], f32_t[k], f32_cos[k], f32_a[k], f32_q[k]) = (z, t, c, a, q);
+    let outputs = f32_z
+        .chunks_exact_mut(W)
+        .zip(f32_t.chunks_exact_mut(W))
+        .zip(f32_cos.chunks_exact_mut(W))
+        .zip(f32_a.chunks_exact_mut(W))
+        .zip(f32_q.chunks_exact_mut(W));
+    let inputs = layer
+        .chunks_exact(W)
+        .zip(draw_cos.chunks_exact(W))
+        .zip(draw_phi.chunks_exact(W));
+    for (((((z, t), c), a), q), ((j, dc), dp)) in outputs.zip(inputs) {
+        for k in 0..W {
+            [z[k], t[k], c[k], a[k], q[k]] = landing_inputs_f32(j[k], dc[k], dp[k]);
+        }
     }
     let l = LandingF32::new(ray, bundles);
     let mut near = 0;
-    for k in 0..n {
-        slot[k] = landing_slot_f32(&l, [f32_z[k], f32_t[k], f32_cos[k], f32_a[k], f32_q[k]]);
-        near |= i32::from(slot[k] == 3);
+    // Vector by vector: the compiler then leaves no lane to a narrower remainder loop.
+    const V: usize = F32_LANES;
+    let inputs = f32_z
+        .chunks_exact(V)
+        .zip(f32_t.chunks_exact(V))
+        .zip(f32_cos.chunks_exact(V))
+        .zip(f32_a.chunks_exact(V))
+        .zip(f32_q.chunks_exact(V));
+    for (((((z, t), c), a), q), s) in inputs.zip(slot.chunks_exact_mut(V)) {
+        for k in 0..V {
+            s[k] = landing_slot_f32(&l, [z[k], t[k], c[k], a[k], q[k]]);
+            near |= i32::from(s[k] == 3);
+        }
     }
     any_near[0] = near;
 }
