@@ -113,8 +113,10 @@ pub(crate) struct BubbleLanes {
     count: usize,
     /// The stream of the ray's bubbles.
     stream: CounterStream,
-    /// The walks of a group of rays (layer index j of each bubble), and the ray's lane.
+    /// The walks of a group of rays (layer index j of each bubble), their streams, and the
+    /// ray's lane.
     walk: GroupWalk,
+    streams: [CounterStream; GROUP_RAYS],
     lane: usize,
     /// Output: the output index (thickness) from which the bubble is frozen in.
     pub index: Vec<i32>,
@@ -184,12 +186,12 @@ impl BubbleLanes {
         j_end: [u32; GROUP_RAYS],
     ) {
         self.walk.walk(streams, gaps, j_end);
+        self.streams = streams;
     }
 
-    /// The bubbles of the ray of lane `lane` of the group walked last, whose stream is
-    /// `stream`.
-    pub(crate) fn select(&mut self, lane: usize, stream: CounterStream) {
-        self.stream = stream;
+    /// The bubbles of the ray of lane `lane` of the group walked last.
+    pub(crate) fn select(&mut self, lane: usize) {
+        self.stream = self.streams[lane];
         self.lane = lane;
         let n = self.walk.len(lane);
         self.count = n;
@@ -205,7 +207,7 @@ impl BubbleLanes {
         let mut j_ends = [0; GROUP_RAYS];
         j_ends[0] = j_end;
         self.walk_group([stream; GROUP_RAYS], gaps, j_ends);
-        self.select(0, stream);
+        self.select(0);
     }
 
     /// Layer index j of each bubble, then the padding.

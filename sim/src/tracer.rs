@@ -66,6 +66,10 @@ pub(crate) struct Accretion<'m> {
     /// indices ≤ i is the running maximum). The forward flux at thickness i is
     /// fwd_after[that number].
     fwd_after: Vec<f64>,
+    /// Dense bubbles: the forward flux after n bubbles is Φ·F^n, read as `fwd_scale` ×
+    /// `forward_pow[n]` (the same product, so the same bits) instead of from `fwd_after`.
+    fwd_dense: bool,
+    fwd_scale: f64,
     frozen_by: Vec<u32>,
     /// F^n, n = 0, 1, …: grown to the most bubbles one ray met.
     forward_pow: Vec<f64>,
@@ -136,6 +140,8 @@ impl<'m> Accretion<'m> {
             scat_delta: vec![[0.0; 2]; nt],
             leak: vec![0.0; nt],
             fwd_after: Vec::with_capacity(256),
+            fwd_dense: false,
+            fwd_scale: 1.0,
             frozen_by: vec![0; nt],
             forward_pow: vec![1.0],
             lanes: BubbleLanes::default(),
@@ -214,13 +220,15 @@ impl<'m> Accretion<'m> {
         // The layers that the ice covers within max_mm: j < j_end. Beyond, the bubbles are
         // not drawn. A ray almost parallel to a tilted surface would walk very many layers
         // before the surface covers them: at most MAX_LAYERS_PER_RAY (2 m).
-        self.fwd_after.clear();
-        self.fwd_after.push(ray.flux_in_w);
-        match &m.dense {
-            Some(gaps) => self.bubbles_dense(&f, gaps),
-            None => self.bubbles_sparse(&f, self.layers_of(&f.bubble, layers)),
-        }
-        let had_bubbles = self.fwd_after.len() > 1;
+        let had_bubbles = match &m.dense {
+            Some(gaps) => self.bubbles_dense(&f, gaps) > 0,
+            None => {
+                self.fwd_after.clear();
+                self.fwd_after.push(ray.flux_in_w);
+                self.bubbles_sparse(&f, self.layers_of(&f.bubble, layers));
+                self.fwd_after.len() > 1
+            }
+        };
 
         // Pass 2, the surface at every thickness.
         if sensor_a {
@@ -310,13 +318,12 @@ impl<'m> Accretion<'m> {
 
     /// Pass 1, dense bubbles (rime): the walk draws one geometric gap per bubble from a
     /// counter-based stream, then lands all scattered rays at once (bubbles.rs).
-    fn bubbles_dense(&mut self, f: &RayFrame, gaps: &GapSampler) {
+    fn bubbles_dense(&mut self, f: &RayFrame, gaps: &GapSampler) -> usize {
         let (lane, first) = (f.r % GROUP_RAYS, f.r - f.r % GROUP_RAYS);
         if self.group_first != Some(first) {
             self.walk_group(first, gaps);
         }
-        self.lanes
-            .select(lane, CounterStream::new(self.key, bubble_stream(f.r)));
+        self.lanes.select(lane);
         land_scattered(&f.bubble, &self.bundles, &mut self.lanes);
         let count = self.lanes.len();
         // Forward flux after n bubbles: Φ·F^n (F = FORWARD_FRACTION).
@@ -324,9 +331,7 @@ impl<'m> Accretion<'m> {
             let last = self.forward_pow.last().copied().unwrap_or(1.0);
             self.forward_pow.push(last * FORWARD_FRACTION);
         }
-        let flux = f.ray.flux_in_w;
-        self.fwd_after
-            .extend(self.forward_pow[1..=count].iter().map(|&p| flux * p));
+        (self.fwd_dense, self.fwd_scale) = (true, f.ray.flux_in_w);
         let landed_count = self.lanes.tally(&mut self.frozen_by, &mut self.landed);
         // The thesis's coupling needs only cos θ_B; the acceptance cone the whole direction.
         let sideways = self.m.cfg.coupling == Coupling::AcceptanceCone;
@@ -334,15 +339,17 @@ impl<'m> Accretion<'m> {
             let n = self.landed[l] as usize;
             let sc = self.lanes.scattered(n, sideways);
             let at = (self.lanes.index[n] as usize, self.lanes.slot[n] as usize);
-            let fwd = self.fwd_after[n];
+            let fwd = self.fwd_scale * self.forward_pow[n];
             self.scatter(f, at, fwd, DVec3::from(sc.dir), sc.z_mm, sc.reach_mm);
         }
+        count
     }
 
     /// Pass 1, sparse bubbles (glazed): geometric gaps between bubbles by inversion (one `ln`
     /// per bubble), P_B per layer; each bubble's scattered ray is culled before its azimuth is
     /// drawn when it cannot reach the face.
     fn bubbles_sparse(&mut self, f: &RayFrame, j_end: u32) {
+        self.fwd_dense = false;
         let ray = &f.ray;
         let slope_xy = f.bubble.slope_xy;
         let mut bub = Pcg32::new(self.key, bubble_stream(f.r));
@@ -454,12 +461,18 @@ impl<'m> Accretion<'m> {
         let d = &self.diffuse_out;
         let (landed, weight) = d.landed();
         let slot = &d.slot[..];
+        let (scale, table) = forward_flux(
+            self.fwd_dense,
+            self.fwd_scale,
+            &self.forward_pow,
+            &self.fwd_after,
+        );
         let refl = &mut self.refl[i0..i_end];
         if !cone && !had_bubbles {
             // The common case (glazed ice: most rays meet no bubble), without a branch per
             // lane: the same forward flux for every thickness. A landed lane's slot is 0 or
             // 1, so `& 1` keeps it and spares the bounds check.
-            let fwd = self.fwd_after[n_bub0];
+            let fwd = scale * table[n_bub0];
             for (&n, &w) in landed.iter().zip(weight) {
                 let n = n as usize;
                 debug_assert!(slot[n] < 2, "a landed lane has a bundle");
@@ -473,9 +486,9 @@ impl<'m> Accretion<'m> {
                 continue;
             }
             let fwd = if had_bubbles {
-                self.fwd_after[self.diffuse_bubbles[n]]
+                scale * table[self.diffuse_bubbles[n]]
             } else {
-                self.fwd_after[n_bub0]
+                scale * table[n_bub0]
             };
             debug_assert!(slot[n] < 2, "a landed lane has a bundle");
             refl[n][(slot[n] & 1) as usize] += fwd * w;
@@ -521,7 +534,12 @@ impl<'m> Accretion<'m> {
             &mut self.refl[i_lo..i_hi],
             &self.frozen_by[i_lo..i_hi],
             &self.spec_slot[..i_hi - i_lo],
-            &self.fwd_after,
+            forward_flux(
+                self.fwd_dense,
+                self.fwd_scale,
+                &self.forward_pow,
+                &self.fwd_after,
+            ),
             n_bub,
             [rfl, cpl],
             [att, att_step],
@@ -552,6 +570,13 @@ impl<'m> Accretion<'m> {
         }
         Curve { points }
     }
+}
+
+/// The forward flux after n bubbles as `scale` × `table[n]`: Φ·F^n (`pow[n]` = F^n) for
+/// dense bubbles, the running product `after[n]` (times 1, exactly) for sparse ones. From
+/// the tracer's fields, so that another of them can be borrowed mutably beside it.
+fn forward_flux<'a>(dense: bool, scale: f64, pow: &'a [f64], after: &'a [f64]) -> (f64, &'a [f64]) {
+    if dense { (scale, pow) } else { (1.0, after) }
 }
 
 /// The number of bubble layers a ray meets within the output thicknesses: the first layer j
@@ -630,7 +655,7 @@ fn add_specular(
     refl: &mut [[f64; 2]],
     frozen_by: &[u32],
     slot: &[i32],
-    fwd_after: &[f64],
+    (scale, fwd_after): (f64, &[f64]),
     mut n_bub: usize,
     [rfl, cpl]: [f64; 2],
     [mut att, att_step]: [f64; 2],
@@ -642,7 +667,7 @@ fn add_specular(
         // Along the line the bundle changes rarely: a branch predicts well.
         let k = k as u32 as usize;
         if k < 2 {
-            flux[k] += fwd_after[n_bub] * rfl * cpl * att_i;
+            flux[k] += scale * fwd_after[n_bub] * rfl * cpl * att_i;
         }
     }
 }
