@@ -309,6 +309,15 @@ fn landing_slot_exact(
     small_int(bundles.slot_f64(land[0], land[1]))
 }
 
+/// Marks a loop over whole vectors whose body, unrolled over the lanes, is to become one
+/// vector operation per step: an empty `asm!` keeps the compiler from vectorising across
+/// the steps (it did, with gathers and scatters) and costs nothing.
+#[inline(always)]
+fn one_vector_at_a_time() {
+    // SAFETY: an empty instruction sequence.
+    unsafe { std::arch::asm!("", options(nomem, nostack, preserves_flags)) };
+}
+
 /// Lanes of a vector of f32 with AVX-512: the single-precision pass runs over whole ones.
 const F32_LANES: usize = 2 * LANES;
 
@@ -502,6 +511,7 @@ fn land_scattered_lanes(
     // 1. The draws of the angles.
     let draws = draw_cos.chunks_exact_mut(W).zip(draw_phi.chunks_exact_mut(W));
     for (first, (dc, dp)) in (0u64..).step_by(W).zip(draws) {
+        one_vector_at_a_time();
         for k in 0..W {
             (dc[k], dp[k]) = angle_draws(stream, first + k as u64);
         }
@@ -509,6 +519,7 @@ fn land_scattered_lanes(
     // 2. The freeze-in index.
     let first_wet = f64::from(ray.first_wet);
     for (j, i) in layer.chunks_exact(W).zip(index.chunks_exact_mut(W)) {
+        one_vector_at_a_time();
         for k in 0..W {
             // ceil is exact; the walk keeps j below the layer whose index would pass the
             // last.
@@ -528,6 +539,7 @@ fn land_scattered_lanes(
         .zip(draw_cos.chunks_exact(W))
         .zip(draw_phi.chunks_exact(W));
     for (((((z, t), c), a), q), ((j, dc), dp)) in outputs.zip(inputs) {
+        one_vector_at_a_time();
         for k in 0..W {
             [z[k], t[k], c[k], a[k], q[k]] = landing_inputs_f32(j[k], dc[k], dp[k]);
         }
@@ -543,6 +555,7 @@ fn land_scattered_lanes(
         .zip(f32_a.chunks_exact(V))
         .zip(f32_q.chunks_exact(V));
     for (((((z, t), c), a), q), s) in inputs.zip(slot.chunks_exact_mut(V)) {
+        one_vector_at_a_time();
         for k in 0..V {
             s[k] = landing_slot_f32(&l, [z[k], t[k], c[k], a[k], q[k]]);
             near |= i32::from(s[k] == 3);
