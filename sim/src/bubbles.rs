@@ -24,7 +24,7 @@ use glam::DVec2;
 
 use crate::consts::BUBBLE_LAYER_MM;
 use crate::geometry::Bundles;
-use crate::kernels::{LANES, grow, small_int, u32_to_f64, vector_kernel};
+use crate::kernels::{LANES, grow, one_vector_at_a_time, small_int, u32_to_f64, vector_kernel};
 use crate::streams::{CounterStream, INV_2_POW_32};
 use crate::walk::{GROUP_RAYS, GapSampler, GroupWalk};
 
@@ -307,15 +307,6 @@ fn landing_slot_exact(
     let s = scattered_ray(j, cos_b_of(draw_cos), c_phi, s_phi);
     let land = landing(ray, s.z_mm, s.dir[0], s.dir[1], s.reach_mm);
     small_int(bundles.slot_f64(land[0], land[1]))
-}
-
-/// Marks a loop over whole vectors whose body, unrolled over the lanes, is to become one
-/// vector operation per step: an empty `asm!` keeps the compiler from vectorising across
-/// the steps (it did, with gathers and scatters) and costs nothing.
-#[inline(always)]
-fn one_vector_at_a_time() {
-    // SAFETY: an empty instruction sequence.
-    unsafe { std::arch::asm!("", options(nomem, nostack, preserves_flags)) };
 }
 
 /// Lanes of a vector of f32 with AVX-512: the single-precision pass runs over whole ones.

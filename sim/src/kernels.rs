@@ -135,6 +135,16 @@ pub(crate) use vector_kernel;
 /// values that are never read.
 pub(crate) const LANES: usize = 8;
 
+/// Marks a loop over whole vectors whose body, unrolled over the lanes, is to become one
+/// vector operation per step: an empty `asm!` keeps the compiler from vectorising across
+/// the steps (it did, with gathers and scatters) or unrolling them into wider steps that
+/// leave a remainder to narrower loops, and costs nothing.
+#[inline(always)]
+pub(crate) fn one_vector_at_a_time() {
+    // SAFETY: an empty instruction sequence.
+    unsafe { std::arch::asm!("", options(nomem, nostack, preserves_flags)) };
+}
+
 /// `v` at least `n` long, filled with `fill` where it grows. The kernels' buffers only grow:
 /// a ray uses their first lanes, so no fill runs per ray.
 #[inline(always)]
@@ -177,13 +187,16 @@ pub(crate) fn specular_slots(
     thick_mm: &[f64],
     slot: &mut [i32],
 ) {
-    let n = thick_mm.len().min(slot.len());
-    let (thick_mm, slot) = (&thick_mm[..n], &mut slot[..n]);
-    for k in 0..n {
-        let h0 = thick_mm[k] + a;
-        let land = p0 + w * h0;
-        let on = bundles.slot_f64(land.x, land.y);
-        slot[k] = small_int(if h0 <= 0.0 { 2.0 } else { on });
+    // One vector per step (`one_vector_at_a_time`): a ray visits only a few vectors of
+    // thicknesses, so no lane is left to a narrower remainder loop.
+    for (d, s) in thick_mm.chunks_exact(LANES).zip(slot.chunks_exact_mut(LANES)) {
+        one_vector_at_a_time();
+        for k in 0..LANES {
+            let h0 = d[k] + a;
+            let land = p0 + w * h0;
+            let on = bundles.slot_f64(land.x, land.y);
+            s[k] = small_int(if h0 <= 0.0 { 2.0 } else { on });
+        }
     }
 }
 }
