@@ -785,7 +785,7 @@ mod tests {
                 let mut i = 1;
                 lanes.index = (0..count)
                     .map(|_| {
-                        i += (rng.next_u32() % 3 == 0) as i32;
+                        i += i32::from(rng.next_u32().is_multiple_of(3));
                         i
                     })
                     .collect();
