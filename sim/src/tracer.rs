@@ -54,6 +54,23 @@ pub(crate) struct Accretion<'m> {
     /// farther than `face_radius` from `face_centre` misses them.
     face_centre: DVec2,
     face_radius: f64,
+    /// Dense bubbles: the forward flux after n bubbles is Φ·F^n, read as `fwd_scale` ×
+    /// `forward_pow[n]` (the same product, so the same bits) instead of from `fwd_after`.
+    fwd_dense: bool,
+    fwd_scale: f64,
+    /// The sums and every buffer the rays share, reused from one accretion to the next
+    /// on a thread ([`Scratch`]).
+    buf: Scratch,
+    /// The first ray of the group whose dense bubbles `lanes` holds (walked side by side).
+    group_first: Option<usize>,
+}
+
+/// The sums of one accretion and the buffers its rays share: kept by each thread from one
+/// accretion to the next ([`Scratch::with`]), so that an accretion allocates nothing. The
+/// sums are zeroed for each accretion; the other buffers only grow, and a ray reads only
+/// what it wrote.
+#[derive(Debug, Default)]
+pub(crate) struct Scratch {
     /// Reflected flux per thickness and bundle, W.
     refl: Vec<[f64; 2]>,
     /// Scattered flux newly frozen in at each thickness, per bundle, W.
@@ -66,10 +83,6 @@ pub(crate) struct Accretion<'m> {
     /// indices ≤ i is the running maximum). The forward flux at thickness i is
     /// fwd_after[that number].
     fwd_after: Vec<f64>,
-    /// Dense bubbles: the forward flux after n bubbles is Φ·F^n, read as `fwd_scale` ×
-    /// `forward_pow[n]` (the same product, so the same bits) instead of from `fwd_after`.
-    fwd_dense: bool,
-    fwd_scale: f64,
     frozen_by: Vec<u32>,
     /// F^n, n = 0, 1, …: grown to the most bubbles one ray met.
     forward_pow: Vec<f64>,
@@ -81,8 +94,30 @@ pub(crate) struct Accretion<'m> {
     diffuse_bubbles: Vec<usize>,
     /// Every ray's set-up against this surface (setup.rs).
     setup: RaySetups,
-    /// The first ray of the group whose dense bubbles `lanes` holds (walked side by side).
-    group_first: Option<usize>,
+}
+
+impl Scratch {
+    /// Run `f` with this thread's scratch, sized and zeroed for `nt` thicknesses.
+    pub(crate) fn with<R>(nt: usize, f: impl FnOnce(Scratch) -> (R, Scratch)) -> R {
+        thread_local! {
+            static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::default();
+        }
+        let mut s = SCRATCH.with(|c| c.take());
+        for sums in [&mut s.refl, &mut s.scat_delta] {
+            sums.clear();
+            sums.resize(nt, [0.0; 2]);
+        }
+        s.leak.clear();
+        s.leak.resize(nt, 0.0);
+        s.frozen_by.clear();
+        s.frozen_by.resize(nt, 0);
+        if s.forward_pow.is_empty() {
+            s.forward_pow.push(1.0);
+        }
+        let (out, s) = f(s);
+        SCRATCH.with(|c| c.replace(s));
+        out
+    }
 }
 
 /// One ray against this accretion's surface.
@@ -100,7 +135,7 @@ struct RayFrame {
 
 impl<'m> Accretion<'m> {
     /// Phase 1: the surface of accretion `run` of `seed`, and empty sums.
-    pub(crate) fn new(m: &'m SensorModel, seed: u64, run: u64) -> Self {
+    pub(crate) fn new(m: &'m SensorModel, seed: u64, run: u64, buf: Scratch) -> Self {
         let cfg = &m.cfg;
         let p = cfg.params;
         let geo = cfg.geometry;
@@ -136,21 +171,9 @@ impl<'m> Accretion<'m> {
             y_hi,
             face_centre,
             face_radius: face_centre.x.hypot(y_hi),
-            refl: vec![[0.0; 2]; nt],
-            scat_delta: vec![[0.0; 2]; nt],
-            leak: vec![0.0; nt],
-            fwd_after: Vec::with_capacity(256),
             fwd_dense: false,
             fwd_scale: 1.0,
-            frozen_by: vec![0; nt],
-            forward_pow: vec![1.0],
-            lanes: BubbleLanes::default(),
-            landed: Vec::new(),
-            spec_slot: Vec::with_capacity(nt),
-            diffuse_draws: Vec::with_capacity(nt),
-            diffuse_out: DiffuseLanes::default(),
-            diffuse_bubbles: Vec::with_capacity(nt),
-            setup: RaySetups::default(),
+            buf,
             group_first: None,
         }
         .with_setup()
@@ -175,7 +198,9 @@ impl<'m> Accretion<'m> {
         };
         let bubbles = m.cfg.params.p_bubble > 0.0;
         let specular = m.cfg.params.diffuse_max_rad <= 0.0; // validated: not NaN
-        self.setup.compute(&m.ray_lanes, &surf, bubbles, specular);
+        self.buf
+            .setup
+            .compute(&m.ray_lanes, &surf, bubbles, specular);
         self
     }
 
@@ -185,11 +210,11 @@ impl<'m> Accretion<'m> {
         let p = m.cfg.params;
         let sensor_a = m.cfg.sensor == SensorKind::A;
         if sensor_a {
-            for l in self.leak.iter_mut().take(self.first_wet) {
+            for l in self.buf.leak.iter_mut().take(self.first_wet) {
                 *l += ray.refl_air_w;
             }
         }
-        let su = &self.setup;
+        let su = &self.buf.setup;
         let (a, den) = (su.a[r], su.den[r]);
         if ray.flux_in_w <= 0.0 || den <= 1e-9 {
             return;
@@ -223,16 +248,16 @@ impl<'m> Accretion<'m> {
         let had_bubbles = match &m.dense {
             Some(gaps) => self.bubbles_dense(&f, gaps) > 0,
             None => {
-                self.fwd_after.clear();
-                self.fwd_after.push(ray.flux_in_w);
+                self.buf.fwd_after.clear();
+                self.buf.fwd_after.push(ray.flux_in_w);
                 self.bubbles_sparse(&f, self.layers_of(&f.bubble, layers));
-                self.fwd_after.len() > 1
+                self.buf.fwd_after.len() > 1
             }
         };
 
         // Pass 2, the surface at every thickness.
         if sensor_a {
-            for (i, l) in self.leak.iter_mut().enumerate().skip(self.first_wet) {
+            for (i, l) in self.buf.leak.iter_mut().enumerate().skip(self.first_wet) {
                 *l += if m.thick[i] + a <= 0.0 {
                     ray.refl_air_w
                 } else {
@@ -247,7 +272,7 @@ impl<'m> Accretion<'m> {
         }
         if had_bubbles {
             let first_wet = self.first_wet;
-            self.frozen_by[first_wet..].fill(0);
+            self.buf.frozen_by[first_wet..].fill(0);
         }
     }
 
@@ -273,7 +298,7 @@ impl<'m> Accretion<'m> {
     /// (walk.rs); a ray that is not traced (no flux, or not steeper than the plane) walks
     /// no layer.
     fn walk_group(&mut self, first: usize, gaps: &GapSampler) {
-        let (rays, su) = (&self.m.rays, &self.setup);
+        let (rays, su) = (&self.m.rays, &self.buf.setup);
         let j_end = std::array::from_fn(|l| {
             let r = first + l;
             match rays.get(r) {
@@ -294,7 +319,7 @@ impl<'m> Accretion<'m> {
         });
         let streams =
             std::array::from_fn(|l| CounterStream::new(self.key, bubble_stream(first + l)));
-        self.lanes.walk_group(streams, gaps, j_end);
+        self.buf.lanes.walk_group(streams, gaps, j_end);
         self.group_first = Some(first);
     }
 
@@ -312,7 +337,7 @@ impl<'m> Accretion<'m> {
         reach: f64,
     ) {
         let path = z_b / f.ray.dir.z + reach;
-        self.scat_delta[i][k] +=
+        self.buf.scat_delta[i][k] +=
             fwd * (1.0 - FORWARD_FRACTION) * self.m.couple(s) * (-ALPHA_PER_MM * path).exp();
     }
 
@@ -323,23 +348,29 @@ impl<'m> Accretion<'m> {
         if self.group_first != Some(first) {
             self.walk_group(first, gaps);
         }
-        self.lanes.select(lane);
-        land_scattered(&f.bubble, &self.bundles, &mut self.lanes);
-        let count = self.lanes.len();
+        self.buf.lanes.select(lane);
+        land_scattered(&f.bubble, &self.bundles, &mut self.buf.lanes);
+        let count = self.buf.lanes.len();
         // Forward flux after n bubbles: Φ·F^n (F = FORWARD_FRACTION).
-        while self.forward_pow.len() <= count {
-            let last = self.forward_pow.last().copied().unwrap_or(1.0);
-            self.forward_pow.push(last * FORWARD_FRACTION);
+        while self.buf.forward_pow.len() <= count {
+            let last = self.buf.forward_pow.last().copied().unwrap_or(1.0);
+            self.buf.forward_pow.push(last * FORWARD_FRACTION);
         }
         (self.fwd_dense, self.fwd_scale) = (true, f.ray.flux_in_w);
-        let landed_count = self.lanes.tally(&mut self.frozen_by, &mut self.landed);
+        let landed_count = self
+            .buf
+            .lanes
+            .tally(&mut self.buf.frozen_by, &mut self.buf.landed);
         // The thesis's coupling needs only cos θ_B; the acceptance cone the whole direction.
         let sideways = self.m.cfg.coupling == Coupling::AcceptanceCone;
         for l in 0..landed_count {
-            let n = self.landed[l] as usize;
-            let sc = self.lanes.scattered(n, sideways);
-            let at = (self.lanes.index[n] as usize, self.lanes.slot[n] as usize);
-            let fwd = self.fwd_scale * self.forward_pow[n];
+            let n = self.buf.landed[l] as usize;
+            let sc = self.buf.lanes.scattered(n, sideways);
+            let at = (
+                self.buf.lanes.index[n] as usize,
+                self.buf.lanes.slot[n] as usize,
+            );
+            let fwd = self.fwd_scale * self.buf.forward_pow[n];
             self.scatter(f, at, fwd, DVec3::from(sc.dir), sc.z_mm, sc.reach_mm);
         }
         count
@@ -385,8 +416,8 @@ impl<'m> Accretion<'m> {
                 }
             }
             fwd *= FORWARD_FRACTION;
-            self.fwd_after.push(fwd);
-            self.frozen_by[i] = (self.fwd_after.len() - 1) as u32;
+            self.buf.fwd_after.push(fwd);
+            self.buf.frozen_by[i] = (self.buf.fwd_after.len() - 1) as u32;
             let gap = geometric_gap(&mut bub, self.ln_q);
             j = j.saturating_add(1).saturating_add(gap);
         }
@@ -427,47 +458,47 @@ impl<'m> Accretion<'m> {
         // The lanes padded to whole vectors: the draws go on in the stream, the thicknesses
         // on their grid; the padding lanes are not counted.
         let lanes = (i_end - i0).next_multiple_of(LANES);
-        grow(&mut self.diffuse_draws, lanes, 0);
+        grow(&mut self.buf.diffuse_draws, lanes, 0);
         fill_u32(
             self.key,
             diffuse_stream(f.r),
-            &mut self.diffuse_draws[..lanes],
+            &mut self.buf.diffuse_draws[..lanes],
         );
         reflect_diffuse(
             &dray,
             &self.bundles,
             &m.thick_lanes[i0..i0 + lanes],
             i_end - i0,
-            &self.diffuse_draws[..lanes],
-            &mut self.diffuse_out,
+            &self.buf.diffuse_draws[..lanes],
+            &mut self.buf.diffuse_out,
         );
         // The bubbles frozen in up to each landed thickness: a running maximum
         // (`frozen_by`), needed only when the ray met bubbles.
-        let n_bub0 = frozen_before(&self.frozen_by[first_wet..i0]);
+        let n_bub0 = frozen_before(&self.buf.frozen_by[first_wet..i0]);
         if had_bubbles {
             // Into a buffer that only grows, by plain stores (a `Vec` push per entry stored
             // its length every time).
-            grow(&mut self.diffuse_bubbles, i_end - i0, 0);
+            grow(&mut self.buf.diffuse_bubbles, i_end - i0, 0);
             let mut b = n_bub0;
-            for (o, &f) in self.diffuse_bubbles[..i_end - i0]
+            for (o, &f) in self.buf.diffuse_bubbles[..i_end - i0]
                 .iter_mut()
-                .zip(&self.frozen_by[i0..i_end])
+                .zip(&self.buf.frozen_by[i0..i_end])
             {
                 b = b.max(f as usize);
                 *o = b;
             }
         }
         let cone = cfg.coupling == Coupling::AcceptanceCone;
-        let d = &self.diffuse_out;
+        let d = &self.buf.diffuse_out;
         let (landed, weight) = d.landed();
         let slot = &d.slot[..];
         let (scale, table) = forward_flux(
             self.fwd_dense,
             self.fwd_scale,
-            &self.forward_pow,
-            &self.fwd_after,
+            &self.buf.forward_pow,
+            &self.buf.fwd_after,
         );
-        let refl = &mut self.refl[i0..i_end];
+        let refl = &mut self.buf.refl[i0..i_end];
         if !cone && !had_bubbles {
             // The common case (glazed ice: most rays meet no bubble), without a branch per
             // lane: the same forward flux for every thickness. A landed lane's slot is 0 or
@@ -486,7 +517,7 @@ impl<'m> Accretion<'m> {
                 continue;
             }
             let fwd = if had_bubbles {
-                scale * table[self.diffuse_bubbles[n]]
+                scale * table[self.buf.diffuse_bubbles[n]]
             } else {
                 scale * table[n_bub0]
             };
@@ -505,7 +536,7 @@ impl<'m> Accretion<'m> {
         // The reflection's set-up (setup.rs): the reflected ray returns toward the face, and
         // the visited thicknesses are those whose landing point lies in the face's bounding
         // box (one index of margin each side; the exact test is the bundle slot below).
-        let su = &self.setup;
+        let su = &self.buf.setup;
         if su.spec_ok[r] == 0.0 {
             return;
         }
@@ -517,28 +548,28 @@ impl<'m> Accretion<'m> {
         let (rfl, w) = (su.rfl[r], DVec2::new(su.w_x[r], su.w_y[r]));
         let (i_lo, i_hi) = (su.i_lo[r] as usize, su.i_hi[r] as usize);
         let (att, att_step) = (su.att[r], su.att_step[r]);
-        let n_bub = frozen_before(&self.frozen_by[self.first_wet..i_lo]);
+        let n_bub = frozen_before(&self.buf.frozen_by[self.first_wet..i_lo]);
         // Padded to whole vectors (the thicknesses go on on their grid); the padding lanes
         // are not added.
         let lanes = (i_hi - i_lo).next_multiple_of(LANES);
-        grow(&mut self.spec_slot, lanes, 2);
+        grow(&mut self.buf.spec_slot, lanes, 2);
         specular_slots(
             ray.p0,
             w,
             a,
             &self.bundles,
             &m.thick_lanes[i_lo..i_lo + lanes],
-            &mut self.spec_slot[..lanes],
+            &mut self.buf.spec_slot[..lanes],
         );
         add_specular(
-            &mut self.refl[i_lo..i_hi],
-            &self.frozen_by[i_lo..i_hi],
-            &self.spec_slot[..i_hi - i_lo],
+            &mut self.buf.refl[i_lo..i_hi],
+            &self.buf.frozen_by[i_lo..i_hi],
+            &self.buf.spec_slot[..i_hi - i_lo],
             forward_flux(
                 self.fwd_dense,
                 self.fwd_scale,
-                &self.forward_pow,
-                &self.fwd_after,
+                &self.buf.forward_pow,
+                &self.buf.fwd_after,
             ),
             n_bub,
             [rfl, cpl],
@@ -547,15 +578,15 @@ impl<'m> Accretion<'m> {
     }
 
     /// Phase 3: flux to current; the scattered light frozen in at each thickness summed up.
-    pub(crate) fn into_curve(self) -> Curve {
+    pub(crate) fn into_curve(self) -> (Curve, Scratch) {
         let ua = RESPONSIVITY_A_PER_W * 1e6;
         let mut points = Vec::with_capacity(self.nt);
         let mut scat = [0.0f64; 2];
         for (i, &d) in self.m.thick.iter().enumerate() {
-            scat[0] += self.scat_delta[i][0];
-            scat[1] += self.scat_delta[i][1];
-            let i1_refl = (self.refl[i][0] + SENSOR_A_LEAK[0] * self.leak[i]) * ua;
-            let i2_refl = (self.refl[i][1] + SENSOR_A_LEAK[1] * self.leak[i]) * ua;
+            scat[0] += self.buf.scat_delta[i][0];
+            scat[1] += self.buf.scat_delta[i][1];
+            let i1_refl = (self.buf.refl[i][0] + SENSOR_A_LEAK[0] * self.buf.leak[i]) * ua;
+            let i2_refl = (self.buf.refl[i][1] + SENSOR_A_LEAK[1] * self.buf.leak[i]) * ua;
             let i1_scat = scat[0] * ua;
             let i2_scat = scat[1] * ua;
             points.push(CurvePoint {
@@ -568,7 +599,7 @@ impl<'m> Accretion<'m> {
                 i2_scat_ua: i2_scat,
             });
         }
-        Curve { points }
+        (Curve { points }, self.buf)
     }
 }
 

@@ -143,6 +143,37 @@ fn same_seed_same_curve_other_run_other_curve() {
     assert_ne!(a, e);
 }
 
+/// A thread keeps the buffers of one accretion for the next: an accretion traced after
+/// others (other media, sensors, thickness grids and bubble counts) on the same thread is
+/// the one traced first on a fresh thread, bit for bit.
+#[test]
+fn an_accretion_does_not_depend_on_the_accretions_before_it_on_its_thread() {
+    let mut rime = cfg(IceKind::Rime, SensorKind::B, Geometry::ThesisCh5);
+    rime.max_mm = 6.0;
+    let fresh = {
+        let c = rime.clone();
+        std::thread::spawn(move || accretion_curve(&c, 17, 2))
+            .join()
+            .unwrap()
+    };
+    let mut others = vec![
+        cfg(IceKind::Rime, SensorKind::B, Geometry::ThesisCh5),
+        cfg(IceKind::Glazed, SensorKind::A, Geometry::ThesisCh3),
+        cfg(IceKind::Water, SensorKind::B, Geometry::ThesisCh5),
+    ];
+    others[0].max_mm = 15.0;
+    others[1].step_mm = 0.05;
+    let after = std::thread::spawn(move || {
+        for (k, c) in others.iter().enumerate() {
+            accretion_curve(c, 5, k as u64);
+        }
+        accretion_curve(&rime, 17, 2)
+    })
+    .join()
+    .unwrap();
+    assert_eq!(after, fresh);
+}
+
 #[test]
 fn monte_carlo_is_identical_for_one_and_two_threads() {
     let mut c = cfg(IceKind::Rime, SensorKind::B, Geometry::ThesisCh5);
