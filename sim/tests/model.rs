@@ -156,7 +156,7 @@ fn an_accretion_does_not_depend_on_the_accretions_before_it_on_its_thread() {
             .join()
             .unwrap()
     };
-    let mut others = vec![
+    let mut others = [
         cfg(IceKind::Rime, SensorKind::B, Geometry::ThesisCh5),
         cfg(IceKind::Glazed, SensorKind::A, Geometry::ThesisCh3),
         cfg(IceKind::Water, SensorKind::B, Geometry::ThesisCh5),
