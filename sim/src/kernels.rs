@@ -201,6 +201,69 @@ pub(crate) fn specular_slots(
 }
 }
 
+vector_kernel! {
+/// The specular reflection of one ray at its `len` visited thicknesses k = 0, 1, … (the
+/// arrays are padded to whole vectors; the padding lanes add nothing): the flux left after
+/// the n_k bubbles frozen in up to k (n_k the running maximum of `frozen_by` from
+/// `n_before` on, into `n_run`) times the Fresnel reflectance, the coupling and the
+/// absorption up and back, Φ·R·T·F^(n_k)·e^(x₀ + k·x₁) (thesis eqs. 3.12, 3.21, Fig. 3.11;
+/// `factors` = [Φ·R·T, ln F, x₀, x₁]), added to the sum of the bundle of `slot[k]` (`sums0`
+/// for 0, `sums1` for 1, none for 2). F^n and the absorption by one polynomial `exp`
+/// ([`exp_small`]), so that no lane waits on the one before it.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn specular_sums(
+    sums0: &mut [f64],
+    sums1: &mut [f64],
+    frozen_by: &[u32],
+    slot: &[i32],
+    len: usize,
+    n_before: u32,
+    factors: [f64; 4],
+    n_run: &mut [u32],
+) {
+    let [scale, ln_forward, x0, x1] = factors;
+    let n = sums0.len().min(sums1.len()).min(frozen_by.len()).min(slot.len()).min(n_run.len());
+    let (sums0, sums1, frozen_by, slot, n_run) =
+        (&mut sums0[..n], &mut sums1[..n], &frozen_by[..n], &slot[..n], &mut n_run[..n]);
+    // The bubbles frozen in up to each thickness: a running maximum, a vector at a time (a
+    // scan in three steps, then the maximum of the vectors before), so that no branch or
+    // chain runs per thickness.
+    let mut most = n_before;
+    for (o, f) in n_run.chunks_exact_mut(LANES).zip(frozen_by.chunks_exact(LANES)) {
+        one_vector_at_a_time();
+        let mut v: [u32; LANES] = std::array::from_fn(|k| f[k]);
+        for shift in [1, 2, 4] {
+            let before: [u32; LANES] =
+                std::array::from_fn(|k| if k >= shift { v[k - shift] } else { 0 });
+            for k in 0..LANES {
+                v[k] = v[k].max(before[k]);
+            }
+        }
+        for k in 0..LANES {
+            o[k] = v[k].max(most);
+        }
+        most = o[LANES - 1];
+    }
+    let chunks = sums0
+        .chunks_exact_mut(LANES)
+        .zip(sums1.chunks_exact_mut(LANES))
+        .zip(n_run.chunks_exact(LANES))
+        .zip(slot.chunks_exact(LANES));
+    for (first, (((s0, s1), bubbles), bundle)) in (0..).step_by(LANES).zip(chunks) {
+        one_vector_at_a_time();
+        for k in 0..LANES {
+            let at = first + k;
+            let bundle = if at < len { bundle[k] } else { 2 };
+            let x = f64::from(bubbles[k]).mul_add(ln_forward, (at as f64).mul_add(x1, x0));
+            let flux = scale * exp_small(x);
+            // The sums are ≥ +0, so adding +0 leaves them as they are.
+            s0[k] += if bundle == 0 { flux } else { 0.0 };
+            s1[k] += if bundle == 1 { flux } else { 0.0 };
+        }
+    }
+}
+}
+
 /// sin and cos of a small angle (|x| ≤ 0.53 rad, i.e. δ_R/2 ≤ 30°) by Taylor series to x¹¹
 /// and x¹² in Horner form with the reciprocal factorials and fused multiply-adds (exactly
 /// rounded on every CPU, see [`vector_kernel`]): error below 1e-13, without a libm call or a

@@ -103,9 +103,10 @@ pub(crate) struct RaySetups {
     /// The visited thickness indices, i_lo ≤ i < i_hi.
     pub i_lo: Vec<i32>,
     pub i_hi: Vec<i32>,
-    /// The absorption up and back at i_lo and its ratio per step (Beer–Lambert, eq. 3.21).
-    pub att: Vec<f64>,
-    pub att_step: Vec<f64>,
+    /// The exponent of the absorption up and back at i_lo, and what it adds per step
+    /// (Beer–Lambert, eq. 3.21: the absorption at i_lo + k is e^(att_exp + k·att_step_exp)).
+    pub att_exp: Vec<f64>,
+    pub att_step_exp: Vec<f64>,
 }
 
 impl RaySetups {
@@ -164,8 +165,8 @@ impl RaySetups {
             &mut self.fibre_t,
             &mut self.w_x,
             &mut self.w_y,
-            &mut self.att,
-            &mut self.att_step,
+            &mut self.att_exp,
+            &mut self.att_step_exp,
         ] {
             grow(v, n, 0.0);
         }
@@ -186,21 +187,9 @@ impl RaySetups {
             &mut self.w_y[..n],
             &mut self.i_lo[..n],
             &mut self.i_hi[..n],
-            &mut self.att[..n],
-            &mut self.att_step[..n],
+            &mut self.att_exp[..n],
+            &mut self.att_step_exp[..n],
         );
-        // The absorption by libm's `exp` (its bits), only where the reflection is traced;
-        // `specular_setup` left the exponents in `att` and `att_step`.
-        for ((ok, att), att_step) in self.spec_ok[..n]
-            .iter()
-            .zip(&mut self.att[..n])
-            .zip(&mut self.att_step[..n])
-        {
-            if *ok != 0.0 {
-                *att = att.exp();
-                *att_step = att_step.exp();
-            }
-        }
     }
 }
 
@@ -303,15 +292,16 @@ fn specular_setup(
     w_y: &mut [f64],
     i_lo: &mut [i32],
     i_hi: &mut [i32],
-    att: &mut [f64],
-    att_step: &mut [f64],
+    att_exp: &mut [f64],
+    att_step_exp: &mut [f64],
 ) {
     let n = ok.len();
     let (p0_x, p0_y, a, den) = (&rays.p0_x[..n], &rays.p0_y[..n], &a[..n], &den[..n]);
     let (dir_x, dir_y, dir_z) = (&rays.dir_x[..n], &rays.dir_y[..n], &rays.dir_z[..n]);
     let (rd_x, rd_y, rd_z) = (&mut rd_x[..n], &mut rd_y[..n], &mut rd_z[..n]);
     let (rfl, fibre_t, w_x, w_y) = (&mut rfl[..n], &mut fibre_t[..n], &mut w_x[..n], &mut w_y[..n]);
-    let (i_lo, i_hi, att, att_step) = (&mut i_lo[..n], &mut i_hi[..n], &mut att[..n], &mut att_step[..n]);
+    let (i_lo, i_hi) = (&mut i_lo[..n], &mut i_hi[..n]);
+    let (att_exp, att_step_exp) = (&mut att_exp[..n], &mut att_step_exp[..n]);
     let nt = surf.nt as f64;
     let first_wet = surf.first_wet as i32;
     for k in 0..n {
@@ -358,8 +348,8 @@ fn specular_setup(
         ok[k] = if returns & on_box & (lo_k < hi_k) { 1.0 } else { 0.0 };
         // Up and back: path (d + a)·k_path, absorbed by the same ratio every step.
         let k_path = (1.0 + back) / den_k;
-        att[k] = -ALPHA_PER_MM * k_path * (f64::from(lo_k) * surf.step_mm + a_k);
-        att_step[k] = -ALPHA_PER_MM * k_path * surf.step_mm;
+        att_exp[k] = -ALPHA_PER_MM * k_path * (f64::from(lo_k) * surf.step_mm + a_k);
+        att_step_exp[k] = -ALPHA_PER_MM * k_path * surf.step_mm;
     }
 }
 }
@@ -376,7 +366,8 @@ mod tests {
     use rand_pcg::Pcg32;
 
     /// The specular set-up of one ray as the tracer computed it ray by ray (`None` where the
-    /// reflection is not traced): rd, rfl, fibre t, w, i_lo, i_hi, att, att_step.
+    /// reflection is not traced): rd, rfl, fibre t, w, i_lo, i_hi, and the absorption's
+    /// exponents att, att_step.
     #[allow(clippy::type_complexity)]
     fn specular_by_ray(
         p0: DVec2,
@@ -425,8 +416,8 @@ mod tests {
             return None;
         }
         let k_path = (1.0 + back) / den;
-        let att = (-ALPHA_PER_MM * k_path * (i_lo as f64 * surf.step_mm + a)).exp();
-        let att_step = (-ALPHA_PER_MM * k_path * surf.step_mm).exp();
+        let att = -ALPHA_PER_MM * k_path * (i_lo as f64 * surf.step_mm + a);
+        let att_step = -ALPHA_PER_MM * k_path * surf.step_mm;
         Some((rd, rfl, t, w, i_lo, i_hi, att, att_step))
     }
 
@@ -507,8 +498,8 @@ mod tests {
                                     su.fibre_t[r],
                                     su.w_x[r],
                                     su.w_y[r],
-                                    su.att[r],
-                                    su.att_step[r],
+                                    su.att_exp[r],
+                                    su.att_step_exp[r],
                                 ];
                                 let want = [rd.x, rd.y, rd.z, rfl, t, w.x, w.y, att, att_step];
                                 for (g, w) in got.iter().zip(&want) {

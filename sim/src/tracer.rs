@@ -22,7 +22,7 @@ use crate::consts::*;
 use crate::curve::{Curve, CurvePoint};
 use crate::diffuse::{DiffuseLanes, DiffuseRay, reflect_diffuse};
 use crate::geometry::Bundles;
-use crate::kernels::{LANES, grow, specular_slots};
+use crate::kernels::{LANES, grow, specular_slots, specular_sums};
 use crate::model::{SensorModel, SourceRay};
 use crate::setup::{MAX_LAYERS_PER_RAY, RaySetups, Surface};
 use crate::streams::{
@@ -71,8 +71,9 @@ pub(crate) struct Accretion<'m> {
 /// what it wrote.
 #[derive(Debug, Default)]
 pub(crate) struct Scratch {
-    /// Reflected flux per thickness and bundle, W.
-    refl: Vec<[f64; 2]>,
+    /// Reflected flux per bundle and thickness, W (each padded by a vector of lanes, which
+    /// the specular sums may add +0 to).
+    refl: [Vec<f64>; 2],
     /// Scattered flux newly frozen in at each thickness, per bundle, W.
     scat_delta: Vec<[f64; 2]>,
     /// Flux reflected at the fibre face per thickness (Sensor A), W.
@@ -89,6 +90,8 @@ pub(crate) struct Scratch {
     lanes: BubbleLanes,
     landed: Vec<u32>,
     spec_slot: Vec<i32>,
+    /// The bubbles frozen in up to each visited thickness (the specular sums).
+    spec_bubbles: Vec<u32>,
     diffuse_draws: Vec<u32>,
     diffuse_out: DiffuseLanes,
     diffuse_bubbles: Vec<usize>,
@@ -103,14 +106,17 @@ impl Scratch {
             static SCRATCH: std::cell::RefCell<Scratch> = std::cell::RefCell::default();
         }
         let mut s = SCRATCH.with(|c| c.take());
-        for sums in [&mut s.refl, &mut s.scat_delta] {
+        for sums in &mut s.refl {
             sums.clear();
-            sums.resize(nt, [0.0; 2]);
+            sums.resize(nt + LANES, 0.0);
         }
+        s.scat_delta.clear();
+        s.scat_delta.resize(nt, [0.0; 2]);
         s.leak.clear();
         s.leak.resize(nt, 0.0);
+        // Padded by a vector of lanes that stay 0 (the specular sums read them).
         s.frozen_by.clear();
-        s.frozen_by.resize(nt, 0);
+        s.frozen_by.resize(nt + LANES, 0);
         if s.forward_pow.is_empty() {
             s.forward_pow.push(1.0);
         }
@@ -498,7 +504,8 @@ impl<'m> Accretion<'m> {
             &self.buf.forward_pow,
             &self.buf.fwd_after,
         );
-        let refl = &mut self.buf.refl[i0..i_end];
+        let [refl0, refl1] = &mut self.buf.refl;
+        let refl = [&mut refl0[i0..i_end], &mut refl1[i0..i_end]];
         if !cone && !had_bubbles {
             // The common case (glazed ice: most rays meet no bubble), without a branch per
             // lane: the same forward flux for every thickness. A landed lane's slot is 0 or
@@ -507,7 +514,7 @@ impl<'m> Accretion<'m> {
             for (&n, &w) in landed.iter().zip(weight) {
                 let n = n as usize;
                 debug_assert!(slot[n] < 2, "a landed lane has a bundle");
-                refl[n][(slot[n] & 1) as usize] += fwd * w;
+                refl[(slot[n] & 1) as usize][n] += fwd * w;
             }
             return;
         }
@@ -522,7 +529,7 @@ impl<'m> Accretion<'m> {
                 scale * table[n_bub0]
             };
             debug_assert!(slot[n] < 2, "a landed lane has a bundle");
-            refl[n][(slot[n] & 1) as usize] += fwd * w;
+            refl[(slot[n] & 1) as usize][n] += fwd * w;
         }
     }
 
@@ -547,12 +554,13 @@ impl<'m> Accretion<'m> {
         }
         let (rfl, w) = (su.rfl[r], DVec2::new(su.w_x[r], su.w_y[r]));
         let (i_lo, i_hi) = (su.i_lo[r] as usize, su.i_hi[r] as usize);
-        let (att, att_step) = (su.att[r], su.att_step[r]);
-        let n_bub = frozen_before(&self.buf.frozen_by[self.first_wet..i_lo]);
+        let (att_exp, att_step_exp) = (su.att_exp[r], su.att_step_exp[r]);
+        let n_before = frozen_before(&self.buf.frozen_by[self.first_wet..i_lo]);
         // Padded to whole vectors (the thicknesses go on on their grid); the padding lanes
         // are not added.
         let lanes = (i_hi - i_lo).next_multiple_of(LANES);
         grow(&mut self.buf.spec_slot, lanes, 2);
+        grow(&mut self.buf.spec_bubbles, lanes, 0);
         specular_slots(
             ray.p0,
             w,
@@ -561,19 +569,21 @@ impl<'m> Accretion<'m> {
             &m.thick_lanes[i_lo..i_lo + lanes],
             &mut self.buf.spec_slot[..lanes],
         );
-        add_specular(
-            &mut self.buf.refl[i_lo..i_hi],
-            &self.buf.frozen_by[i_lo..i_hi],
-            &self.buf.spec_slot[..i_hi - i_lo],
-            forward_flux(
-                self.fwd_dense,
-                self.fwd_scale,
-                &self.buf.forward_pow,
-                &self.buf.fwd_after,
-            ),
-            n_bub,
-            [rfl, cpl],
-            [att, att_step],
+        let [refl0, refl1] = &mut self.buf.refl;
+        specular_sums(
+            &mut refl0[i_lo..i_lo + lanes],
+            &mut refl1[i_lo..i_lo + lanes],
+            &self.buf.frozen_by[i_lo..i_lo + lanes],
+            &self.buf.spec_slot[..lanes],
+            i_hi - i_lo,
+            n_before as u32,
+            [
+                ray.flux_in_w * rfl * cpl,
+                self.m.ln_forward,
+                att_exp,
+                att_step_exp,
+            ],
+            &mut self.buf.spec_bubbles[..lanes],
         );
     }
 
@@ -585,8 +595,8 @@ impl<'m> Accretion<'m> {
         for (i, &d) in self.m.thick.iter().enumerate() {
             scat[0] += self.buf.scat_delta[i][0];
             scat[1] += self.buf.scat_delta[i][1];
-            let i1_refl = (self.buf.refl[i][0] + SENSOR_A_LEAK[0] * self.buf.leak[i]) * ua;
-            let i2_refl = (self.buf.refl[i][1] + SENSOR_A_LEAK[1] * self.buf.leak[i]) * ua;
+            let i1_refl = (self.buf.refl[0][i] + SENSOR_A_LEAK[0] * self.buf.leak[i]) * ua;
+            let i2_refl = (self.buf.refl[1][i] + SENSOR_A_LEAK[1] * self.buf.leak[i]) * ua;
             let i1_scat = scat[0] * ua;
             let i2_scat = scat[1] * ua;
             points.push(CurvePoint {
@@ -673,34 +683,6 @@ fn ceil_index(q: f64) -> usize {
 /// `frozen_by` entries of the range (0 where none is frozen in): their maximum.
 fn frozen_before(frozen_by: &[u32]) -> usize {
     frozen_by.iter().copied().max().unwrap_or(0) as usize
-}
-
-/// The specular reflection of one ray at the visited thicknesses: at each, the forward flux
-/// left after the bubbles frozen in so far (`fwd_after[n]`, n the running maximum of
-/// `frozen_by` from `n_bub` on) times
-/// the Fresnel reflectance and coupling `[rfl, cpl]` times the absorption, which falls by
-/// `att[1]` per step from `att[0]`, added to the bundle of `slot`.
-// Its own function: inside the tracer the running values would live on the stack.
-#[inline(never)]
-fn add_specular(
-    refl: &mut [[f64; 2]],
-    frozen_by: &[u32],
-    slot: &[i32],
-    (scale, fwd_after): (f64, &[f64]),
-    mut n_bub: usize,
-    [rfl, cpl]: [f64; 2],
-    [mut att, att_step]: [f64; 2],
-) {
-    for ((flux, &frozen), &k) in refl.iter_mut().zip(frozen_by).zip(slot) {
-        let att_i = att;
-        att *= att_step;
-        n_bub = n_bub.max(frozen as usize);
-        // Along the line the bundle changes rarely: a branch predicts well.
-        let k = k as u32 as usize;
-        if k < 2 {
-            flux[k] += scale * fwd_after[n_bub] * rfl * cpl * att_i;
-        }
-    }
 }
 
 #[cfg(test)]
