@@ -22,7 +22,7 @@ use crate::consts::*;
 use crate::curve::{Curve, CurvePoint};
 use crate::diffuse::{DiffuseLanes, DiffuseRay, reflect_diffuse};
 use crate::geometry::Bundles;
-use crate::kernels::{LANES, grow, specular_slots, specular_sums};
+use crate::kernels::{LANES, SpecularLine, grow, specular_reflection};
 use crate::model::{SensorModel, SourceRay};
 use crate::setup::{MAX_LAYERS_PER_RAY, RaySetups, Surface};
 use crate::streams::{
@@ -89,9 +89,6 @@ pub(crate) struct Scratch {
     forward_pow: Vec<f64>,
     lanes: BubbleLanes,
     landed: Vec<u32>,
-    spec_slot: Vec<i32>,
-    /// The bubbles frozen in up to each visited thickness (the specular sums).
-    spec_bubbles: Vec<u32>,
     diffuse_draws: Vec<u32>,
     diffuse_out: DiffuseLanes,
     diffuse_bubbles: Vec<usize>,
@@ -559,22 +556,14 @@ impl<'m> Accretion<'m> {
         // Padded to whole vectors (the thicknesses go on on their grid); the padding lanes
         // are not added.
         let lanes = (i_hi - i_lo).next_multiple_of(LANES);
-        grow(&mut self.buf.spec_slot, lanes, 2);
-        grow(&mut self.buf.spec_bubbles, lanes, 0);
-        specular_slots(
-            ray.p0,
-            w,
-            a,
+        let [refl0, refl1] = &mut self.buf.refl;
+        specular_reflection(
+            &SpecularLine { p0: ray.p0, w, a },
             &self.bundles,
             &m.thick_lanes[i_lo..i_lo + lanes],
-            &mut self.buf.spec_slot[..lanes],
-        );
-        let [refl0, refl1] = &mut self.buf.refl;
-        specular_sums(
+            &self.buf.frozen_by[i_lo..i_lo + lanes],
             &mut refl0[i_lo..i_lo + lanes],
             &mut refl1[i_lo..i_lo + lanes],
-            &self.buf.frozen_by[i_lo..i_lo + lanes],
-            &self.buf.spec_slot[..lanes],
             i_hi - i_lo,
             n_before as u32,
             [
@@ -583,7 +572,6 @@ impl<'m> Accretion<'m> {
                 att_exp,
                 att_step_exp,
             ],
-            &mut self.buf.spec_bubbles[..lanes],
         );
     }
 
