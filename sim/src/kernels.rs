@@ -219,15 +219,22 @@ pub(crate) fn specular_reflection(
     len: usize,
     n_before: u32,
     factors: [f64; 4],
+    exponent: &mut [f64],
+    bundle: &mut [i32],
 ) {
     let [scale, ln_forward, x0, x1] = factors;
+    // Two passes, so that each holds its constants in registers (AVX2 has sixteen): where
+    // the ray lands and the exponent of its flux, then the flux added.
     let chunks = thick_mm
         .chunks_exact(LANES)
         .zip(frozen_by.chunks_exact(LANES))
-        .zip(sums0.chunks_exact_mut(LANES))
-        .zip(sums1.chunks_exact_mut(LANES));
+        .zip(exponent.chunks_exact_mut(LANES))
+        .zip(bundle.chunks_exact_mut(LANES));
     let mut most = n_before;
-    for (first, (((d, frozen), s0), s1)) in (0..).step_by(LANES).zip(chunks) {
+    // The thickness steps k as f64 (one conversion per vector: AVX2 has no vector
+    // conversion from 64-bit integers).
+    let mut first_k = 0.0;
+    for (first, (((d, frozen), x), on)) in (0..).step_by(LANES).zip(chunks) {
         one_vector_at_a_time();
         let mut bubbles: [u32; LANES] = std::array::from_fn(|k| frozen[k]);
         for shift in [1, 2, 4] {
@@ -242,13 +249,29 @@ pub(crate) fn specular_reflection(
         }
         most = bubbles[LANES - 1];
         for k in 0..LANES {
-            let at = first + k;
-            let bundle = if at < len { line.slot(bundles, d[k]) } else { 2 };
-            let x = f64::from(bubbles[k]).mul_add(ln_forward, (at as f64).mul_add(x1, x0));
-            let flux = scale * exp_small(x);
+            on[k] = if first + k < len {
+                line.slot(bundles, d[k])
+            } else {
+                2
+            };
+            // The counts fit an i32 (a ray has at most 20 000 layers): a vector conversion.
+            let n = f64::from(bubbles[k] as i32);
+            x[k] = n.mul_add(ln_forward, (first_k + k as f64).mul_add(x1, x0));
+        }
+        first_k += LANES as f64;
+    }
+    let chunks = exponent
+        .chunks_exact(LANES)
+        .zip(bundle.chunks_exact(LANES))
+        .zip(sums0.chunks_exact_mut(LANES))
+        .zip(sums1.chunks_exact_mut(LANES));
+    for (((x, on), s0), s1) in chunks {
+        one_vector_at_a_time();
+        for k in 0..LANES {
+            let flux = scale * exp_small(x[k]);
             // The sums are ≥ +0, so adding +0 leaves them as they are.
-            s0[k] += if bundle == 0 { flux } else { 0.0 };
-            s1[k] += if bundle == 1 { flux } else { 0.0 };
+            s0[k] += if on[k] == 0 { flux } else { 0.0 };
+            s1[k] += if on[k] == 1 { flux } else { 0.0 };
         }
     }
 }
@@ -487,6 +510,8 @@ mod tests {
                         len,
                         n_before,
                         [scale, ln_f, x0, x1],
+                        &mut vec![0.0; lanes],
+                        &mut vec![0; lanes],
                     )
                 });
                 for (got, want) in [(&s0, &want[0]), (&s1, &want[1])] {

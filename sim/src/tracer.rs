@@ -89,6 +89,9 @@ pub(crate) struct Scratch {
     forward_pow: Vec<f64>,
     lanes: BubbleLanes,
     landed: Vec<u32>,
+    /// Per visited thickness of a ray: the exponent of its specular flux, and its bundle.
+    spec_exponent: Vec<f64>,
+    spec_bundle: Vec<i32>,
     diffuse_draws: Vec<u32>,
     diffuse_out: DiffuseLanes,
     diffuse_bubbles: Vec<usize>,
@@ -556,6 +559,8 @@ impl<'m> Accretion<'m> {
         // Padded to whole vectors (the thicknesses go on on their grid); the padding lanes
         // are not added.
         let lanes = (i_hi - i_lo).next_multiple_of(LANES);
+        grow(&mut self.buf.spec_exponent, lanes, 0.0);
+        grow(&mut self.buf.spec_bundle, lanes, 2);
         let [refl0, refl1] = &mut self.buf.refl;
         specular_reflection(
             &SpecularLine { p0: ray.p0, w, a },
@@ -572,6 +577,8 @@ impl<'m> Accretion<'m> {
                 att_exp,
                 att_step_exp,
             ],
+            &mut self.buf.spec_exponent[..lanes],
+            &mut self.buf.spec_bundle[..lanes],
         );
     }
 
