@@ -138,11 +138,15 @@ pub(crate) const LANES: usize = 8;
 /// Marks a loop over whole vectors whose body, unrolled over the lanes, is to become one
 /// vector operation per step: an empty `asm!` keeps the compiler from vectorising across
 /// the steps (it did, with gathers and scatters) or unrolling them into wider steps that
-/// leave a remainder to narrower loops, and costs nothing.
+/// leave a remainder to narrower loops, and costs nothing. (On targets without the x86-64
+/// tiers it does nothing: `asm!` is not on every target.)
 #[inline(always)]
 pub(crate) fn one_vector_at_a_time() {
     // SAFETY: an empty instruction sequence.
-    unsafe { std::arch::asm!("", options(nomem, nostack, preserves_flags)) };
+    #[cfg(target_arch = "x86_64")]
+    unsafe {
+        std::arch::asm!("", options(nomem, nostack, preserves_flags))
+    };
 }
 
 /// `v` at least `n` long, filled with `fill` where it grows. The kernels' buffers only grow:
