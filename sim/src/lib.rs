@@ -26,6 +26,7 @@ pub mod model;
 pub mod montecarlo;
 mod pack;
 mod setup;
+mod specular;
 pub mod streams;
 pub mod table;
 mod tracer;

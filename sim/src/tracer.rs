@@ -22,9 +22,10 @@ use crate::consts::*;
 use crate::curve::{Curve, CurvePoint};
 use crate::diffuse::{DiffuseLanes, DiffuseRay, reflect_diffuse};
 use crate::geometry::Bundles;
-use crate::kernels::{LANES, SpecularLine, grow, specular_reflection};
+use crate::kernels::{LANES, grow};
 use crate::model::{SensorModel, SourceRay};
 use crate::setup::{MAX_LAYERS_PER_RAY, RaySetups, Surface};
+use crate::specular::{SpecularLine, specular_reflection};
 use crate::streams::{
     CounterStream, STREAM_ACCRETION, accretion_key, bubble_stream, diffuse_stream, fill_u32,
     geometric_gap, uniform, uniform32, unit_circle_unnormalised,
