@@ -111,8 +111,6 @@ fn sin_cos_octant(x: f64) -> (f64, f64) {
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BubbleLanes {
     count: usize,
-    /// The stream of the ray's bubbles.
-    stream: CounterStream,
     /// The walks of a group of rays (layer index j of each bubble), their streams, and the
     /// ray's lane.
     walk: GroupWalk,
@@ -199,7 +197,6 @@ impl BubbleLanes {
 
     /// The bubbles of the ray of lane `lane` of the group walked last.
     pub(crate) fn select(&mut self, lane: usize) {
-        self.stream = self.streams[lane];
         self.lane = lane;
         let n = self.walk.len(lane);
         self.count = n;
@@ -512,7 +509,7 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
     land_scattered_lanes(
         ray,
         bundles,
-        lanes.stream,
+        lanes.streams[lanes.lane],
         &lanes.walk.column(lanes.lane)[..n],
         &mut lanes.index[..n],
         &mut lanes.slot[..n_f32],

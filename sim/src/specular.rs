@@ -38,10 +38,11 @@ vector_kernel! {
 /// up to k (n_k the running maximum of `frozen_by` from `n_before` on) times the Fresnel
 /// reflectance, the coupling and the absorption up and back, Φ·R·T·F^(n_k)·e^(x₀ + k·x₁)
 /// (thesis eqs. 3.12, 3.21, Fig. 3.11; `factors` = [Φ·R·T, ln F, x₀, x₁]), added to the
-/// sum of its bundle (`sums0` for 0, `sums1` for 1). All in one pass, a vector at a time:
-/// the running maximum by a scan in three steps and the maximum of the vectors before, F^n
-/// and the absorption by one polynomial `exp` ([`exp_small`]), so that no lane waits on the
-/// one before it.
+/// sum of its bundle (`sums0` for 0, `sums1` for 1). Two passes a vector at a time, so that
+/// no lane waits on the one before it: where the ray lands, the running maximum (a scan in
+/// three steps, then the maximum of the vectors before) and the exponent of its flux into
+/// `exponent` and `bundle`; then F^n and the absorption by one polynomial `exp`
+/// ([`exp_small`]) and the sums.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn specular_reflection(
     line: &SpecularLine,
@@ -56,9 +57,10 @@ pub(crate) fn specular_reflection(
     exponent: &mut [f64],
     bundle: &mut [i32],
 ) {
+    // The scan's steps 1, 2, 4 cover eight lanes.
+    const _: () = assert!(LANES == 8);
     let [scale, ln_forward, x0, x1] = factors;
-    // Two passes, so that each holds its constants in registers (AVX2 has sixteen): where
-    // the ray lands and the exponent of its flux, then the flux added.
+    // Two passes, so that each holds its constants in registers (AVX2 has sixteen).
     let chunks = thick_mm
         .chunks_exact(LANES)
         .zip(frozen_by.chunks_exact(LANES))

@@ -221,14 +221,11 @@ impl<'m> Accretion<'m> {
                 *l += ray.refl_air_w;
             }
         }
-        let su = &self.buf.setup;
-        let (a, den) = (su.a[r], su.den[r]);
-        if ray.flux_in_w <= 0.0 || den <= 1e-9 {
+        if !self.traced(r, ray) {
             return;
         }
-        let slope_xy = DVec2::new(su.slope_x[r], su.slope_y[r]);
-        let off1 = su.off1[r];
-        let layers = su.layers[r];
+        let su = &self.buf.setup;
+        let (a, den, layers) = (su.a[r], su.den[r], su.layers[r]);
         // Pass 1, bubbles: layer j (z from jΔ to (j+1)Δ, bubble at its middle) is frozen in
         // once the local surface above the bubble is at least (j+1)Δ high, i.e. from the mean
         // thickness d_j = (j+1)Δ − off(z_b), where off is the plane's local offset at the
@@ -240,18 +237,8 @@ impl<'m> Accretion<'m> {
             ray: *ray,
             a,
             den,
-            bubble: BubbleRay {
-                p0: ray.p0,
-                slope_xy,
-                a,
-                off1,
-                inv_step: self.inv_step,
-                first_wet: self.first_wet as u32,
-            },
+            bubble: self.bubble_ray(r, ray),
         };
-        // The layers that the ice covers within max_mm: j < j_end. Beyond, the bubbles are
-        // not drawn. A ray almost parallel to a tilted surface would walk very many layers
-        // before the surface covers them: at most MAX_LAYERS_PER_RAY (2 m).
         let had_bubbles = match &m.dense {
             Some(gaps) => self.bubbles_dense(&f, gaps) > 0,
             None => {
@@ -301,25 +288,34 @@ impl<'m> Accretion<'m> {
         }
     }
 
+    /// Whether ray r (`ray`) is traced: it carries flux and is steeper than the surface
+    /// plane. Written as a negation, so that a NaN does not stop the ray.
+    fn traced(&self, r: usize, ray: &SourceRay) -> bool {
+        !(ray.flux_in_w <= 0.0 || self.buf.setup.den[r] <= 1e-9)
+    }
+
+    /// Ray r (`ray`) as the bubbles see it, from its set-up.
+    fn bubble_ray(&self, r: usize, ray: &SourceRay) -> BubbleRay {
+        let su = &self.buf.setup;
+        BubbleRay {
+            p0: ray.p0,
+            slope_xy: DVec2::new(su.slope_x[r], su.slope_y[r]),
+            a: su.a[r],
+            off1: su.off1[r],
+            inv_step: self.inv_step,
+            first_wet: self.first_wet as u32,
+        }
+    }
+
     /// Walk the dense bubbles of the group of rays from `first` on, side by side
-    /// (walk.rs); a ray that is not traced (no flux, or not steeper than the plane) walks
-    /// no layer.
+    /// (walk.rs); a ray that is not traced walks no layer.
     fn walk_group(&mut self, first: usize, gaps: &GapSampler) {
-        let (rays, su) = (&self.m.rays, &self.buf.setup);
+        let rays = &self.m.rays;
         let j_end = std::array::from_fn(|l| {
             let r = first + l;
             match rays.get(r) {
-                // The negation of `trace`'s test, NaN included.
-                Some(ray) if !(ray.flux_in_w <= 0.0 || su.den[r] <= 1e-9) => {
-                    let bubble = BubbleRay {
-                        p0: ray.p0,
-                        slope_xy: DVec2::new(su.slope_x[r], su.slope_y[r]),
-                        a: su.a[r],
-                        off1: su.off1[r],
-                        inv_step: self.inv_step,
-                        first_wet: self.first_wet as u32,
-                    };
-                    self.layers_of(&bubble, su.layers[r])
+                Some(ray) if self.traced(r, ray) => {
+                    self.layers_of(&self.bubble_ray(r, ray), self.buf.setup.layers[r])
                 }
                 _ => 0,
             }
