@@ -132,6 +132,11 @@ impl Bundles {
         self.r
     }
 
+    /// R², mm² (as `slot_f64` compares it).
+    pub(crate) fn radius2_mm2(&self) -> f64 {
+        self.r2
+    }
+
     /// B, mm.
     pub(crate) fn length_b_mm(&self) -> f64 {
         self.b

@@ -49,8 +49,6 @@ pub struct SensorModel {
     cos_accept: f64,
     /// Dense bubbles (rime) walk gap by gap from counter-based streams (bubbles.rs).
     pub(crate) dense: Option<GapSampler>,
-    /// ln F: the forward flux after n bubbles is Φ·e^(n ln F) (thesis Fig. 3.11).
-    pub(crate) ln_forward: f64,
 }
 
 /// Above this P_B the bubbles are walked by `walk::GapSampler` from counter-based
@@ -117,7 +115,6 @@ impl SensorModel {
             cos_accept: th_max_f.cos(),
             dense: (cfg.params.p_bubble > DENSE_ABOVE)
                 .then(|| GapSampler::new(cfg.params.p_bubble)),
-            ln_forward: FORWARD_FRACTION.ln(),
         }
     }
 

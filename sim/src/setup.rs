@@ -13,7 +13,7 @@ use glam::{DVec2, DVec3};
 
 use crate::bubbles::BubbleRay;
 use crate::consts::{ALPHA_PER_MM, N_AIR, N_FIBRE};
-use crate::kernels::{LANES, grow, small_int, vector_kernel};
+use crate::kernels::{LANES, exp_small, grow, small_int, vector_kernel};
 use crate::laws::{fr_dielectric, fresnel_transmittance, reflect};
 
 /// Most bubble layers one ray walks through (20 000 × 0.1 mm = 2 m of ice along z).
@@ -103,10 +103,12 @@ pub(crate) struct RaySetups {
     /// The visited thickness indices, i_lo ≤ i < i_hi.
     pub i_lo: Vec<i32>,
     pub i_hi: Vec<i32>,
-    /// The exponent of the absorption up and back at i_lo, and what it adds per step
-    /// (Beer–Lambert, eq. 3.21: the absorption at i_lo + k is e^(att_exp + k·att_step_exp)).
-    pub att_exp: Vec<f64>,
-    pub att_step_exp: Vec<f64>,
+    /// The absorption up and back at i_lo, e^x₀, and its ratio per step and per eight
+    /// steps, e^x₁ and e^(8·x₁) (Beer–Lambert, eq. 3.21: the absorption at i_lo + k is
+    /// e^(x₀ + k·x₁)); by the polynomial `exp_small`.
+    pub att: Vec<f64>,
+    pub att_step: Vec<f64>,
+    pub att_step8: Vec<f64>,
 }
 
 impl RaySetups {
@@ -165,8 +167,9 @@ impl RaySetups {
             &mut self.fibre_t,
             &mut self.w_x,
             &mut self.w_y,
-            &mut self.att_exp,
-            &mut self.att_step_exp,
+            &mut self.att,
+            &mut self.att_step,
+            &mut self.att_step8,
         ] {
             grow(v, n, 0.0);
         }
@@ -187,8 +190,9 @@ impl RaySetups {
             &mut self.w_y[..n],
             &mut self.i_lo[..n],
             &mut self.i_hi[..n],
-            &mut self.att_exp[..n],
-            &mut self.att_step_exp[..n],
+            &mut self.att[..n],
+            &mut self.att_step[..n],
+            &mut self.att_step8[..n],
         );
     }
 }
@@ -292,8 +296,9 @@ fn specular_setup(
     w_y: &mut [f64],
     i_lo: &mut [i32],
     i_hi: &mut [i32],
-    att_exp: &mut [f64],
-    att_step_exp: &mut [f64],
+    att: &mut [f64],
+    att_step: &mut [f64],
+    att_step8: &mut [f64],
 ) {
     let n = ok.len();
     let (p0_x, p0_y, a, den) = (&rays.p0_x[..n], &rays.p0_y[..n], &a[..n], &den[..n]);
@@ -301,7 +306,7 @@ fn specular_setup(
     let (rd_x, rd_y, rd_z) = (&mut rd_x[..n], &mut rd_y[..n], &mut rd_z[..n]);
     let (rfl, fibre_t, w_x, w_y) = (&mut rfl[..n], &mut fibre_t[..n], &mut w_x[..n], &mut w_y[..n]);
     let (i_lo, i_hi) = (&mut i_lo[..n], &mut i_hi[..n]);
-    let (att_exp, att_step_exp) = (&mut att_exp[..n], &mut att_step_exp[..n]);
+    let (att, att_step, att_step8) = (&mut att[..n], &mut att_step[..n], &mut att_step8[..n]);
     let nt = surf.nt as f64;
     let first_wet = surf.first_wet as i32;
     for k in 0..n {
@@ -348,8 +353,10 @@ fn specular_setup(
         ok[k] = if returns & on_box & (lo_k < hi_k) { 1.0 } else { 0.0 };
         // Up and back: path (d + a)·k_path, absorbed by the same ratio every step.
         let k_path = (1.0 + back) / den_k;
-        att_exp[k] = -ALPHA_PER_MM * k_path * (f64::from(lo_k) * surf.step_mm + a_k);
-        att_step_exp[k] = -ALPHA_PER_MM * k_path * surf.step_mm;
+        let x1 = -ALPHA_PER_MM * k_path * surf.step_mm;
+        att[k] = exp_small(-ALPHA_PER_MM * k_path * (f64::from(lo_k) * surf.step_mm + a_k));
+        att_step[k] = exp_small(x1);
+        att_step8[k] = exp_small(LANES as f64 * x1);
     }
 }
 }
@@ -375,7 +382,7 @@ mod tests {
         surf: &Surface,
         a: f64,
         den: f64,
-    ) -> Option<(DVec3, f64, f64, DVec2, usize, usize, f64, f64)> {
+    ) -> Option<(DVec3, f64, f64, DVec2, usize, usize, [f64; 3])> {
         let cos_i = v.dot(surf.normal);
         if cos_i <= 0.0 {
             return None;
@@ -416,9 +423,13 @@ mod tests {
             return None;
         }
         let k_path = (1.0 + back) / den;
-        let att = -ALPHA_PER_MM * k_path * (i_lo as f64 * surf.step_mm + a);
-        let att_step = -ALPHA_PER_MM * k_path * surf.step_mm;
-        Some((rd, rfl, t, w, i_lo, i_hi, att, att_step))
+        let x1 = -ALPHA_PER_MM * k_path * surf.step_mm;
+        let att = [
+            exp_small(-ALPHA_PER_MM * k_path * (i_lo as f64 * surf.step_mm + a)),
+            exp_small(x1),
+            exp_small(8.0 * x1),
+        ];
+        Some((rd, rfl, t, w, i_lo, i_hi, att))
     }
 
     /// Every ray's set-up, on every tier this CPU runs, has the bits of the formulas ray by
@@ -489,7 +500,7 @@ mod tests {
                             }
                             let want = specular_by_ray(p0, v, &surf, a, den);
                             assert_eq!(su.spec_ok[r] != 0.0, want.is_some(), "{at}");
-                            if let Some((rd, rfl, t, w, i_lo, i_hi, att, att_step)) = want {
+                            if let Some((rd, rfl, t, w, i_lo, i_hi, [att, step, step8])) = want {
                                 let got = [
                                     su.rd_x[r],
                                     su.rd_y[r],
@@ -498,10 +509,11 @@ mod tests {
                                     su.fibre_t[r],
                                     su.w_x[r],
                                     su.w_y[r],
-                                    su.att_exp[r],
-                                    su.att_step_exp[r],
+                                    su.att[r],
+                                    su.att_step[r],
+                                    su.att_step8[r],
                                 ];
-                                let want = [rd.x, rd.y, rd.z, rfl, t, w.x, w.y, att, att_step];
+                                let want = [rd.x, rd.y, rd.z, rfl, t, w.x, w.y, att, step, step8];
                                 for (g, w) in got.iter().zip(&want) {
                                     assert_eq!(g.to_bits(), w.to_bits(), "{at}: {got:?} {want:?}");
                                 }

@@ -7,7 +7,9 @@
 use glam::DVec2;
 
 use crate::geometry::Bundles;
-use crate::kernels::{LANES, exp_small, one_vector_at_a_time, small_int, vector_kernel};
+#[cfg(target_arch = "x86_64")]
+use crate::kernels::{Isa, isa};
+use crate::kernels::{LANES, one_vector_at_a_time, small_int, vector_kernel};
 
 /// A ray's specular reflection against one accretion's surface: the landing point on the
 /// face is p0 + w·h0 for a surface h0 = d + a above the fibre (thickness d).
@@ -31,18 +33,50 @@ impl SpecularLine {
     }
 }
 
-vector_kernel! {
+/// What a ray's specular flux is made of at the visited thickness k (thesis eqs. 3.12,
+/// 3.21, Fig. 3.11): Φ·R·T · F^(n_k) · e^(x₀ + k·x₁), with n_k the bubbles frozen in up to k.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SpecularFlux<'a> {
+    /// Φ·R·T: the ray's flux, the Fresnel reflectance and the coupling.
+    pub scale: f64,
+    /// F^n for n = 0, 1, …, one entry more than the most bubbles frozen in.
+    pub forward_pow: &'a [f64],
+    /// The absorption up and back at the first visited thickness, e^x₀, and its ratio per
+    /// step and per eight steps, e^x₁ and e^(8·x₁).
+    pub absorption: [f64; 3],
+}
+
+impl SpecularFlux<'_> {
+    /// The absorption of the first eight visited thicknesses, e^x₀·(e^x₁)^j on lane j:
+    /// (e^x₁)^j as the product of the powers e^x₁, e^(2x₁) = (e^x₁)², e^(4x₁) = (e^(2x₁))²
+    /// of j's binary digits, in that order, each missing one as a factor 1 (exact). The
+    /// AVX-512 pass builds the same products lane by lane.
+    #[inline(always)]
+    fn first_absorption(&self) -> [f64; LANES] {
+        let [att, s1, _] = self.absorption;
+        let s2 = s1 * s1;
+        let s4 = s2 * s2;
+        let mut out = [0.0; LANES];
+        for (j, o) in out.iter_mut().enumerate() {
+            let b0 = if j & 1 != 0 { s1 } else { 1.0 };
+            let b1 = if j & 2 != 0 { s2 } else { 1.0 };
+            let b2 = if j & 4 != 0 { s4 } else { 1.0 };
+            *o = att * ((b0 * b1) * b2);
+        }
+        out
+    }
+}
+
 /// The specular reflection of one ray at its `len` visited thicknesses k = 0, 1, …
 /// (`thick_mm[k]`; the arrays are padded to whole vectors, the padding lanes add nothing):
-/// where it lands (`SpecularLine::slot`), and the flux left after the n_k bubbles frozen in
-/// up to k (n_k the running maximum of `frozen_by` from `n_before` on) times the Fresnel
-/// reflectance, the coupling and the absorption up and back, Φ·R·T·F^(n_k)·e^(x₀ + k·x₁)
-/// (thesis eqs. 3.12, 3.21, Fig. 3.11; `factors` = [Φ·R·T, ln F, x₀, x₁]), added to the
-/// sum of its bundle (`sums0` for 0, `sums1` for 1). Two passes a vector at a time, so that
-/// no lane waits on the one before it: where the ray lands, the running maximum (a scan in
-/// three steps, then the maximum of the vectors before) and the exponent of its flux into
-/// `exponent` and `bundle`; then F^n and the absorption by one polynomial `exp`
-/// ([`exp_small`]) and the sums.
+/// where it lands (`SpecularLine::slot`), and its flux ([`SpecularFlux`]; n_k the running
+/// maximum of `frozen_by` from `n_before` on), added to the sum of its bundle (`sums0` for
+/// 0, `sums1` for 1). The absorption is [`SpecularFlux::first_absorption`] on the eight
+/// lanes of the first vector, times e^(8·x₁) from one vector to the next: products, no
+/// `exp` per thickness. With AVX-512 in one pass of intrinsics
+/// ([`specular_reflection_avx512`]), otherwise in two passes that the compiler vectorises
+/// ([`specular_reflection_lanes`], with `count` and `bundle` as its scratch); the same
+/// operations in the same order either way, so the same bits (tested).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn specular_reflection(
     line: &SpecularLine,
@@ -53,25 +87,175 @@ pub(crate) fn specular_reflection(
     sums1: &mut [f64],
     len: usize,
     n_before: u32,
-    factors: [f64; 4],
-    exponent: &mut [f64],
+    flux: &SpecularFlux,
+    count: &mut [u32],
+    bundle: &mut [i32],
+) {
+    #[cfg(target_arch = "x86_64")]
+    if isa() == Isa::Avx512 {
+        // SAFETY: the CPU has AVX-512 F, DQ, VL and FMA (`isa`).
+        return unsafe {
+            specular_reflection_avx512(
+                line, bundles, thick_mm, frozen_by, sums0, sums1, len, n_before, flux,
+            )
+        };
+    }
+    specular_reflection_lanes(
+        line, bundles, thick_mm, frozen_by, sums0, sums1, len, n_before, flux, count, bundle,
+    );
+}
+
+/// [`specular_reflection`] in AVX-512 intrinsics, one vector of eight thicknesses per
+/// step: the bundle as two masks (the comparisons of `Bundles::slot_f64`, NaN included),
+/// the running maximum by a scan in three shifts and the maximum carried from the vector
+/// before (kept in a register), F^n by a gather, and a masked add to each bundle's sums.
+///
+/// # Safety
+/// The CPU has AVX-512 F, DQ, VL and FMA.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn specular_reflection_avx512(
+    line: &SpecularLine,
+    bundles: &Bundles,
+    thick_mm: &[f64],
+    frozen_by: &[u32],
+    sums0: &mut [f64],
+    sums1: &mut [f64],
+    len: usize,
+    n_before: u32,
+    flux: &SpecularFlux,
+) {
+    use std::arch::x86_64::*;
+    const _: () = assert!(LANES == 8);
+    let lanes = len.next_multiple_of(LANES);
+    assert!(
+        thick_mm.len() >= lanes
+            && frozen_by.len() >= lanes
+            && sums0.len() >= lanes
+            && sums1.len() >= lanes,
+        "the specular pass's arrays hold whole vectors"
+    );
+    let pow = flux.forward_pow;
+    let pow_len = _mm256_set1_epi32(pow.len().min(i32::MAX as usize) as i32);
+    let scale = _mm512_set1_pd(flux.scale);
+    let (a, p0x, p0y) = (
+        _mm512_set1_pd(line.a),
+        _mm512_set1_pd(line.p0.x),
+        _mm512_set1_pd(line.p0.y),
+    );
+    let (wx, wy) = (_mm512_set1_pd(line.w.x), _mm512_set1_pd(line.w.y));
+    let (r, b, r2) = (
+        _mm512_set1_pd(bundles.radius_mm()),
+        _mm512_set1_pd(bundles.length_b_mm()),
+        _mm512_set1_pd(bundles.radius2_mm2()),
+    );
+    let zero = _mm512_setzero_pd();
+    let (no_bubbles, last_lane) = (_mm256_setzero_si256(), _mm256_set1_epi32(7));
+    let mut most = _mm256_set1_epi32(n_before as i32);
+    // `SpecularFlux::first_absorption` lane by lane, and e^(8·x₁) per vector.
+    let [att, s1, step] = flux.absorption;
+    let (s2, one) = (s1 * s1, _mm512_set1_pd(1.0));
+    let b0 = _mm512_mask_blend_pd(0b1010_1010, one, _mm512_set1_pd(s1));
+    let b1 = _mm512_mask_blend_pd(0b1100_1100, one, _mm512_set1_pd(s2));
+    let b2 = _mm512_mask_blend_pd(0b1111_0000, one, _mm512_set1_pd(s2 * s2));
+    let ladder = _mm512_mul_pd(_mm512_mul_pd(b0, b1), b2);
+    let mut absorb = _mm512_mul_pd(_mm512_set1_pd(att), ladder);
+    let step = _mm512_set1_pd(step);
+    for first in (0..lanes).step_by(LANES) {
+        // SAFETY: first + 8 ≤ lanes ≤ every array's length (asserted above).
+        let (d, frozen, s0, s1) = unsafe {
+            (
+                _mm512_loadu_pd(thick_mm.as_ptr().add(first)),
+                _mm256_loadu_si256(frozen_by.as_ptr().add(first).cast()),
+                _mm512_loadu_pd(sums0.as_ptr().add(first)),
+                _mm512_loadu_pd(sums1.as_ptr().add(first)),
+            )
+        };
+        // Where it lands: p0 + w·h0, h0 = d + a (`SpecularLine::slot`).
+        let h0 = _mm512_add_pd(d, a);
+        let x = _mm512_add_pd(p0x, _mm512_mul_pd(wx, h0));
+        let y = _mm512_add_pd(p0y, _mm512_mul_pd(wy, h0));
+        // !(|y| > r) & !(x < 0): true for NaN, as the negated comparisons.
+        let face = _mm512_cmp_pd_mask::<_CMP_NGT_UQ>(_mm512_abs_pd(y), r)
+            & _mm512_cmp_pd_mask::<_CMP_NLT_UQ>(x, zero);
+        let dx = _mm512_sub_pd(x, b);
+        let q = _mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(y, y));
+        let disc = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(q, r2);
+        let near = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(x, b);
+        let above = _mm512_cmp_pd_mask::<_CMP_NLE_UQ>(h0, zero);
+        let valid: __mmask8 = if len - first >= LANES {
+            0xFF
+        } else {
+            (1u8 << (len - first)) - 1
+        };
+        let hit = face & above & valid;
+        let (on0, on1) = (hit & near, hit & !near & disc);
+        // The running maximum: lane k takes the maximum of lanes ≤ k, then of the vectors
+        // before.
+        let mut n = frozen;
+        n = _mm256_max_epu32(n, _mm256_alignr_epi32::<7>(n, no_bubbles));
+        n = _mm256_max_epu32(n, _mm256_alignr_epi32::<6>(n, no_bubbles));
+        n = _mm256_max_epu32(n, _mm256_alignr_epi32::<4>(n, no_bubbles));
+        n = _mm256_max_epu32(n, most);
+        most = _mm256_permutexvar_epi32(last_lane, n);
+        // F^n where the ray lands (0 elsewhere), every such n within the table (as
+        // indexing checks).
+        let landed = on0 | on1;
+        assert_eq!(
+            _mm256_mask_cmplt_epu32_mask(landed, n, pow_len),
+            landed,
+            "bubbles frozen in beyond the table of F^n"
+        );
+        // SAFETY: the landed lanes' n are below pow.len() (checked above).
+        let fwd = unsafe { _mm512_mask_i32gather_pd::<8>(zero, landed, n, pow.as_ptr().cast()) };
+        let flux = _mm512_mul_pd(_mm512_mul_pd(scale, fwd), absorb);
+        absorb = _mm512_mul_pd(absorb, step);
+        // SAFETY: as the loads.
+        unsafe {
+            _mm512_storeu_pd(
+                sums0.as_mut_ptr().add(first),
+                _mm512_mask_add_pd(s0, on0, s0, flux),
+            );
+            _mm512_storeu_pd(
+                sums1.as_mut_ptr().add(first),
+                _mm512_mask_add_pd(s1, on1, s1, flux),
+            );
+        }
+    }
+}
+
+vector_kernel! {
+/// [`specular_reflection`] in two passes a vector at a time, so that no lane waits on the
+/// one before it and each pass holds its constants in registers (AVX2 has sixteen): where
+/// the ray lands and the running maximum (a scan in three steps, then the maximum of the
+/// vectors before) into `bundle` and `count`; then F^n from the table, the flux and the sums.
+#[allow(clippy::too_many_arguments)]
+fn specular_reflection_lanes(
+    line: &SpecularLine,
+    bundles: &Bundles,
+    thick_mm: &[f64],
+    frozen_by: &[u32],
+    sums0: &mut [f64],
+    sums1: &mut [f64],
+    len: usize,
+    n_before: u32,
+    flux: &SpecularFlux,
+    count: &mut [u32],
     bundle: &mut [i32],
 ) {
     // The scan's steps 1, 2, 4 cover eight lanes.
     const _: () = assert!(LANES == 8);
-    let [scale, ln_forward, x0, x1] = factors;
-    // Two passes, so that each holds its constants in registers (AVX2 has sixteen).
     let chunks = thick_mm
         .chunks_exact(LANES)
         .zip(frozen_by.chunks_exact(LANES))
-        .zip(exponent.chunks_exact_mut(LANES))
+        .zip(count.chunks_exact_mut(LANES))
         .zip(bundle.chunks_exact_mut(LANES));
     let mut most = n_before;
-    // The thickness steps k as f64 (one conversion per vector: AVX2 has no vector
-    // conversion from 64-bit integers).
-    let mut first_k = 0.0;
-    for (first, (((d, frozen), x), on)) in (0..).step_by(LANES).zip(chunks) {
+    let mut written = 0;
+    for (first, (((d, frozen), n), on)) in (0..).step_by(LANES).zip(chunks) {
         one_vector_at_a_time();
+        written = first + LANES;
         let mut bubbles: [u32; LANES] = std::array::from_fn(|k| frozen[k]);
         for shift in [1, 2, 4] {
             let before: [u32; LANES] =
@@ -90,24 +274,29 @@ pub(crate) fn specular_reflection(
             } else {
                 2
             };
-            // The counts fit an i32 (a ray has at most 20 000 layers): a vector conversion.
-            let n = f64::from(bubbles[k] as i32);
-            x[k] = n.mul_add(ln_forward, (first_k + k as f64).mul_add(x1, x0));
+            n[k] = bubbles[k];
         }
-        first_k += LANES as f64;
     }
-    let chunks = exponent
+    let mut absorb = flux.first_absorption();
+    let step = flux.absorption[2];
+    // Every count written is at most the last (a running maximum), so within the table.
+    let pow = &flux.forward_pow;
+    assert!((most as usize) < pow.len(), "bubbles frozen in beyond the table of F^n");
+    let chunks = count[..written]
         .chunks_exact(LANES)
         .zip(bundle.chunks_exact(LANES))
         .zip(sums0.chunks_exact_mut(LANES))
         .zip(sums1.chunks_exact_mut(LANES));
-    for (((x, on), s0), s1) in chunks {
+    for (((n, on), s0), s1) in chunks {
         one_vector_at_a_time();
         for k in 0..LANES {
-            let flux = scale * exp_small(x[k]);
+            // SAFETY: n[k] was written above, so n[k] ≤ most < pow.len().
+            let fwd = unsafe { *pow.get_unchecked(n[k] as usize) };
+            let f = (flux.scale * fwd) * absorb[k];
+            absorb[k] *= step;
             // The sums are ≥ +0, so adding +0 leaves them as they are.
-            s0[k] += if on[k] == 0 { flux } else { 0.0 };
-            s1[k] += if on[k] == 1 { flux } else { 0.0 };
+            s0[k] += if on[k] == 0 { f } else { 0.0 };
+            s1[k] += if on[k] == 1 { f } else { 0.0 };
         }
     }
 }
@@ -129,7 +318,11 @@ mod tests {
         let mut rng = Pcg32::new(5, 9);
         let geo = Geometry::ThesisCh5;
         let bundles = geo.bundles();
-        let ln_f = 0.95f64.ln();
+        // F^n as the tracer keeps it: each entry the one before times F.
+        let mut forward_pow = vec![1.0f64];
+        for _ in 0..200 {
+            forward_pow.push(forward_pow[forward_pow.len() - 1] * 0.95);
+        }
         let mut landed = [0usize; 3];
         for (case, len) in [1usize, 7, 8, 9, 30, 55, 64]
             .into_iter()
@@ -193,8 +386,12 @@ mod tests {
                         &mut s1,
                         len,
                         n_before,
-                        [scale, ln_f, x0, x1],
-                        &mut vec![0.0; lanes],
+                        &SpecularFlux {
+                            scale,
+                            forward_pow: &forward_pow,
+                            absorption: [x0.exp(), x1.exp(), (8.0 * x1).exp()],
+                        },
+                        &mut vec![0; lanes],
                         &mut vec![0; lanes],
                     )
                 });

@@ -25,7 +25,7 @@ use crate::geometry::Bundles;
 use crate::kernels::{LANES, grow};
 use crate::model::{SensorModel, SourceRay};
 use crate::setup::{MAX_LAYERS_PER_RAY, RaySetups, Surface};
-use crate::specular::{SpecularLine, specular_reflection};
+use crate::specular::{SpecularFlux, SpecularLine, specular_reflection};
 use crate::streams::{
     CounterStream, STREAM_ACCRETION, accretion_key, bubble_stream, diffuse_stream, fill_u32,
     geometric_gap, uniform, uniform32, unit_circle_unnormalised,
@@ -90,8 +90,9 @@ pub(crate) struct Scratch {
     forward_pow: Vec<f64>,
     lanes: BubbleLanes,
     landed: Vec<u32>,
-    /// Per visited thickness of a ray: the exponent of its specular flux, and its bundle.
-    spec_exponent: Vec<f64>,
+    /// Per visited thickness of a ray: the bubbles frozen in up to it, and its bundle (the
+    /// specular pass's scratch on the tiers below AVX-512).
+    spec_count: Vec<u32>,
     spec_bundle: Vec<i32>,
     diffuse_draws: Vec<u32>,
     diffuse_out: DiffuseLanes,
@@ -355,10 +356,7 @@ impl<'m> Accretion<'m> {
         land_scattered(&f.bubble, &self.bundles, &mut self.buf.lanes);
         let count = self.buf.lanes.len();
         // Forward flux after n bubbles: Φ·F^n (F = FORWARD_FRACTION).
-        while self.buf.forward_pow.len() <= count {
-            let last = self.buf.forward_pow.last().copied().unwrap_or(1.0);
-            self.buf.forward_pow.push(last * FORWARD_FRACTION);
-        }
+        grow_forward_pow(&mut self.buf.forward_pow, count);
         (self.fwd_dense, self.fwd_scale) = (true, f.ray.flux_in_w);
         let landed_count = self
             .buf
@@ -424,6 +422,7 @@ impl<'m> Accretion<'m> {
             let gap = geometric_gap(&mut bub, self.ln_q);
             j = j.saturating_add(1).saturating_add(gap);
         }
+        grow_forward_pow(&mut self.buf.forward_pow, self.buf.fwd_after.len() - 1);
     }
 
     /// Pass 2 with diffuse angles: the surface is above the fibre (h0 = d + a > 0) from
@@ -551,12 +550,12 @@ impl<'m> Accretion<'m> {
         }
         let (rfl, w) = (su.rfl[r], DVec2::new(su.w_x[r], su.w_y[r]));
         let (i_lo, i_hi) = (su.i_lo[r] as usize, su.i_hi[r] as usize);
-        let (att_exp, att_step_exp) = (su.att_exp[r], su.att_step_exp[r]);
+        let absorption = [su.att[r], su.att_step[r], su.att_step8[r]];
         let n_before = frozen_before(&self.buf.frozen_by[self.first_wet..i_lo]);
         // Padded to whole vectors (the thicknesses go on on their grid); the padding lanes
         // are not added.
         let lanes = (i_hi - i_lo).next_multiple_of(LANES);
-        grow(&mut self.buf.spec_exponent, lanes, 0.0);
+        grow(&mut self.buf.spec_count, lanes, 0);
         grow(&mut self.buf.spec_bundle, lanes, 2);
         let [refl0, refl1] = &mut self.buf.refl;
         specular_reflection(
@@ -568,13 +567,12 @@ impl<'m> Accretion<'m> {
             &mut refl1[i_lo..i_lo + lanes],
             i_hi - i_lo,
             n_before as u32,
-            [
-                ray.flux_in_w * rfl * cpl,
-                self.m.ln_forward,
-                att_exp,
-                att_step_exp,
-            ],
-            &mut self.buf.spec_exponent[..lanes],
+            &SpecularFlux {
+                scale: ray.flux_in_w * rfl * cpl,
+                forward_pow: &self.buf.forward_pow,
+                absorption,
+            },
+            &mut self.buf.spec_count[..lanes],
             &mut self.buf.spec_bundle[..lanes],
         );
     }
@@ -669,6 +667,15 @@ fn ceil_index(q: f64) -> usize {
     let t = q as i64; // toward zero: the ceiling for q ≤ 0, the floor for q > 0
     let t = if (t as f64) < q { t + 1 } else { t };
     t.max(0) as usize
+}
+
+/// `forward_pow` holds F^n (F = FORWARD_FRACTION, fig. 3.11) for n = 0 ..= `most`, each the
+/// one before times F.
+fn grow_forward_pow(forward_pow: &mut Vec<f64>, most: usize) {
+    while forward_pow.len() <= most {
+        let last = forward_pow.last().copied().unwrap_or(1.0);
+        forward_pow.push(last * FORWARD_FRACTION);
+    }
 }
 
 /// How many bubbles are frozen in up to the end of a range of thickness indices, from the
