@@ -125,7 +125,7 @@ pub(crate) struct BubbleLanes {
     draw_phi: Vec<f64>,
     /// The single-precision test's inputs (`landing_inputs_f32`).
     f32_z: Vec<f32>,
-    f32_t: Vec<f32>,
+    f32_sin2: Vec<f32>,
     f32_cos: Vec<f32>,
     f32_a: Vec<f32>,
     f32_q: Vec<f32>,
@@ -405,15 +405,19 @@ impl LandingF32 {
 
 /// The inputs of [`landing_slot_f32`] for the bubble of layer `j` with angle draws
 /// (`draw_cos`, `draw_phi`), each computed exactly in double precision and rounded once to
-/// single: the bubble's height z, 1 − cos θ, cos θ (both keep their relative precision
-/// however small), the angle a within φ's quadrant about its middle (|a| ≤ π/4, as in
+/// single: the bubble's height z, sin² θ = t·(2 − t) with t = 1 − cos θ (to 10⁻¹⁶), cos θ
+/// (both keep their relative precision however small), the angle a within φ's quadrant about its middle (|a| ≤ π/4, as in
 /// `unit_circle_of`) and the quadrant.
 #[inline(always)]
 fn landing_inputs_f32(j: f64, draw_cos: f64, draw_phi: f64) -> [f32; 5] {
     let (quadrant, a) = quadrant_and_angle(draw_phi);
     [
         ((j + 0.5) * BUBBLE_LAYER_MM) as f32,
-        (draw_cos * INV_2_POW_32) as f32,
+        {
+            // t and 2 − t are exact (32 and 34 significant bits).
+            let t = draw_cos * INV_2_POW_32;
+            (t * (2.0 - t)) as f32
+        },
         ((4_294_967_296.0 - draw_cos) * INV_2_POW_32) as f32,
         a as f32,
         quadrant as f32,
@@ -428,13 +432,14 @@ fn landing_inputs_f32(j: f64, draw_cos: f64, draw_phi: f64) -> [f32; 5] {
 ///
 /// Error bound: every input is rounded once to single precision (relative error
 /// u = 2⁻²⁴ ≈ 6·10⁻⁸) and each operation adds at most u: the sideways travel
-/// ρ = z·sin θ/cos θ carries ≲ 6u of relative error, (cos φ, sin φ) from the series below
+/// ρ = (z·sin θ)·(1/cos θ) carries ≲ 7u of relative error, (cos φ, sin φ) from the series below
 /// ≲ 2·10⁻⁷, the bubble's position ≲ 3u of (|b| + z), the landing point ≲ 10⁻⁶·(ρ + |b| + z)
 /// in all, and double precision differs from exact by ≈ 10⁻¹⁵. The margin is ten times that.
 #[inline(always)]
-fn landing_slot_f32(l: &LandingF32, [z, t, cos_b, a, quadrant]: [f32; 5]) -> i32 {
-    let sin_b = (t * (2.0 - t)).sqrt(); // sin² θ = 1 − cos² θ = t (2 − t)
-    let rho = z * sin_b / cos_b;
+fn landing_slot_f32(l: &LandingF32, [z, sin2_b, cos_b, a, quadrant]: [f32; 5]) -> i32 {
+    let sin_b = sin2_b.sqrt();
+    // 1/cos θ apart, so that the division runs beside the square root.
+    let rho = (z * sin_b) * (1.0 / cos_b);
     // sin and cos of a by their series to a⁹ and a¹⁰ (error below 2·10⁻⁹), then turned
     // into φ's quadrant as in `unit_circle_of`.
     let a2 = a * a;
@@ -498,7 +503,7 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
     }
     for out in [
         &mut lanes.f32_z,
-        &mut lanes.f32_t,
+        &mut lanes.f32_sin2,
         &mut lanes.f32_cos,
         &mut lanes.f32_a,
         &mut lanes.f32_q,
@@ -516,7 +521,7 @@ pub(crate) fn land_scattered(ray: &BubbleRay, bundles: &Bundles, lanes: &mut Bub
         &mut lanes.draw_cos[..n],
         &mut lanes.draw_phi[..n],
         &mut lanes.f32_z[..n_f32],
-        &mut lanes.f32_t[..n_f32],
+        &mut lanes.f32_sin2[..n_f32],
         &mut lanes.f32_cos[..n_f32],
         &mut lanes.f32_a[..n_f32],
         &mut lanes.f32_q[..n_f32],
@@ -552,7 +557,7 @@ fn land_scattered_lanes(
     draw_cos: &mut [f64],
     draw_phi: &mut [f64],
     f32_z: &mut [f32],
-    f32_t: &mut [f32],
+    f32_sin2: &mut [f32],
     f32_cos: &mut [f32],
     f32_a: &mut [f32],
     f32_q: &mut [f32],
@@ -560,7 +565,7 @@ fn land_scattered_lanes(
 ) {
     let n = layer.len();
     let n_f32 = slot.len().max(n);
-    let (f32_z, f32_t, f32_cos) = (&mut f32_z[..n_f32], &mut f32_t[..n_f32], &mut f32_cos[..n_f32]);
+    let (f32_z, f32_sin2, f32_cos) = (&mut f32_z[..n_f32], &mut f32_sin2[..n_f32], &mut f32_cos[..n_f32]);
     let (f32_a, f32_q) = (&mut f32_a[..n_f32], &mut f32_q[..n_f32]);
     let (index, slot) = (&mut index[..n], &mut slot[..n_f32]);
     let (draw_cos, draw_phi) = (&mut draw_cos[..n], &mut draw_phi[..n]);
@@ -591,7 +596,7 @@ fn land_scattered_lanes(
     // its inputs from double precision, eight lanes to a vector, then sixteen.
     let outputs = f32_z
         .chunks_exact_mut(W)
-        .zip(f32_t.chunks_exact_mut(W))
+        .zip(f32_sin2.chunks_exact_mut(W))
         .zip(f32_cos.chunks_exact_mut(W))
         .zip(f32_a.chunks_exact_mut(W))
         .zip(f32_q.chunks_exact_mut(W));
@@ -611,7 +616,7 @@ fn land_scattered_lanes(
     const V: usize = F32_LANES;
     let inputs = f32_z
         .chunks_exact(V)
-        .zip(f32_t.chunks_exact(V))
+        .zip(f32_sin2.chunks_exact(V))
         .zip(f32_cos.chunks_exact(V))
         .zip(f32_a.chunks_exact(V))
         .zip(f32_q.chunks_exact(V));
