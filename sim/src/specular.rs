@@ -152,6 +152,7 @@ unsafe fn specular_reflection_avx512(
     );
     let zero = _mm512_setzero_pd();
     let (no_bubbles, last_lane) = (_mm256_setzero_si256(), _mm256_set1_epi32(7));
+    let lane = _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7);
     let mut most = _mm256_set1_epi32(n_before as i32);
     // `SpecularFlux::first_absorption` lane by lane, and e^(8·x₁) per vector.
     let [att, s1, step] = flux.absorption;
@@ -176,21 +177,19 @@ unsafe fn specular_reflection_avx512(
         let h0 = _mm512_add_pd(d, a);
         let x = _mm512_add_pd(p0x, _mm512_mul_pd(wx, h0));
         let y = _mm512_add_pd(p0y, _mm512_mul_pd(wy, h0));
-        // !(|y| > r) & !(x < 0): true for NaN, as the negated comparisons.
-        let face = _mm512_cmp_pd_mask::<_CMP_NGT_UQ>(_mm512_abs_pd(y), r)
-            & _mm512_cmp_pd_mask::<_CMP_NLT_UQ>(x, zero);
+        // The comparisons of `Bundles::slot_f64` (the negated ones true for NaN), each
+        // masked by the ones before: the lanes before `len`, !(|y| > r), !(x < 0), the
+        // surface above the fibre (!(h0 ≤ 0)); then x ≤ B for bundle 0, and !(x ≤ B) with
+        // (x − B)² + y² ≤ R² for bundle 1.
+        let valid = _mm512_cmplt_epi64_mask(lane, _mm512_set1_epi64((len - first) as i64));
+        let hit = _mm512_mask_cmp_pd_mask::<_CMP_NGT_UQ>(valid, _mm512_abs_pd(y), r);
+        let hit = _mm512_mask_cmp_pd_mask::<_CMP_NLT_UQ>(hit, x, zero);
+        let hit = _mm512_mask_cmp_pd_mask::<_CMP_NLE_UQ>(hit, h0, zero);
         let dx = _mm512_sub_pd(x, b);
         let q = _mm512_add_pd(_mm512_mul_pd(dx, dx), _mm512_mul_pd(y, y));
-        let disc = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(q, r2);
-        let near = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(x, b);
-        let above = _mm512_cmp_pd_mask::<_CMP_NLE_UQ>(h0, zero);
-        let valid: __mmask8 = if len - first >= LANES {
-            0xFF
-        } else {
-            (1u8 << (len - first)) - 1
-        };
-        let hit = face & above & valid;
-        let (on0, on1) = (hit & near, hit & !near & disc);
+        let on0 = _mm512_mask_cmp_pd_mask::<_CMP_LE_OQ>(hit, x, b);
+        let beyond = _mm512_mask_cmp_pd_mask::<_CMP_NLE_UQ>(hit, x, b);
+        let on1 = _mm512_mask_cmp_pd_mask::<_CMP_LE_OQ>(beyond, q, r2);
         // The running maximum: lane k takes the maximum of lanes ≤ k, then of the vectors
         // before.
         let mut n = frozen;
@@ -201,7 +200,7 @@ unsafe fn specular_reflection_avx512(
         most = _mm256_permutexvar_epi32(last_lane, n);
         // F^n where the ray lands (0 elsewhere), every such n within the table (as
         // indexing checks).
-        let landed = on0 | on1;
+        let landed = _kor_mask8(on0, on1);
         assert_eq!(
             _mm256_mask_cmplt_epu32_mask(landed, n, pow_len),
             landed,
