@@ -308,7 +308,8 @@ mod tests {
 
     /// The specular reflection against the law written out thickness by thickness (the
     /// bundle from `Geometry::region`, libm's `exp`, F^n by `powi`): within 10⁻¹³; the same
-    /// bits on every tier; nothing added past `len` or to the bundle it does not land on.
+    /// bits on every tier; nothing added past `len` or to the bundle it does not land on; lines
+    /// that land exactly on an edge of the bundles at every thickness.
     #[test]
     fn specular_reflection_follows_the_law_on_every_tier() {
         use crate::geometry::{Geometry, Region};
@@ -332,11 +333,24 @@ mod tests {
             let lanes = len.next_multiple_of(LANES);
             let mut u =
                 |lo: f64, hi: f64| lo + (hi - lo) * (rng.next_u32() as f64 / 4_294_967_296.0);
-            let line = SpecularLine {
+            let mut line = SpecularLine {
                 p0: DVec2::new(u(-4.0, 0.0), u(-4.0, 4.0)),
                 w: DVec2::new(u(-1.0, 2.0), u(-1.0, 1.0)),
                 a: u(-1.0, 1.0),
             };
+            // Lines that run along an edge, landing exactly on it at every thickness:
+            // x = B, x = B + R with y = 0 (on the arc), x = 0, y = ±R.
+            let (r, b) = (bundles.radius_mm(), bundles.length_b_mm());
+            let along = [
+                (DVec2::new(b, -0.5), DVec2::new(0.0, 0.3)),
+                (DVec2::new(b + r, 0.0), DVec2::ZERO),
+                (DVec2::new(0.0, -0.5), DVec2::new(0.0, 0.2)),
+                (DVec2::new(-0.5, r), DVec2::new(0.4, 0.0)),
+                (DVec2::new(-0.5, -r), DVec2::new(0.4, 0.0)),
+            ];
+            if let Some(&(p0, w)) = along.get(case % 14) {
+                (line.p0, line.w) = (p0, w);
+            }
             let d0 = u(0.0, 5.0);
             let thick: Vec<f64> = (0..lanes).map(|k| d0 + 0.1 * k as f64).collect();
             // Bubbles frozen in at a few thicknesses (0 elsewhere), counts that grow.
