@@ -46,11 +46,24 @@ pub(crate) struct SpecularFlux<'a> {
     pub absorption: [f64; 3],
 }
 
+/// One ray's specular reflection at the thicknesses it visits: its landing line, the
+/// thicknesses and the bubbles frozen in at each (`frozen_by`, 0 where none; both padded to
+/// whole vectors, the grid going on), how many are visited (`len`), the bubbles frozen in
+/// before the first (`n_before`) and its flux.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SpecularRay<'a> {
+    pub line: SpecularLine,
+    pub thick_mm: &'a [f64],
+    pub frozen_by: &'a [u32],
+    pub len: usize,
+    pub n_before: u32,
+    pub flux: SpecularFlux<'a>,
+}
+
 impl SpecularFlux<'_> {
     /// The absorption of the first eight visited thicknesses, e^x₀·(e^x₁)^j on lane j:
     /// (e^x₁)^j as the product of the powers e^x₁, e^(2x₁) = (e^x₁)², e^(4x₁) = (e^(2x₁))²
-    /// of j's binary digits, in that order, each missing one as a factor 1 (exact). The
-    /// AVX-512 pass builds the same products lane by lane.
+    /// of j's binary digits, in that order, each missing one as a factor 1 (exact).
     #[inline(always)]
     fn first_absorption(&self) -> [f64; LANES] {
         let [att, s1, _] = self.absorption;
@@ -68,41 +81,28 @@ impl SpecularFlux<'_> {
 }
 
 /// The specular reflection of one ray at its `len` visited thicknesses k = 0, 1, …
-/// (`thick_mm[k]`; the arrays are padded to whole vectors, the padding lanes add nothing):
-/// where it lands (`SpecularLine::slot`), and its flux ([`SpecularFlux`]; n_k the running
-/// maximum of `frozen_by` from `n_before` on), added to the sum of its bundle (`sums0` for
-/// 0, `sums1` for 1). The absorption is [`SpecularFlux::first_absorption`] on the eight
+/// ([`SpecularRay`]; the padding lanes add nothing): where it lands (`SpecularLine::slot`),
+/// and its flux ([`SpecularFlux`]; n_k the running maximum of `frozen_by` from `n_before`
+/// on), added to the sum of its bundle (`sums0` for 0, `sums1` for 1). The absorption is [`SpecularFlux::first_absorption`] on the eight
 /// lanes of the first vector, times e^(8·x₁) from one vector to the next: products, no
 /// `exp` per thickness. With AVX-512 in one pass of intrinsics
 /// ([`specular_reflection_avx512`]), otherwise in two passes that the compiler vectorises
 /// ([`specular_reflection_lanes`], with `count` and `bundle` as its scratch); the same
 /// operations in the same order either way, so the same bits (tested).
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn specular_reflection(
-    line: &SpecularLine,
+    ray: &SpecularRay,
     bundles: &Bundles,
-    thick_mm: &[f64],
-    frozen_by: &[u32],
     sums0: &mut [f64],
     sums1: &mut [f64],
-    len: usize,
-    n_before: u32,
-    flux: &SpecularFlux,
     count: &mut [u32],
     bundle: &mut [i32],
 ) {
     #[cfg(target_arch = "x86_64")]
     if isa() == Isa::Avx512 {
         // SAFETY: the CPU has AVX-512 F, DQ, VL and FMA (`isa`).
-        return unsafe {
-            specular_reflection_avx512(
-                line, bundles, thick_mm, frozen_by, sums0, sums1, len, n_before, flux,
-            )
-        };
+        return unsafe { specular_reflection_avx512(ray, bundles, sums0, sums1) };
     }
-    specular_reflection_lanes(
-        line, bundles, thick_mm, frozen_by, sums0, sums1, len, n_before, flux, count, bundle,
-    );
+    specular_reflection_lanes(ray, bundles, sums0, sums1, count, bundle);
 }
 
 /// [`specular_reflection`] in AVX-512 intrinsics, one vector of eight thicknesses per
@@ -114,20 +114,22 @@ pub(crate) fn specular_reflection(
 /// The CPU has AVX-512 F, DQ, VL and FMA.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512dq,avx512vl,avx2,fma")]
-#[allow(clippy::too_many_arguments)]
 unsafe fn specular_reflection_avx512(
-    line: &SpecularLine,
+    ray: &SpecularRay,
     bundles: &Bundles,
-    thick_mm: &[f64],
-    frozen_by: &[u32],
     sums0: &mut [f64],
     sums1: &mut [f64],
-    len: usize,
-    n_before: u32,
-    flux: &SpecularFlux,
 ) {
     use std::arch::x86_64::*;
     const _: () = assert!(LANES == 8);
+    let SpecularRay {
+        line,
+        thick_mm,
+        frozen_by,
+        len,
+        n_before,
+        flux,
+    } = *ray;
     let lanes = len.next_multiple_of(LANES);
     assert!(
         thick_mm.len() >= lanes
@@ -154,15 +156,11 @@ unsafe fn specular_reflection_avx512(
     let (no_bubbles, last_lane) = (_mm256_setzero_si256(), _mm256_set1_epi32(7));
     let lane = _mm512_setr_epi64(0, 1, 2, 3, 4, 5, 6, 7);
     let mut most = _mm256_set1_epi32(n_before as i32);
-    // `SpecularFlux::first_absorption` lane by lane, and e^(8·x₁) per vector.
-    let [att, s1, step] = flux.absorption;
-    let (s2, one) = (s1 * s1, _mm512_set1_pd(1.0));
-    let b0 = _mm512_mask_blend_pd(0b1010_1010, one, _mm512_set1_pd(s1));
-    let b1 = _mm512_mask_blend_pd(0b1100_1100, one, _mm512_set1_pd(s2));
-    let b2 = _mm512_mask_blend_pd(0b1111_0000, one, _mm512_set1_pd(s2 * s2));
-    let ladder = _mm512_mul_pd(_mm512_mul_pd(b0, b1), b2);
-    let mut absorb = _mm512_mul_pd(_mm512_set1_pd(att), ladder);
-    let step = _mm512_set1_pd(step);
+    // The absorption of the first vector, and e^(8·x₁) per vector.
+    let first = flux.first_absorption();
+    // SAFETY: eight f64 are loaded.
+    let mut absorb = unsafe { _mm512_loadu_pd(first.as_ptr()) };
+    let step = _mm512_set1_pd(flux.absorption[2]);
     for first in (0..lanes).step_by(LANES) {
         // SAFETY: first + 8 ≤ lanes ≤ every array's length (asserted above).
         let (d, frozen, s0, s1) = unsafe {
@@ -229,22 +227,24 @@ vector_kernel! {
 /// one before it and each pass holds its constants in registers (AVX2 has sixteen): where
 /// the ray lands and the running maximum (a scan in three steps, then the maximum of the
 /// vectors before) into `bundle` and `count`; then F^n from the table, the flux and the sums.
-#[allow(clippy::too_many_arguments)]
 fn specular_reflection_lanes(
-    line: &SpecularLine,
+    ray: &SpecularRay,
     bundles: &Bundles,
-    thick_mm: &[f64],
-    frozen_by: &[u32],
     sums0: &mut [f64],
     sums1: &mut [f64],
-    len: usize,
-    n_before: u32,
-    flux: &SpecularFlux,
     count: &mut [u32],
     bundle: &mut [i32],
 ) {
     // The scan's steps 1, 2, 4 cover eight lanes.
     const _: () = assert!(LANES == 8);
+    let SpecularRay {
+        line,
+        thick_mm,
+        frozen_by,
+        len,
+        n_before,
+        flux,
+    } = *ray;
     let chunks = thick_mm
         .chunks_exact(LANES)
         .zip(frozen_by.chunks_exact(LANES))
@@ -279,7 +279,7 @@ fn specular_reflection_lanes(
     let mut absorb = flux.first_absorption();
     let step = flux.absorption[2];
     // Every count written is at most the last (a running maximum), so within the table.
-    let pow = &flux.forward_pow;
+    let pow = flux.forward_pow;
     assert!((most as usize) < pow.len(), "bubbles frozen in beyond the table of F^n");
     let chunks = count[..written]
         .chunks_exact(LANES)
@@ -390,20 +390,23 @@ mod tests {
                 }
                 let (mut s0, mut s1) = (vec![0.5; lanes], vec![0.25; lanes]);
                 with_isa(tier, || {
-                    specular_reflection(
-                        &line,
-                        &bundles,
-                        &thick,
-                        &frozen_by,
-                        &mut s0,
-                        &mut s1,
+                    let ray = SpecularRay {
+                        line,
+                        thick_mm: &thick,
+                        frozen_by: &frozen_by,
                         len,
                         n_before,
-                        &SpecularFlux {
+                        flux: SpecularFlux {
                             scale,
                             forward_pow: &forward_pow,
                             absorption: [x0.exp(), x1.exp(), (8.0 * x1).exp()],
                         },
+                    };
+                    specular_reflection(
+                        &ray,
+                        &bundles,
+                        &mut s0,
+                        &mut s1,
                         &mut vec![0; lanes],
                         &mut vec![0; lanes],
                     )

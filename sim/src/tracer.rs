@@ -25,7 +25,7 @@ use crate::geometry::Bundles;
 use crate::kernels::{LANES, grow};
 use crate::model::{SensorModel, SourceRay};
 use crate::setup::{MAX_LAYERS_PER_RAY, RaySetups, Surface};
-use crate::specular::{SpecularFlux, SpecularLine, specular_reflection};
+use crate::specular::{SpecularFlux, SpecularLine, SpecularRay, specular_reflection};
 use crate::streams::{
     CounterStream, STREAM_ACCRETION, accretion_key, bubble_stream, diffuse_stream, fill_u32,
     geometric_gap, uniform, uniform32, unit_circle_unnormalised,
@@ -558,20 +558,23 @@ impl<'m> Accretion<'m> {
         grow(&mut self.buf.spec_count, lanes, 0);
         grow(&mut self.buf.spec_bundle, lanes, 2);
         let [refl0, refl1] = &mut self.buf.refl;
-        specular_reflection(
-            &SpecularLine { p0: ray.p0, w, a },
-            &self.bundles,
-            &m.thick_lanes[i_lo..i_lo + lanes],
-            &self.buf.frozen_by[i_lo..i_lo + lanes],
-            &mut refl0[i_lo..i_lo + lanes],
-            &mut refl1[i_lo..i_lo + lanes],
-            i_hi - i_lo,
-            n_before as u32,
-            &SpecularFlux {
+        let spec = SpecularRay {
+            line: SpecularLine { p0: ray.p0, w, a },
+            thick_mm: &m.thick_lanes[i_lo..i_lo + lanes],
+            frozen_by: &self.buf.frozen_by[i_lo..i_lo + lanes],
+            len: i_hi - i_lo,
+            n_before: n_before as u32,
+            flux: SpecularFlux {
                 scale: ray.flux_in_w * rfl * cpl,
                 forward_pow: &self.buf.forward_pow,
                 absorption,
             },
+        };
+        specular_reflection(
+            &spec,
+            &self.bundles,
+            &mut refl0[i_lo..i_lo + lanes],
+            &mut refl1[i_lo..i_lo + lanes],
             &mut self.buf.spec_count[..lanes],
             &mut self.buf.spec_bundle[..lanes],
         );
