@@ -404,10 +404,11 @@ impl LandingF32 {
 }
 
 /// The inputs of [`landing_slot_f32`] for the bubble of layer `j` with angle draws
-/// (`draw_cos`, `draw_phi`), each computed exactly in double precision and rounded once to
-/// single: the bubble's height z, sin² θ = t·(2 − t) with t = 1 − cos θ (to 10⁻¹⁶), cos θ
-/// (both keep their relative precision however small), the angle a within φ's quadrant about its middle (|a| ≤ π/4, as in
-/// `unit_circle_of`) and the quadrant.
+/// (`draw_cos`, `draw_phi`), each computed in double precision (exactly, but for sin² θ:
+/// within 10⁻¹⁶) and rounded once to single: the bubble's height z, sin² θ = t·(2 − t) with
+/// t = 1 − cos θ, cos θ (both keep their relative precision however small), the angle a
+/// within φ's quadrant about its middle (|a| ≤ π/4, as in `unit_circle_of`) and the
+/// quadrant.
 #[inline(always)]
 fn landing_inputs_f32(j: f64, draw_cos: f64, draw_phi: f64) -> [f32; 5] {
     let (quadrant, a) = quadrant_and_angle(draw_phi);
@@ -432,9 +433,10 @@ fn landing_inputs_f32(j: f64, draw_cos: f64, draw_phi: f64) -> [f32; 5] {
 ///
 /// Error bound: every input is rounded once to single precision (relative error
 /// u = 2⁻²⁴ ≈ 6·10⁻⁸) and each operation adds at most u: the sideways travel
-/// ρ = (z·sin θ)·(1/cos θ) carries ≲ 7u of relative error, (cos φ, sin φ) from the series below
-/// ≲ 2·10⁻⁷, the bubble's position ≲ 3u of (|b| + z), the landing point ≲ 10⁻⁶·(ρ + |b| + z)
-/// in all, and double precision differs from exact by ≈ 10⁻¹⁵. The margin is ten times that.
+/// ρ = (z·sin θ)·(1/cos θ) carries ≲ 7u of relative error, (cos φ, sin φ) from the series
+/// below ≲ 2·10⁻⁷, the bubble's position ≲ 3u of (|b| + z), the landing point
+/// ≲ 10⁻⁶·(ρ + |b| + z) in all, and double precision differs from exact by ≈ 10⁻¹⁵. The
+/// margin is ten times that.
 #[inline(always)]
 fn landing_slot_f32(l: &LandingF32, [z, sin2_b, cos_b, a, quadrant]: [f32; 5]) -> i32 {
     let sin_b = sin2_b.sqrt();
@@ -565,7 +567,8 @@ fn land_scattered_lanes(
 ) {
     let n = layer.len();
     let n_f32 = slot.len().max(n);
-    let (f32_z, f32_sin2, f32_cos) = (&mut f32_z[..n_f32], &mut f32_sin2[..n_f32], &mut f32_cos[..n_f32]);
+    let (f32_z, f32_sin2) = (&mut f32_z[..n_f32], &mut f32_sin2[..n_f32]);
+    let f32_cos = &mut f32_cos[..n_f32];
     let (f32_a, f32_q) = (&mut f32_a[..n_f32], &mut f32_q[..n_f32]);
     let (index, slot) = (&mut index[..n], &mut slot[..n_f32]);
     let (draw_cos, draw_phi) = (&mut draw_cos[..n], &mut draw_phi[..n]);

@@ -83,12 +83,13 @@ impl SpecularFlux<'_> {
 /// The specular reflection of one ray at its `len` visited thicknesses k = 0, 1, …
 /// ([`SpecularRay`]; the padding lanes add nothing): where it lands (`SpecularLine::slot`),
 /// and its flux ([`SpecularFlux`]; n_k the running maximum of `frozen_by` from `n_before`
-/// on), added to the sum of its bundle (`sums0` for 0, `sums1` for 1). The absorption is [`SpecularFlux::first_absorption`] on the eight
-/// lanes of the first vector, times e^(8·x₁) from one vector to the next: products, no
-/// `exp` per thickness. With AVX-512 in one pass of intrinsics
-/// ([`specular_reflection_avx512`]), otherwise in two passes that the compiler vectorises
-/// ([`specular_reflection_lanes`], with `count` and `bundle` as its scratch); the same
-/// operations in the same order either way, so the same bits (tested).
+/// on), added to the sum of its bundle (`sums0` for 0, `sums1` for 1). The absorption is
+/// [`SpecularFlux::first_absorption`] on the eight lanes of the first vector, times
+/// e^(8·x₁) from one vector to the next: products, no `exp` per thickness. With AVX-512
+/// in one pass of intrinsics ([`specular_reflection_avx512`]), otherwise in two passes
+/// that the compiler vectorises ([`specular_reflection_lanes`], with `count` and `bundle`
+/// as its scratch); the same operations in the same order either way, so the same bits
+/// (tested).
 pub(crate) fn specular_reflection(
     ray: &SpecularRay,
     bundles: &Bundles,
