@@ -39,7 +39,10 @@ mod crates;
 mod ha_check;
 mod modules;
 mod package;
+mod shell;
 mod tools;
+
+use shell::{have, run};
 
 /// Flash budget of the firmware image (the project's goal for a small MCU).
 const FLASH_BUDGET_BYTES: u64 = 128 * 1024;
@@ -112,27 +115,6 @@ fn project_root() -> PathBuf {
         .unwrap_or_else(|| PathBuf::from("."))
 }
 
-/// Run a command, echoing it, failing on a non-zero exit.
-pub(crate) fn run(program: &str, args: &[&str]) -> Result<()> {
-    eprintln!("\n$ {program} {}", args.join(" "));
-    let status = Command::new(program)
-        .args(args)
-        .status()
-        .with_context(|| format!("could not start `{program}`"))?;
-    if !status.success() {
-        bail!("`{program} {}` failed ({status})", args.join(" "));
-    }
-    Ok(())
-}
-
-fn have(program: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {program} >/dev/null 2>&1")])
-        .status()
-        .map(|s| s.success())
-        .unwrap_or(false)
-}
-
 fn ci() -> Result<()> {
     let started = Instant::now();
     let mut steps: Vec<(String, f64)> = Vec::new();
@@ -159,7 +141,9 @@ fn ci() -> Result<()> {
     })?;
     let root = project_root();
     step("crate rules", &mut || crates::check(&root))?;
-    step("module rule (no import circles)", &mut || modules::check(&root))?;
+    step("module rule (no import circles)", &mut || {
+        modules::check(&root)
+    })?;
     step("clippy (host)", &mut || {
         run(
             "cargo",

@@ -35,8 +35,33 @@ use anyhow::{Context, Result, bail};
 /// Circles tolerated until the branches that cut them land: each the full
 /// set of files of one circle (repository-relative). The goal is none; an
 /// entry that matches no circle any more fails the check, so it is removed
-/// when its circle is cut.
-pub const KNOWN_CIRCLES: &[&[&str]] = &[];
+/// when its circle is cut. Temporary: the firmware's files are being moved
+/// into folders and the gateway's driver, config and state machine
+/// rewritten; each entry goes with the change that cuts its circle.
+pub const KNOWN_CIRCLES: &[&[&str]] = &[
+    // The estimator's settings and table row in estimator.rs, read by the
+    // child files that estimator.rs reads.
+    &[
+        "firmware/src/estimator.rs",
+        "firmware/src/estimator/grid.rs",
+        "firmware/src/estimator/table.rs",
+    ],
+    // config/mod.rs re-uses its children's items; they use its types.
+    &[
+        "gateway/src/config/file.rs",
+        "gateway/src/config/mod.rs",
+        "gateway/src/config/modbus.rs",
+        "gateway/src/config/resolve.rs",
+    ],
+    // FrontEndCommand (driver.rs) against bind/serve (modbus/server.rs).
+    &["gateway/src/driver.rs", "gateway/src/modbus/server.rs"],
+    // machine/mod.rs (Action, Gateway) against its children commands, owner.
+    &[
+        "gateway/src/machine/commands.rs",
+        "gateway/src/machine/mod.rs",
+        "gateway/src/machine/owner.rs",
+    ],
+];
 
 /// Check every workspace member's crates; fail on a circle not in
 /// [`KNOWN_CIRCLES`] or an entry of it that matches no circle.
@@ -56,7 +81,8 @@ pub fn check(root: &Path) -> Result<()> {
             files += graph.files.len();
             edges += graph.edges.values().map(BTreeMap::len).sum::<usize>();
             for circle in graph.circles() {
-                let names: BTreeSet<&str> = circle.iter().map(|&f| graph.files[f].as_str()).collect();
+                let names: BTreeSet<&str> =
+                    circle.iter().map(|&f| graph.files[f].as_str()).collect();
                 let known = KNOWN_CIRCLES
                     .iter()
                     .position(|k| k.iter().copied().collect::<BTreeSet<_>>() == names);
@@ -207,7 +233,10 @@ fn lex(src: &str) -> Vec<(Tok, u32)> {
                 }
                 j += 1;
             }
-            out.push((Tok::Str(c[body..j.min(c.len())].iter().collect()), start_line));
+            out.push((
+                Tok::Str(c[body..j.min(c.len())].iter().collect()),
+                start_line,
+            ));
             i = j + 1 + hashes;
         } else if ch == '"' || ((ch == 'b' || ch == 'c') && at(i + 1) == '"') {
             let mut j = if ch == '"' { i + 1 } else { i + 2 };
@@ -221,7 +250,10 @@ fn lex(src: &str) -> Vec<(Tok, u32)> {
                 }
                 j += 1;
             }
-            out.push((Tok::Str(c[body..j.min(c.len())].iter().collect()), start_line));
+            out.push((
+                Tok::Str(c[body..j.min(c.len())].iter().collect()),
+                start_line,
+            ));
             i = j + 1;
         } else if ch == '\'' || (ch == 'b' && at(i + 1) == '\'') {
             let q = if ch == '\'' { i } else { i + 1 };
@@ -347,10 +379,11 @@ fn parse(src: &str, module: &[String]) -> Parsed {
         let at_item_level = scopes.last().is_some_and(|s| s.1 == depth);
         match t {
             Tok::Punct('#') if tok(i + 1) == Some(&Tok::Punct('[')) => {
-                if ident(i + 2) == Some("path") && tok(i + 3) == Some(&Tok::Punct('=')) {
-                    if let Some(Tok::Str(s)) = tok(i + 4) {
-                        path_attr = Some(s.clone());
-                    }
+                if ident(i + 2) == Some("path")
+                    && tok(i + 3) == Some(&Tok::Punct('='))
+                    && let Some(Tok::Str(s)) = tok(i + 4)
+                {
+                    path_attr = Some(s.clone());
                 }
                 // Skip the attribute, keeping a path attribute for its `mod`.
                 let mut d = 0usize;
@@ -414,11 +447,9 @@ fn parse(src: &str, module: &[String]) -> Parsed {
                 }
                 i = j;
             }
-            Tok::Ident(k) if ITEM_KEYWORDS.contains(&k.as_str()) => {
-                if at_item_level {
-                    if let Some(name) = ident(i + 1) {
-                        p.defs.push((scope, name.to_string()));
-                    }
+            Tok::Ident(k) if ITEM_KEYWORDS.contains(&k.as_str()) && at_item_level => {
+                if let Some(name) = ident(i + 1) {
+                    p.defs.push((scope, name.to_string()));
                 }
             }
             Tok::Ident(k) if k == "macro_rules" => {
@@ -619,15 +650,24 @@ impl Graph {
             }
             for (scope, name) in &parsed.defs {
                 if !name.starts_with("use:") {
-                    g.modules.entry(scope.clone()).or_default().defs.insert(name.clone());
+                    g.modules
+                        .entry(scope.clone())
+                        .or_default()
+                        .defs
+                        .insert(name.clone());
                 }
             }
             for (scope, leaf, _) in &parsed.uses {
                 let m = g.modules.entry(scope.clone()).or_default();
                 if leaf.name == "*" {
                     m.globs.push(leaf.path.clone());
-                } else if parsed.defs.contains(&(scope.clone(), format!("use:{}", leaf.name))) {
-                    m.bindings.entry(leaf.name.clone()).or_insert(leaf.path.clone());
+                } else if parsed
+                    .defs
+                    .contains(&(scope.clone(), format!("use:{}", leaf.name)))
+                {
+                    m.bindings
+                        .entry(leaf.name.clone())
+                        .or_insert(leaf.path.clone());
                 }
             }
         }
@@ -638,14 +678,14 @@ impl Graph {
                 let Some(abs) = g.absolute(scope, path, 0) else {
                     continue;
                 };
-                if let Some(to) = g.target(&abs, 0) {
-                    if to != index {
-                        g.edges
-                            .entry(index)
-                            .or_default()
-                            .entry(to)
-                            .or_insert((line, path.join("::")));
-                    }
+                if let Some(to) = g.target(&abs, 0)
+                    && to != index
+                {
+                    g.edges
+                        .entry(index)
+                        .or_default()
+                        .entry(to)
+                        .or_insert((line, path.join("::")));
                 }
             }
         }
@@ -721,8 +761,7 @@ impl Graph {
             let Some(m) = self.modules.get(&source) else {
                 continue;
             };
-            if m.defs.contains(name) || m.bindings.contains_key(name) || m.children.contains(name)
-            {
+            if m.defs.contains(name) || m.bindings.contains_key(name) || m.children.contains(name) {
                 let mut to = source;
                 to.extend_from_slice(rest);
                 return self.target(&to, hops + 1);
@@ -749,12 +788,11 @@ impl Graph {
             s.next += 1;
             s.stack.push(v);
             s.on_stack[v] = true;
-            let succ: Vec<usize> = s
-                .g
-                .edges
-                .get(&v)
-                .map(|e| e.keys().copied().collect())
-                .unwrap_or_default();
+            let succ: Vec<usize> =
+                s.g.edges
+                    .get(&v)
+                    .map(|e| e.keys().copied().collect())
+                    .unwrap_or_default();
             for w in succ {
                 match s.index[w] {
                     None => {
@@ -797,7 +835,8 @@ impl Graph {
         for c in &mut s.out {
             c.sort_by(|&a, &b| self.files[a].cmp(&self.files[b]));
         }
-        s.out.sort_by(|a, b| self.files[a[0]].cmp(&self.files[b[0]]));
+        s.out
+            .sort_by(|a, b| self.files[a[0]].cmp(&self.files[b[0]]));
         s.out
     }
 
@@ -860,7 +899,11 @@ mod tests {
             ("lib.rs", &[], "mod a;\nmod b;\nmod c;\nmod d;\n"),
             ("a.rs", &["a"], "use crate::b::B;\npub struct A;\n"),
             ("b.rs", &["b"], "pub struct B(crate::c::C);\n"),
-            ("c.rs", &["c"], "pub fn f() -> super::a::A { todo!() }\npub struct C;\n"),
+            (
+                "c.rs",
+                &["c"],
+                "pub fn f() -> super::a::A { todo!() }\npub struct C;\n",
+            ),
             ("d.rs", &["d"], "use crate::a::A;\n"),
         ]);
         assert_eq!(circle_names(&g), vec![vec!["a.rs", "b.rs", "c.rs"]]);
@@ -873,7 +916,11 @@ mod tests {
     fn a_tree_has_no_circle() {
         let g = graph(&[
             ("lib.rs", &[], "mod a;\nmod b;\npub use a::A;\n"),
-            ("a.rs", &["a"], "use crate::b::{self, B};\npub struct A(B);\n"),
+            (
+                "a.rs",
+                &["a"],
+                "use crate::b::{self, B};\npub struct A(B);\n",
+            ),
             ("b.rs", &["b"], "pub struct B;\n"),
         ]);
         assert!(g.circles().is_empty());
