@@ -14,8 +14,9 @@
 //! - `cargo xtask tools` — only the system tools (and the pymodbus
 //!   virtualenv `target/pymodbus-venv`).
 //! - `cargo xtask crates` — only the crate rules.
-//! - `cargo xtask modules` — only the module rule: every crate's files
-//!   form no import circle (a list of known ones is tolerated for now).
+//! - `cargo xtask modules [--graph]` — only the module rule: every crate's
+//!   files form no import circle (a list of known ones is tolerated for
+//!   now); `--graph`: print each file and the files it imports first.
 //! - `cargo xtask deb` — build the gateway's Debian package and check it.
 //! - `cargo xtask ha-check [--if-changed]` — the gateway's Home Assistant
 //!   discovery checked by real Home Assistant releases (installed into
@@ -71,7 +72,11 @@ fn main() -> Result<()> {
         "ci" => ci(),
         "tools" => tools::ensure(&root),
         "crates" => crates::check(&root),
-        "modules" => modules::check(&root),
+        "modules" => match std::env::args().nth(2).as_deref() {
+            None => modules::check(&root, false),
+            Some("--graph") => modules::check(&root, true),
+            Some(other) => bail!("usage: cargo xtask modules [--graph] (not `{other}`)"),
+        },
         "deb" => package::build().and_then(|deb| package::check(&deb)),
         "ha-check" => match std::env::args().nth(2).as_deref() {
             None => ha_check::run(&root),
@@ -90,7 +95,8 @@ fn main() -> Result<()> {
                  Assistant check when its inputs changed since its recorded pass\n  \
                  tools  install the system tools the tests need (mosquitto, qemu-system-arm, systemd, python3)\n         and the gateway Modbus tests' pymodbus virtualenv (target/pymodbus-venv)\n  \
                  crates check the crate rules of ARCHITECTURE.md on the dependency graph\n  \
-                 modules check that no two files of a crate import each other (directly or around a loop)\n  \
+                 modules [--graph]  check that no two files of a crate import each other (directly or around\n         \
+                 a loop); --graph: print each file and the files it imports first\n  \
                  deb    build the gateway's Debian package and check its files, config and unit\n  \
                  ha-check [--if-changed]  the gateway's Home Assistant discovery checked by Home Assistant\n         \
                  2024.1.6 and 2024.3.3 (installed into virtualenvs under ~/.cache/fois/home-assistant);\n         \
@@ -142,7 +148,7 @@ fn ci() -> Result<()> {
     let root = project_root();
     step("crate rules", &mut || crates::check(&root))?;
     step("module rule (no import circles)", &mut || {
-        modules::check(&root)
+        modules::check(&root, false)
     })?;
     step("clippy (host)", &mut || {
         run(

@@ -64,8 +64,9 @@ pub const KNOWN_CIRCLES: &[&[&str]] = &[
 ];
 
 /// Check every workspace member's crates; fail on a circle not in
-/// [`KNOWN_CIRCLES`] or an entry of it that matches no circle.
-pub fn check(root: &Path) -> Result<()> {
+/// [`KNOWN_CIRCLES`] or an entry of it that matches no circle. With
+/// `print_graph`, print every file and its imports first.
+pub fn check(root: &Path, print_graph: bool) -> Result<()> {
     let manifest = std::fs::read_to_string(root.join("Cargo.toml")).context("Cargo.toml")?;
     let members = workspace_members(&manifest);
     if members.is_empty() {
@@ -77,6 +78,9 @@ pub fn check(root: &Path) -> Result<()> {
     for member in &members {
         for crate_root in crate_roots(&root.join(member).join("src")) {
             let graph = Graph::load(root, &crate_root)?;
+            if print_graph {
+                print!("{}", graph.listing());
+            }
             roots += 1;
             files += graph.files.len();
             edges += graph.edges.values().map(BTreeMap::len).sum::<usize>();
@@ -838,6 +842,22 @@ impl Graph {
         s.out
             .sort_by(|a, b| self.files[a[0]].cmp(&self.files[b[0]]));
         s.out
+    }
+
+    /// Every file and the files it imports, one line each.
+    fn listing(&self) -> String {
+        let mut text = String::new();
+        for (from, name) in self.files.iter().enumerate() {
+            let to: Vec<&str> = self
+                .edges
+                .get(&from)
+                .into_iter()
+                .flat_map(BTreeMap::keys)
+                .map(|&t| self.files[t].as_str())
+                .collect();
+            let _ = writeln!(text, "{name} -> {}", to.join(", "));
+        }
+        text
     }
 
     /// A circle's files and the imports between them.
