@@ -21,7 +21,10 @@
 //! a `mod b;` declaration alone is not an import (a parent declaring its
 //! children is a tree); a child that uses its parent's items while the
 //! parent uses the child's is a circle; an inline `mod tests { use
-//! super::*; }` uses its own file, which is no edge at all.
+//! super::*; }` uses its own file, which is no edge at all; test code is
+//! code (a `#[cfg(test)]` import is an import: a test that needs a higher
+//! module lives in a file of its own, e.g. `setup/tests.rs`). Method calls
+//! name no module and are no edge.
 //!
 //! [`KNOWN_CIRCLES`] lists the circles tolerated for now; an entry that no
 //! longer matches a circle fails the check too, so the list only shrinks.
@@ -1045,6 +1048,54 @@ mod tests {
         );
         let abs = g.absolute(&[], &["crate".into(), "a".into(), "g".into()], 0);
         assert_eq!(abs.as_deref().and_then(|p| g.target(p, 0)), Some(2));
+    }
+
+    #[test]
+    fn the_tree_is_walked_through_files_dirs_and_path_attributes() {
+        let dir = std::env::temp_dir().join(format!("xtask-modules-{}", std::process::id()));
+        let files = [
+            (
+                "src/lib.rs",
+                "mod a;\nmod b;\n#[path = \"other/c_impl.rs\"]\nmod c;\n",
+            ),
+            // a.rs is not a mod-rs file: its child lives in a/.
+            ("src/a.rs", "mod inner;\npub use inner::I;\n"),
+            ("src/a/inner.rs", "use crate::b::B;\npub struct I;\n"),
+            ("src/b/mod.rs", "mod deep;\npub struct B;\n"),
+            ("src/b/deep.rs", "use crate::c::C;\n"),
+            ("src/other/c_impl.rs", "pub struct C;\n"),
+        ];
+        for (name, text) in files {
+            let path = dir.join(name);
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(&path, text).unwrap();
+        }
+        let g = Graph::load(&dir, &dir.join("src/lib.rs"));
+        std::fs::remove_dir_all(&dir).unwrap();
+        let g = g.unwrap();
+        let mut names = g.files.clone();
+        names.sort();
+        assert_eq!(
+            names,
+            [
+                "src/a.rs",
+                "src/a/inner.rs",
+                "src/b/deep.rs",
+                "src/b/mod.rs",
+                "src/lib.rs",
+                "src/other/c_impl.rs"
+            ]
+        );
+        let mut edges = edge_names(&g);
+        edges.sort();
+        assert_eq!(
+            edges,
+            [
+                ("src/a.rs", "src/a/inner.rs"),
+                ("src/a/inner.rs", "src/b/mod.rs"),
+                ("src/b/deep.rs", "src/other/c_impl.rs"),
+            ]
+        );
     }
 
     #[test]
