@@ -449,10 +449,13 @@ fn parse(src: &str, module: &[String]) -> Parsed {
                     }
                     p.uses.push((scope.clone(), leaf, line));
                 }
-                while j < toks.len() && toks[j].0 != Tok::Punct(';') {
-                    j += 1;
-                }
-                i = j;
+                // On the `;` (consumed below); `use<'a>` in a bound is no
+                // declaration: nothing more is skipped (a `{` may follow).
+                i = if tok(j) == Some(&Tok::Punct(';')) {
+                    j
+                } else {
+                    j - 1
+                };
             }
             Tok::Ident(k) if ITEM_KEYWORDS.contains(&k.as_str()) && at_item_level => {
                 if let Some(name) = ident(i + 1) {
@@ -702,6 +705,9 @@ impl Graph {
     /// `path` as written in `scope`, as a path from the crate root; `None`
     /// when it leaves the crate (std, another crate) or cannot be resolved.
     fn absolute(&self, scope: &[String], path: &[String], hops: usize) -> Option<ModPath> {
+        if hops > MAX_HOPS {
+            return None;
+        }
         let first = path.first()?;
         let mut rest = &path[1..];
         let mut base: ModPath = match first.as_str() {
@@ -730,7 +736,18 @@ impl Graph {
                     }
                     self.absolute(scope, bound, hops + 1)?
                 } else {
-                    return None;
+                    // Through a glob import (`use super::*` in a tests file).
+                    return m.globs.iter().find_map(|glob| {
+                        let source = self.absolute(scope, glob, hops + 1)?;
+                        let s = self.modules.get(&source)?;
+                        let known = s.children.contains(name)
+                            || s.defs.contains(name)
+                            || s.bindings.contains_key(name);
+                        if !known || hops >= MAX_HOPS || source.as_slice() == scope {
+                            return None;
+                        }
+                        self.absolute(&source, path, hops + 1)
+                    });
                 }
             }
         };
@@ -1096,6 +1113,51 @@ mod tests {
                 ("src/b/deep.rs", "src/other/c_impl.rs"),
             ]
         );
+    }
+
+    #[test]
+    fn a_use_bound_and_a_tests_file_glob_are_read_right() {
+        let g = graph(&[
+            ("lib.rs", &[], "mod a;\nmod b;\n"),
+            (
+                "a/mod.rs",
+                &["a"],
+                "fn f<'a>(x: &'a [u8]) -> impl Iterator<Item = &'a u8> + use<'a> { x.iter() }\n\
+                 mod inner { pub fn g() {} }\npub fn after() {}\nuse crate::b;\n#[cfg(test)]\nmod tests;\n",
+            ),
+            (
+                "a/tests.rs",
+                &["a", "tests"],
+                "use super::*;\nfn t() { b::deep::h(); }\n",
+            ),
+            ("b/mod.rs", &["b"], "pub mod deep;\n"),
+            ("b/deep.rs", &["b", "deep"], "pub fn h() {}\n"),
+        ]);
+        let a = &g.modules[&vec!["a".to_string()]];
+        assert!(a.defs.contains("after") && a.children.contains("inner"));
+        assert_eq!(
+            edge_names(&g),
+            vec![
+                ("a/mod.rs", "b/mod.rs"),
+                ("a/tests.rs", "a/mod.rs"),
+                ("a/tests.rs", "b/deep.rs")
+            ]
+        );
+    }
+
+    #[test]
+    fn globs_that_import_each_other_end() {
+        // Relative globs in a loop, and a name found nowhere: no edge, no hang.
+        let g = graph(&[
+            ("lib.rs", &[], "mod a;\nmod b;\n"),
+            (
+                "a.rs",
+                &["a"],
+                "use x::*;\nuse crate::b::*;\nfn f() { nowhere::g(); }\n",
+            ),
+            ("b.rs", &["b"], "use y::*;\nuse crate::a::*;\n"),
+        ]);
+        assert_eq!(edge_names(&g), vec![("a.rs", "b.rs"), ("b.rs", "a.rs")]);
     }
 
     #[test]
