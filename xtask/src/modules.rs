@@ -354,8 +354,8 @@ struct UseLeaf {
 #[derive(Debug, Default)]
 struct Parsed {
     mods: Vec<ModDecl>,
-    /// (scope, leaf, line)
-    uses: Vec<(ModPath, UseLeaf, u32)>,
+    /// (scope, leaf, line, at module level: a binding others may reach)
+    uses: Vec<(ModPath, UseLeaf, u32, bool)>,
     /// Items defined at module level: (scope, name).
     defs: Vec<(ModPath, String)>,
     /// Paths outside `use` that may reach another module: (scope, path, line).
@@ -444,10 +444,7 @@ fn parse(src: &str, module: &[String]) -> Parsed {
                 let mut leaves = Vec::new();
                 use_tree(&toks, &mut j, &[], &mut leaves);
                 for leaf in leaves {
-                    if at_item_level && leaf.name != "*" && leaf.name != "_" {
-                        p.defs.push((scope.clone(), format!("use:{}", leaf.name)));
-                    }
-                    p.uses.push((scope.clone(), leaf, line));
+                    p.uses.push((scope.clone(), leaf, line, at_item_level));
                 }
                 // On the `;` (consumed below); `use<'a>` in a bound is no
                 // declaration: nothing more is skipped (a `{` may follow).
@@ -659,22 +656,17 @@ impl Graph {
                     .insert(decl.name.clone());
             }
             for (scope, name) in &parsed.defs {
-                if !name.starts_with("use:") {
-                    g.modules
-                        .entry(scope.clone())
-                        .or_default()
-                        .defs
-                        .insert(name.clone());
-                }
+                g.modules
+                    .entry(scope.clone())
+                    .or_default()
+                    .defs
+                    .insert(name.clone());
             }
-            for (scope, leaf, _) in &parsed.uses {
+            for (scope, leaf, _, item_level) in &parsed.uses {
                 let m = g.modules.entry(scope.clone()).or_default();
                 if leaf.name == "*" {
                     m.globs.push(leaf.path.clone());
-                } else if parsed
-                    .defs
-                    .contains(&(scope.clone(), format!("use:{}", leaf.name)))
-                {
+                } else if *item_level && leaf.name != "_" {
                     m.bindings
                         .entry(leaf.name.clone())
                         .or_insert(leaf.path.clone());
@@ -682,7 +674,10 @@ impl Graph {
             }
         }
         for (index, (_, _, parsed)) in sources.iter().enumerate() {
-            let uses = parsed.uses.iter().map(|(s, l, line)| (s, &l.path, *line));
+            let uses = parsed
+                .uses
+                .iter()
+                .map(|(s, l, line, _)| (s, &l.path, *line));
             let refs = parsed.refs.iter().map(|(s, p, line)| (s, p, *line));
             for (scope, path, line) in uses.chain(refs) {
                 let Some(abs) = g.absolute(scope, path, 0) else {
