@@ -28,7 +28,7 @@ use fois_protocol::Medium;
 use fois_sim::{Geometry, IceKind, SensorKind, SimConfig};
 use fois_vnode::Cover;
 
-use crate::run::{EstSample, Outcome};
+use crate::outcome::{EstSample, Outcome};
 
 /// The true thicknesses of the table, mm.
 pub const THICKNESSES_MM: [f64; 5] = [0.5, 1.0, 2.0, 5.0, 10.0];
@@ -363,8 +363,8 @@ mod tests {
 
     #[test]
     fn bias_rms_over_seeds_and_fractions_over_frames() {
-        let mut a = crate::run::tests_support::outcome("acc@seed1");
-        let mut b = crate::run::tests_support::outcome("acc@seed2");
+        let mut a = crate::outcome::tests_support::outcome("acc@seed1");
+        let mut b = crate::outcome::tests_support::outcome("acc@seed2");
         // Seed 1 reads +0.2 at 2 mm, seed 2 −0.4: bias −0.1, RMS √0.1.
         a.estimates = vec![
             sample(1.98, 2.18, 0.3, Medium::Rime),
@@ -407,8 +407,8 @@ mod tests {
 
     #[test]
     fn gain_columns_compare_the_estimate_with_the_truth() {
-        let mut a = crate::run::tests_support::outcome("g@seed1");
-        let mut b = crate::run::tests_support::outcome("g@seed2");
+        let mut a = crate::outcome::tests_support::outcome("g@seed1");
+        let mut b = crate::outcome::tests_support::outcome("g@seed2");
         let with = |true_mm, est_mm, sigma_mm, true_gain, gain| EstSample {
             true_gain,
             gain,

@@ -2,7 +2,7 @@
 
 use fois_protocol::{DetectorState, EventKind};
 
-use crate::run::Outcome;
+use crate::outcome::Outcome;
 use crate::scenario::{Reply, Scenario, state_named};
 
 /// Every expectation of `sc` that `o` does not meet (empty: all hold). The

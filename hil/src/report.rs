@@ -2,7 +2,7 @@
 
 use std::fmt::Write as _;
 
-use crate::run::Outcome;
+use crate::outcome::Outcome;
 
 /// Verdict of one run against the project's goals.
 #[derive(Debug, Clone, PartialEq)]

@@ -5,7 +5,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use fois_hil::{accuracy, report, run, scenario};
+use fois_hil::{Outcome, accuracy, report, run, scenario};
 
 #[test]
 fn every_scenario_meets_its_expectations() {
@@ -39,7 +39,7 @@ fn every_scenario_meets_its_expectations() {
 /// CI): those met on these seeds are asserted; the misses (rime 10 mm, the
 /// unknown LED −30 %, glazed, the gain scenarios' thickness) are printed,
 /// not asserted (hil/README.md).
-fn accuracy_goals(outcomes: &[run::Outcome]) {
+fn accuracy_goals(outcomes: &[Outcome]) {
     let rows = accuracy::rows(outcomes);
     let crlb = accuracy::crlb_rows(64);
     println!("{}", accuracy::table(&rows, &crlb));

@@ -13,7 +13,6 @@ use crate::kernels::LANES;
 use crate::laws::{fr_dielectric, fresnel_transmittance, refract, theta_max, theta_max_fibre};
 use crate::setup::RayLanes;
 use crate::streams::{mix64, std_normal, uniform};
-use crate::tracer::{Accretion, Scratch};
 use crate::walk::GapSampler;
 
 /// One source fibre's ray, fixed at model set-up.
@@ -160,18 +159,6 @@ impl SensorModel {
             Some(tr) => tr.dot(-self.fibre_axis) >= self.cos_accept,
             None => false,
         }
-    }
-
-    /// Trace one accretion: one physical ice body grown from 0 to `max_mm`, deterministic
-    /// in (seed, run). Cost O(rays × (thicknesses + bubbles)); the phases in `tracer.rs`.
-    pub fn accretion(&self, seed: u64, run: u64) -> Curve {
-        Scratch::with(self.thick.len(), |buf| {
-            let mut acc = Accretion::new(self, seed, run, buf);
-            for (r, ray) in self.rays.iter().enumerate() {
-                acc.trace(r, ray);
-            }
-            acc.into_curve()
-        })
     }
 }
 

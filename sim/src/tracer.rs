@@ -141,6 +141,20 @@ struct RayFrame {
     bubble: BubbleRay,
 }
 
+impl SensorModel {
+    /// Trace one accretion: one physical ice body grown from 0 to `max_mm`, deterministic
+    /// in (seed, run). Cost O(rays × (thicknesses + bubbles)); the phases in `tracer.rs`.
+    pub fn accretion(&self, seed: u64, run: u64) -> Curve {
+        Scratch::with(self.thick.len(), |buf| {
+            let mut acc = Accretion::new(self, seed, run, buf);
+            for (r, ray) in self.rays.iter().enumerate() {
+                acc.trace(r, ray);
+            }
+            acc.into_curve()
+        })
+    }
+}
+
 impl<'m> Accretion<'m> {
     /// Phase 1: the surface of accretion `run` of `seed`, and empty sums.
     pub(crate) fn new(m: &'m SensorModel, seed: u64, run: u64, buf: Scratch) -> Self {

@@ -258,7 +258,7 @@ pub fn run(root: &Path) -> Result<()> {
         pythons.push((r, venv(r, root)?, t.elapsed().as_secs_f64()));
     }
     // Build once (the run below then only starts the test binary).
-    crate::run(
+    crate::shell::run(
         "cargo",
         &[
             "test",

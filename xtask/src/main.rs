@@ -4,7 +4,8 @@
 //!   system tools the tests need (installed if missing, before anything is
 //!   compiled: [`tools`]; with the gateway Modbus tests' pymodbus
 //!   virtualenv), format, the crate rules of ARCHITECTURE.md
-//!   ([`crates`]), clippy (host crates, and the firmware on its thumb
+//!   ([`crates`]), the module rule: no import circles between a crate's
+//!   files ([`modules`]), clippy (host crates, and the firmware on its thumb
 //!   target), the whole test suite, the firmware's release cross-build with
 //!   its size budget, the firmware logic on an emulated Cortex-M4F, the
 //!   fuzz crates' build, the gateway's Debian package ([`package`]), and
@@ -13,6 +14,9 @@
 //! - `cargo xtask tools` — only the system tools (and the pymodbus
 //!   virtualenv `target/pymodbus-venv`).
 //! - `cargo xtask crates` — only the crate rules.
+//! - `cargo xtask modules [--graph]` — only the module rule: every crate's
+//!   files form no import circle (a list of known ones is tolerated for
+//!   now); `--graph`: print each file and the files it imports first.
 //! - `cargo xtask deb` — build the gateway's Debian package and check it.
 //! - `cargo xtask ha-check [--if-changed]` — the gateway's Home Assistant
 //!   discovery checked by real Home Assistant releases (installed into
@@ -34,8 +38,12 @@ use anyhow::{Context, Result, bail};
 
 mod crates;
 mod ha_check;
+mod modules;
 mod package;
+mod shell;
 mod tools;
+
+use shell::{have, run};
 
 /// Flash budget of the firmware image (the project's goal for a small MCU).
 const FLASH_BUDGET_BYTES: u64 = 128 * 1024;
@@ -64,6 +72,11 @@ fn main() -> Result<()> {
         "ci" => ci(),
         "tools" => tools::ensure(&root),
         "crates" => crates::check(&root),
+        "modules" => match std::env::args().nth(2).as_deref() {
+            None => modules::check(&root, false),
+            Some("--graph") => modules::check(&root, true),
+            Some(other) => bail!("usage: cargo xtask modules [--graph] (not `{other}`)"),
+        },
         "deb" => package::build().and_then(|deb| package::check(&deb)),
         "ha-check" => match std::env::args().nth(2).as_deref() {
             None => ha_check::run(&root),
@@ -77,11 +90,13 @@ fn main() -> Result<()> {
             eprintln!(
                 "usage: cargo xtask <task>\n\n\
                  tasks:\n  \
-                 ci     system tools, format, crate rules, clippy (host + thumb), tests, firmware size\n         \
+                 ci     system tools, format, crate rules, module rule, clippy (host + thumb), tests, firmware size\n         \
                  budget, QEMU run, fuzz crates build, the gateway's Debian package, the Home\n         \
                  Assistant check when its inputs changed since its recorded pass\n  \
                  tools  install the system tools the tests need (mosquitto, qemu-system-arm, systemd, python3)\n         and the gateway Modbus tests' pymodbus virtualenv (target/pymodbus-venv)\n  \
                  crates check the crate rules of ARCHITECTURE.md on the dependency graph\n  \
+                 modules [--graph]  check that no two files of a crate import each other (directly or around\n         \
+                 a loop); --graph: print each file and the files it imports first\n  \
                  deb    build the gateway's Debian package and check its files, config and unit\n  \
                  ha-check [--if-changed]  the gateway's Home Assistant discovery checked by Home Assistant\n         \
                  2024.1.6 and 2024.3.3 (installed into virtualenvs under ~/.cache/fois/home-assistant);\n         \
@@ -104,27 +119,6 @@ fn project_root() -> PathBuf {
         .parent()
         .map(Path::to_path_buf)
         .unwrap_or_else(|| PathBuf::from("."))
-}
-
-/// Run a command, echoing it, failing on a non-zero exit.
-pub(crate) fn run(program: &str, args: &[&str]) -> Result<()> {
-    eprintln!("\n$ {program} {}", args.join(" "));
-    let status = Command::new(program)
-        .args(args)
-        .status()
-        .with_context(|| format!("could not start `{program}`"))?;
-    if !status.success() {
-        bail!("`{program} {}` failed ({status})", args.join(" "));
-    }
-    Ok(())
-}
-
-fn have(program: &str) -> bool {
-    Command::new("sh")
-        .args(["-c", &format!("command -v {program} >/dev/null 2>&1")])
-        .status()
-        .map(|s| s.success())
-        .unwrap_or(false)
 }
 
 fn ci() -> Result<()> {
@@ -153,6 +147,9 @@ fn ci() -> Result<()> {
     })?;
     let root = project_root();
     step("crate rules", &mut || crates::check(&root))?;
+    step("module rule (no import circles)", &mut || {
+        modules::check(&root, false)
+    })?;
     step("clippy (host)", &mut || {
         run(
             "cargo",

@@ -38,7 +38,7 @@ fn output(program: &str, args: &[&str]) -> Result<(bool, String)> {
 /// Build the package; its path.
 pub fn build() -> Result<PathBuf> {
     if !crate::tools::found("cargo-deb", &[]) {
-        crate::run("cargo", &["install", "cargo-deb", "--locked"])?;
+        crate::shell::run("cargo", &["install", "cargo-deb", "--locked"])?;
     }
     eprintln!("\n$ cargo deb -p fois-gateway --strip");
     let out = Command::new("cargo")

@@ -168,9 +168,9 @@ pub fn ensure_pymodbus(root: &Path) -> Result<()> {
     }
     let v = venv.to_string_lossy().to_string();
     let r = req_path.to_string_lossy().to_string();
-    crate::run("python3", &["-m", "venv", &v])?;
+    crate::shell::run("python3", &["-m", "venv", &v])?;
     let pip = venv.join("bin/pip").to_string_lossy().to_string();
-    crate::run(
+    crate::shell::run(
         &pip,
         &[
             "install",
