@@ -12,7 +12,7 @@ use fois_link::numbers::{f64_in, non_negative};
 use tracing::info;
 
 use crate::config::{FileConfig, GatewayConfig, Overrides};
-use crate::driver::{NameConflict, RunLimits, Service};
+use crate::service::{NameConflict, RunLimits, Service};
 use crate::logging::{LogTime, LogTo};
 
 /// Exit code of a bad command line or config.

@@ -20,9 +20,10 @@
 //! | [`logging`] | `tracing` set-up: levels, `RUST_LOG`, timestamps only on a terminal |
 
 pub mod cli;
+pub mod command;
 pub mod config;
 pub mod discovery;
-pub mod driver;
+pub mod service;
 pub mod inflight;
 pub mod logging;
 pub mod machine;

@@ -19,6 +19,7 @@ use fois_link::timefmt::unix_ms_now;
 use fois_link::{Incoming, Link, LinkError, open_port};
 use fois_protocol::{Command, DeviceFrame, DeviceMsg, Hello, SeqEvent, SeqTracker};
 
+use crate::command::NodeCommand;
 use crate::config::NodeSpec;
 
 /// Wait between reconnection attempts.
@@ -36,42 +37,6 @@ pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REPLY
 /// to ~6–7 s (its longest frame, a sector erase, then a dark calibration;
 /// firmware/README.md "Answer time"), so anything shorter would flap.
 pub const SILENCE_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS);
-
-/// A command from MQTT for the node.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum NodeCommand {
-    /// Acknowledge the ice alarm.
-    AckAlarm,
-    /// Take the dark baseline.
-    CalibrateDark,
-}
-
-impl NodeCommand {
-    /// Parse a command payload (`ack`, `calibrate-dark`; case and
-    /// surrounding blanks ignored).
-    pub fn parse(s: &str) -> Option<NodeCommand> {
-        match s.trim().to_ascii_lowercase().as_str() {
-            "ack" | "ack-alarm" | "ack_alarm" => Some(NodeCommand::AckAlarm),
-            "calibrate-dark" | "calibrate_dark" => Some(NodeCommand::CalibrateDark),
-            _ => None,
-        }
-    }
-
-    /// The command's name.
-    pub fn name(self) -> &'static str {
-        match self {
-            NodeCommand::AckAlarm => "ack",
-            NodeCommand::CalibrateDark => "calibrate-dark",
-        }
-    }
-
-    fn wire(self) -> Command {
-        match self {
-            NodeCommand::AckAlarm => Command::AckAlarm,
-            NodeCommand::CalibrateDark => Command::CalibrateDark,
-        }
-    }
-}
 
 /// What a reader reports.
 #[derive(Debug, Clone, PartialEq)]
@@ -253,7 +218,7 @@ fn stream<P: Read + Write, S: Sink>(
             return Some(None);
         }
         match commands.try_recv() {
-            Ok(cmd) => match link.send(cmd.wire()) {
+            Ok(cmd) => match link.send(cmd.wire_command()) {
                 Ok(id) => pending.push((id, cmd, Instant::now())),
                 Err(e) => {
                     let detail = format!("not sent: {e}");
@@ -528,14 +493,4 @@ mod tests {
         }));
     }
 
-    #[test]
-    fn command_payloads_parse() {
-        assert_eq!(NodeCommand::parse(" ACK\n"), Some(NodeCommand::AckAlarm));
-        assert_eq!(
-            NodeCommand::parse("calibrate-dark"),
-            Some(NodeCommand::CalibrateDark)
-        );
-        assert_eq!(NodeCommand::parse("reset"), None);
-        assert_eq!(NodeCommand::parse(""), None);
-    }
 }

@@ -26,12 +26,7 @@ use tracing::{info, warn};
 
 use super::{Action, Gateway};
 use crate::payload::CommandResultJson;
-use crate::reader::NodeCommand;
-
-/// The longest command message read, bytes: anything longer is skipped
-/// (the longest command, `{"command": "calibrate-dark"}` with blanks, is
-/// far below).
-pub const MAX_COMMAND_BYTES: usize = 256;
+use crate::command::{MAX_COMMAND_BYTES, NodeCommand, command_word};
 
 /// After the SUBACK of the checking subscription, a retained copy has this
 /// long to arrive (it follows the SUBACK on the same connection at once).
@@ -125,15 +120,7 @@ impl Gateway {
             return;
         }
         let text = String::from_utf8_lossy(payload).to_string();
-        // `{"command": "ack"}` or plain `ack`.
-        let word = serde_json::from_str::<serde_json::Value>(&text)
-            .ok()
-            .and_then(|v| {
-                v.get("command")
-                    .and_then(|c| c.as_str())
-                    .map(str::to_string)
-            })
-            .unwrap_or_else(|| text.clone());
+        let word = command_word(&text);
         let shown: String = word.trim().chars().take(40).collect();
         if shown.is_empty() {
             return;
@@ -239,7 +226,7 @@ impl Gateway {
     }
 
     /// A command from another front end (see
-    /// [`crate::driver::FrontEndCommand`]): the same checks as MQTT's.
+    /// [`crate::command::FrontEndCommand`]): the same checks as MQTT's.
     pub fn front_end_command(&mut self, node: usize, cmd: NodeCommand, now: Instant) {
         if node < self.nodes.len() {
             self.request_command(node, cmd.name(), cmd, "a front end", now);

@@ -2,7 +2,7 @@
 //! (a node reader's report, the broker connecting or going away, a packet
 //! id going out, a PUBACK, a message on a command topic, a tick) and answers
 //! with [`Action`]s (publish, subscribe, hand a command to a node) that the
-//! driver ([`crate::driver`]) carries out with rumqttc — as rumqttc itself
+//! service ([`crate::service`]) carries out with rumqttc — as rumqttc itself
 //! keeps its `MqttState` apart from its `EventLoop`. Its tests need no
 //! broker. Its only IO is the disk queue it owns.
 //!
@@ -33,17 +33,15 @@ use crate::config::{GatewayConfig, NodeSpec};
 use crate::inflight::{InFlight, WINDOW};
 use crate::payload::{InfoJson, StateJson, StatusJson};
 use crate::queue::{Queue, Record};
-use crate::reader::NodeCommand;
+use crate::command::NodeCommand;
 use crate::snapshot::Fleet;
 use crate::state_filter::StateFilter;
 use crate::topics::Topics;
 
-pub use commands::MAX_COMMAND_BYTES;
-
 /// Wait before reconnecting to the broker.
 pub const RECONNECT_DELAY: Duration = Duration::from_secs(1);
 
-/// What the driver is to do.
+/// What the service is to do.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Action {
     /// Publish a message.
@@ -276,7 +274,7 @@ impl Gateway {
         }
     }
 
-    /// The driver could not hand `actions` (the tail of what
+    /// The service could not hand `actions` (the tail of what
     /// [`Gateway::actions`] returned, in order) to the client: take them
     /// back, so records are sent again and subscriptions are made again.
     pub fn unsent(&mut self, actions: &[Action]) {

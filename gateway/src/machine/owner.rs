@@ -131,7 +131,7 @@ impl Gateway {
     }
 
     /// Another gateway of this name started before this one: why this one
-    /// must stop (the driver stops without the goodbye).
+    /// must stop (the service stops without the goodbye).
     pub fn conflict(&self) -> Option<&str> {
         self.conflict.as_deref()
     }

@@ -12,7 +12,8 @@ use rumqttc::QoS;
 use super::{Action, Gateway};
 use crate::config::{FileConfig, Overrides};
 use crate::queue::{Queue, QueueLimits};
-use crate::reader::{NodeCommand, NodeMsg, NodeUpdate};
+use crate::command::NodeCommand;
+use crate::reader::{NodeMsg, NodeUpdate};
 
 fn gateway(dir: &std::path::Path, extra: &str) -> Gateway {
     let text = format!(
