@@ -121,7 +121,8 @@ pub struct Gateway {
     queue: Queue,
     fleet: Fleet,
     connected: bool,
-    down_said: Option<String>,
+    /// The broker failure last logged (a repeat of it is not logged again).
+    logged_down_reason: Option<String>,
     flight: InFlight,
     send_cursor: u64,
     started: Instant,
@@ -172,7 +173,7 @@ impl Gateway {
             queue,
             fleet,
             connected: false,
-            down_said: None,
+            logged_down_reason: None,
             flight: InFlight::default(),
             send_cursor,
             started: now,
@@ -393,7 +394,7 @@ impl Gateway {
     /// send the queue from its acknowledged offset.
     pub fn on_connected(&mut self, now: Instant) {
         self.connected = true;
-        self.down_said = None;
+        self.logged_down_reason = None;
         self.sum.broker_connects += 1;
         self.flight.clear();
         self.send_cursor = self.queue.acked();
@@ -430,7 +431,7 @@ impl Gateway {
     /// The connection failed or was lost: forget what is in flight (it is
     /// sent again from the queue after the reconnect).
     pub fn on_disconnected(&mut self, reason: &str) {
-        if self.connected || self.down_said.as_deref() != Some(reason) {
+        if self.connected || self.logged_down_reason.as_deref() != Some(reason) {
             warn!(
                 "broker {} {}: {reason}; {} record(s) wait in the disk queue, retrying every {} s",
                 self.cfg.broker.describe(),
@@ -443,7 +444,7 @@ impl Gateway {
                 RECONNECT_DELAY.as_secs()
             );
         }
-        self.down_said = Some(reason.to_string());
+        self.logged_down_reason = Some(reason.to_string());
         self.connected = false;
         self.flight.clear();
         self.send_cursor = self.queue.acked();
