@@ -12,8 +12,8 @@ use fois_link::numbers::{f64_in, non_negative};
 use tracing::info;
 
 use crate::config::{FileConfig, GatewayConfig, Overrides};
-use crate::service::{NameConflict, RunLimits, Service};
 use crate::logging::{LogTime, LogTo};
+use crate::service::{NameConflict, RunLimits, Service};
 
 /// Exit code of a bad command line or config.
 pub const EXIT_USAGE: i32 = 2;

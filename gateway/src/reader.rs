@@ -502,5 +502,4 @@ mod tests {
             frame_period_ms: None
         }));
     }
-
 }

@@ -13,11 +13,11 @@ use rumqttc::{AsyncClient, ConnectionError, Event, EventLoop, Incoming, Outgoing
 use tokio::sync::mpsc;
 use tracing::{info, warn};
 
+use crate::command::{FrontEndCommand, NodeCommand};
 use crate::config::GatewayConfig;
 use crate::machine::{Action, Gateway, GatewaySummary, RECONNECT_DELAY};
 use crate::mqtt::{describe, mqtt_options};
 use crate::queue::{Queue, QueueLimits};
-use crate::command::{FrontEndCommand, NodeCommand};
 use crate::reader::{NodeMsg, ReaderTimings, spawn_serial_reader};
 use crate::snapshot::Fleet;
 use crate::topics::Topics;
@@ -212,8 +212,7 @@ impl Service {
         drop(node_tx);
 
         let started = Instant::now();
-        let mut gw = Gateway::new(cfg, queue, started);
-        gw.share_fleet(fleet);
+        let mut gw = Gateway::new(cfg, queue, fleet, started);
         let mut io = Io {
             client,
             resume: resume_tx,

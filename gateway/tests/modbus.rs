@@ -14,9 +14,9 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use fois_gateway::config::{FileConfig, Overrides};
-use fois_gateway::service::{RunLimits, Service};
 use fois_gateway::machine::GatewaySummary;
 use fois_gateway::modbus::status;
+use fois_gateway::service::{RunLimits, Service};
 use fois_gateway::snapshot::{Fleet, NodeSnapshot};
 use fois_vnode::Cover;
 use support::pymodbus::{self, Client};

@@ -28,9 +28,9 @@ use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
 use tracing::{debug, info, warn};
 
 use super::{ACK, ACK_VALUE, REGISTERS, register_map};
-use crate::config::ModbusConfig;
 use crate::command::FrontEndCommand;
 use crate::command::NodeCommand;
+use crate::config::ModbusConfig;
 use crate::snapshot::Fleet;
 
 /// Registers one read may ask for (Modbus: 125).

@@ -187,12 +187,18 @@ mod answers {
 
     use super::super::server::ModbusUnits;
     use super::iced;
-    use crate::config::ModbusConfig;
     use crate::command::FrontEndCommand;
     use crate::command::NodeCommand;
+    use crate::config::ModbusConfig;
     use crate::snapshot::{Fleet, NodeSnapshot};
 
-    fn units(commands: bool) -> (ModbusUnits, mpsc::UnboundedReceiver<FrontEndCommand>, Instant) {
+    fn units(
+        commands: bool,
+    ) -> (
+        ModbusUnits,
+        mpsc::UnboundedReceiver<FrontEndCommand>,
+        Instant,
+    ) {
         let t0 = Instant::now();
         let mut down = NodeSnapshot::new(1, Some("down".into()), "/dev/y".into());
         down.link_up = false;
