@@ -126,24 +126,7 @@ impl Fleet {
 
     /// A copy of node `index`'s snapshot.
     pub fn node(&self, index: usize) -> Option<NodeSnapshot> {
-        self.nodes
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .get(index)
-            .cloned()
-    }
-
-    /// Number of nodes.
-    pub fn len(&self) -> usize {
-        self.nodes
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .len()
-    }
-
-    /// True when no node is configured.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
+        self.read(index, NodeSnapshot::clone)
     }
 
     /// Change node `index`'s snapshot (the gateway's writer side).
