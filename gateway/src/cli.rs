@@ -1,7 +1,7 @@
-//! The command line of `fois-gateway`: its flags (each overrides the
-//! config file's value), the parsers that refuse a bad value before anything
-//! is opened (exit code 2), `--print-config`, `--check-config`, and the run
-//! with its summary.
+//! The command line of `fois-gateway`: the flags of the run (the flags
+//! that override the config file are [`Overrides`], declared there and
+//! flattened in), `--print-config`, `--check-config`, and the run with its
+//! summary. A bad value is refused before anything is opened (exit code 2).
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;

@@ -1,6 +1,7 @@
 //! The config file as written: every key optional, unknown keys refused
 //! (a misspelt key is an error, not a silent default), and the command
-//! line's [`Overrides`]. [`FileConfig::resolve`] turns both into a checked
+//! line's [`Overrides`] (its flags declared here, with their parsers, once).
+//! [`FileConfig::resolve`] turns both into a checked
 //! [`GatewayConfig`](super::GatewayConfig).
 
 use std::path::{Path, PathBuf};
