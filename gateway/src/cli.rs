@@ -11,7 +11,8 @@ use clap::Parser;
 use fois_link::numbers::{f64_in, non_negative};
 use tracing::info;
 
-use crate::config::{FileConfig, GatewayConfig, Overrides};
+use crate::config::GatewayConfig;
+use crate::config::file::{FileConfig, Overrides};
 use crate::logging::{LogTime, LogTo};
 use crate::service::{NameConflict, RunLimits, Service};
 

@@ -5,7 +5,7 @@
 //! | module | what lives there |
 //! | --- | --- |
 //! | [`cli`] | the command line: flags, `--print-config`, `--check-config`, the run and its summary |
-//! | [`config`] | the TOML file, the flags that override it ([`config::Overrides`], declared once), defaults, checks, [`config::Secret`] |
+//! | [`config`] | the TOML file, the flags that override it ([`config::file::Overrides`], declared once), defaults, checks, [`config::Secret`] |
 //! | [`command`] | the node command words, their parser, the front-end command: shared by the reader, the machine, MQTT and Modbus |
 //! | [`reader`] | the node reader: one thread per serial port (`fois_link`), handshake, stream, reconnect |
 //! | [`machine`] | the state machine, free of network IO: node reports and broker events in, publish/subscribe/command actions out |

@@ -13,7 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use fois_gateway::config::{FileConfig, Overrides};
+use fois_gateway::config::file::{FileConfig, Overrides};
 use fois_gateway::machine::GatewaySummary;
 use fois_gateway::modbus::status;
 use fois_gateway::service::{RunLimits, Service};

@@ -84,7 +84,7 @@ mod tests {
     };
 
     use super::super::{Action, Gateway};
-    use crate::config::{FileConfig, Overrides};
+    use crate::config::file::{FileConfig, Overrides};
     use crate::queue::{Queue, QueueLimits};
     use crate::reader::{NodeMsg, NodeUpdate};
 

@@ -45,7 +45,7 @@ pub struct Instance {
 impl Instance {
     /// This process, now.
     pub fn this_process() -> Instance {
-        let host = crate::config::default_gateway_name();
+        let host = crate::config::resolve::default_gateway_name();
         let pid = std::process::id();
         let started_unix_ms = unix_ms_now();
         Instance {

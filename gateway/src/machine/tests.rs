@@ -11,7 +11,7 @@ use rumqttc::QoS;
 
 use super::{Action, Gateway};
 use crate::command::NodeCommand;
-use crate::config::{FileConfig, Overrides};
+use crate::config::file::{FileConfig, Overrides};
 use crate::queue::{Queue, QueueLimits};
 use crate::reader::{NodeMsg, NodeUpdate};
 
