@@ -1,7 +1,7 @@
-//! The command line of `fois-gateway`: its flags (each overrides the
-//! config file's value), the parsers that refuse a bad value before anything
-//! is opened (exit code 2), `--print-config`, `--check-config`, and the run
-//! with its summary.
+//! The command line of `fois-gateway`: the flags of the run (the flags
+//! that override the config file are [`Overrides`], declared there and
+//! flattened in), `--print-config`, `--check-config`, and the run with its
+//! summary. A bad value is refused before anything is opened (exit code 2).
 
 use std::path::PathBuf;
 use std::sync::atomic::AtomicBool;
@@ -11,12 +11,10 @@ use clap::Parser;
 use fois_link::numbers::{f64_in, non_negative};
 use tracing::info;
 
-use crate::config::{
-    BrokerAddr, FileConfig, GatewayConfig, MAX_INTERVAL_MS, MIN_QUEUE_MAX_BYTES, NodeSpec,
-    Overrides, is_valid_name,
-};
-use crate::driver::{NameConflict, RunLimits, Service};
+use crate::config::GatewayConfig;
+use crate::config::file::{FileConfig, Overrides};
 use crate::logging::{LogTime, LogTo};
+use crate::service::{NameConflict, RunLimits, Service};
 
 /// Exit code of a bad command line or config.
 pub const EXIT_USAGE: i32 = 2;
@@ -46,28 +44,6 @@ impl std::fmt::Display for UsageError {
 
 impl std::error::Error for UsageError {}
 
-/// A gateway name usable as one MQTT topic level and in Home Assistant ids:
-/// 1 to 64 letters, digits, `-` or `_`.
-fn topic_name(s: &str) -> Result<String, String> {
-    if is_valid_name(s) {
-        Ok(s.to_string())
-    } else {
-        Err(format!(
-            "`{s}` is not usable in topics: use 1 to 64 letters, digits, `-` or `_`"
-        ))
-    }
-}
-
-/// An MQTT broker, `HOST[:PORT]` ([`BrokerAddr::parse`]).
-fn broker_addr(s: &str) -> Result<BrokerAddr, String> {
-    BrokerAddr::parse(s).map_err(|e| format!("{e:#}"))
-}
-
-/// A gateway node, `PATH[=NAME]` ([`NodeSpec::parse_flag`]).
-fn gateway_node(s: &str) -> Result<NodeSpec, String> {
-    NodeSpec::parse_flag(s).map_err(|e| format!("{e:#}"))
-}
-
 /// `fois-gateway`: many FOIS nodes to an MQTT broker.
 #[derive(Debug, Clone, Parser)]
 #[command(
@@ -85,56 +61,9 @@ pub struct GatewayArgs {
     /// the whole config.
     #[arg(long, short = 'c', value_name = "FILE.toml")]
     pub config: Option<PathBuf>,
-    /// Gateway name: a topic level (<prefix>/<name>/...) and part of every
-    /// Home Assistant id; 1 to 64 letters, digits, - and _ [default: the
-    /// host name].
-    #[arg(long, value_name = "NAME", value_parser = topic_name)]
-    pub name: Option<String>,
-    /// The broker, HOST, HOST:PORT or [IPv6]:PORT [default: 127.0.0.1:1883,
-    /// 8883 with TLS].
-    #[arg(long, value_name = "HOST[:PORT]", value_parser = broker_addr)]
-    pub broker: Option<BrokerAddr>,
-    /// Broker user name.
-    #[arg(long, value_name = "USER")]
-    pub username: Option<String>,
-    /// A file whose first line is the broker password (there is no password
-    /// flag: other users can read a command line).
-    #[arg(long, value_name = "FILE")]
-    pub password_file: Option<PathBuf>,
-    /// Connect with TLS, trusting the CA certificate(s) in this PEM file.
-    #[arg(long, value_name = "FILE.pem")]
-    pub ca_file: Option<PathBuf>,
-    /// Client certificate (PEM) for mutual TLS, with --client-key.
-    #[arg(long, value_name = "FILE.pem", requires = "client_key")]
-    pub client_cert: Option<PathBuf>,
-    /// Private key (PEM) of the client certificate.
-    #[arg(long, value_name = "FILE.pem", requires = "client_cert")]
-    pub client_key: Option<PathBuf>,
-    /// A node: serial port (or pty) path, optionally =NAME for its topics
-    /// [default name: the node's unique id, hex]. Repeat for more nodes;
-    /// added to the config file's [[node]] tables.
-    #[arg(long = "node", value_name = "PATH[=NAME]", value_parser = gateway_node)]
-    pub nodes: Vec<NodeSpec>,
-    /// At most one measurement per node per this many ms of node time while
-    /// the broker is connected; 0 publishes every frame (10 per second per
-    /// node); at most 86400000 (a day) [default: 1000].
-    #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(..=MAX_INTERVAL_MS))]
-    pub measurement_interval_ms: Option<u64>,
-    /// The same while the broker is unreachable: what goes to the disk
-    /// queue [default: 10000].
-    #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(..=MAX_INTERVAL_MS))]
-    pub offline_measurement_interval_ms: Option<u64>,
-    /// Directory of the store-and-forward queue [default:
-    /// $XDG_STATE_HOME/fois/gateway-<name>, else ~/.local/state/fois/...].
-    #[arg(long, value_name = "DIR")]
-    pub queue_dir: Option<PathBuf>,
-    /// Bound of the disk queue, bytes, at least 65536; the oldest records
-    /// are dropped first and counted [default: 268435456 = 256 MiB].
-    #[arg(long, value_name = "BYTES", value_parser = clap::value_parser!(u64).range(MIN_QUEUE_MAX_BYTES..))]
-    pub queue_max_bytes: Option<u64>,
-    /// Do not publish Home Assistant discovery configs.
-    #[arg(long)]
-    pub no_homeassistant: bool,
+    /// The flags that override the config file.
+    #[command(flatten)]
+    pub overrides: Overrides,
     /// Print a status line every this many seconds (0.1 to 86400).
     #[arg(long, default_value_t = 10.0, value_name = "SECONDS", value_parser = f64_in(0.1, 86_400.0))]
     pub status_interval_s: f64,
@@ -171,22 +100,7 @@ impl GatewayArgs {
             Some(p) => FileConfig::load(p).map_err(usage)?,
             None => FileConfig::default(),
         };
-        let o = Overrides {
-            name: self.name.clone(),
-            broker: self.broker.clone(),
-            username: self.username.clone(),
-            password_file: self.password_file.clone(),
-            ca_file: self.ca_file.clone(),
-            client_cert_file: self.client_cert.clone(),
-            client_key_file: self.client_key.clone(),
-            nodes: self.nodes.clone(),
-            measurement_interval_ms: self.measurement_interval_ms,
-            offline_measurement_interval_ms: self.offline_measurement_interval_ms,
-            queue_dir: self.queue_dir.clone(),
-            queue_max_bytes: self.queue_max_bytes,
-            no_homeassistant: self.no_homeassistant,
-        };
-        Ok(file.resolve(&o).map_err(usage)?)
+        Ok(file.resolve(&self.overrides).map_err(usage)?)
     }
 }
 

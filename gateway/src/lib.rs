@@ -5,14 +5,15 @@
 //! | module | what lives there |
 //! | --- | --- |
 //! | [`cli`] | the command line: flags, `--print-config`, `--check-config`, the run and its summary |
-//! | [`config`] | the TOML file, the flags that override it, defaults, checks, [`config::Secret`] |
+//! | [`config`] | the TOML file, the flags that override it ([`config::file::Overrides`], declared once), defaults, checks, [`config::Secret`] |
+//! | [`command`] | the node command words, their parser, the front-end command: shared by the reader, the machine, MQTT and Modbus |
 //! | [`reader`] | the node reader: one thread per serial port (`fois_link`), handshake, stream, reconnect |
 //! | [`machine`] | the state machine, free of network IO: node reports and broker events in, publish/subscribe/command actions out |
-//! | [`driver`] | the runtime: tokio, rumqttc's event loop, the readers, the machine's actions carried out |
+//! | [`service`] | the runtime: tokio, rumqttc's event loop, the readers, the Modbus server, the machine's actions carried out |
 //! | [`mqtt`] | connection set-up: client options, TLS (rustls, ring), words for connection errors |
 //! | [`inflight`] | packet-id bookkeeping: which record a PUBACK acknowledges |
 //! | [`queue`] | the bounded on-disk store-and-forward queue |
-//! | [`snapshot`] | every node's latest state, shared with other front ends |
+//! | [`snapshot`] | each node's one record, shared with other front ends; the naming rule |
 //! | [`modbus`] | Modbus TCP for SCADA: the register table of a node's snapshot, the server (`tokio-modbus`) |
 //! | [`topics`], [`payload`] | the topic layout, the JSON payloads |
 //! | [`state_filter`] | when the retained state is published: discrete changes at once, continuous values deadbanded |
@@ -20,9 +21,9 @@
 //! | [`logging`] | `tracing` set-up: levels, `RUST_LOG`, timestamps only on a terminal |
 
 pub mod cli;
+pub mod command;
 pub mod config;
 pub mod discovery;
-pub mod driver;
 pub mod inflight;
 pub mod logging;
 pub mod machine;
@@ -31,6 +32,7 @@ pub mod mqtt;
 pub mod payload;
 pub mod queue;
 pub mod reader;
+pub mod service;
 pub mod snapshot;
 pub mod state_filter;
 pub mod topics;

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use clap::Parser;
 use fois_gateway::cli::{self, EXIT_NAME_CONFLICT, EXIT_USAGE, GatewayArgs, UsageError};
-use fois_gateway::driver::NameConflict;
+use fois_gateway::service::NameConflict;
 
 /// Set by Ctrl-C or SIGTERM: the gateway stops cleanly.
 static STOP: AtomicBool = AtomicBool::new(false);

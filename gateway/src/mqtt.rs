@@ -21,7 +21,7 @@ pub const INFLIGHT: u16 = 1024;
 /// limit (a remaining length of 2²⁸ − 1). A smaller limit would make
 /// rumqttc drop the connection when any client publishes a big message on
 /// a command topic (a retained one: at every reconnection); the gateway
-/// instead reads it and skips it ([`crate::machine::MAX_COMMAND_BYTES`]).
+/// instead reads it and skips it ([`crate::command::MAX_COMMAND_BYTES`]).
 /// Brokers bound what they accept themselves (Mosquitto:
 /// `message_size_limit`).
 pub const MAX_INCOMING_PACKET: usize = 268_435_455 + 5;

@@ -19,6 +19,7 @@ use fois_link::timefmt::unix_ms_now;
 use fois_link::{Incoming, Link, LinkError, open_port};
 use fois_protocol::{Command, DeviceFrame, DeviceMsg, Hello, SeqEvent, SeqTracker};
 
+use crate::command::NodeCommand;
 use crate::config::NodeSpec;
 
 /// Wait between reconnection attempts.
@@ -32,46 +33,10 @@ pub const HANDSHAKE_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REP
 pub const COMMAND_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS);
 
 /// A node silent this long is declared offline and reconnected: the
-/// protocol's `REPLY_TIMEOUT_MS` (8 s). A healthy node can be silent for up
-/// to ~6–7 s (its longest frame, a sector erase, then a dark calibration;
-/// firmware/README.md "Answer time"), so anything shorter would flap.
+/// protocol's `REPLY_TIMEOUT_MS` (8 s), over the longest a healthy node is
+/// silent: its worst answer, 5.829 s (its longest frame, a sector erase,
+/// then a dark calibration; firmware/README.md "Answer time").
 pub const SILENCE_TIMEOUT: Duration = Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS);
-
-/// A command from MQTT for the node.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum NodeCommand {
-    /// Acknowledge the ice alarm.
-    AckAlarm,
-    /// Take the dark baseline.
-    CalibrateDark,
-}
-
-impl NodeCommand {
-    /// Parse a command payload (`ack`, `calibrate-dark`; case and
-    /// surrounding blanks ignored).
-    pub fn parse(s: &str) -> Option<NodeCommand> {
-        match s.trim().to_ascii_lowercase().as_str() {
-            "ack" | "ack-alarm" | "ack_alarm" => Some(NodeCommand::AckAlarm),
-            "calibrate-dark" | "calibrate_dark" => Some(NodeCommand::CalibrateDark),
-            _ => None,
-        }
-    }
-
-    /// The command's name.
-    pub fn name(self) -> &'static str {
-        match self {
-            NodeCommand::AckAlarm => "ack",
-            NodeCommand::CalibrateDark => "calibrate-dark",
-        }
-    }
-
-    fn wire(self) -> Command {
-        match self {
-            NodeCommand::AckAlarm => Command::AckAlarm,
-            NodeCommand::CalibrateDark => Command::CalibrateDark,
-        }
-    }
-}
 
 /// What a reader reports.
 #[derive(Debug, Clone, PartialEq)]
@@ -216,44 +181,54 @@ pub fn run_reader<P, O, S>(
         if !rep.send(NodeUpdate::Up(hello)) {
             return;
         }
-        let reason = match stream(&mut link, &mut rep, commands, timings, stop) {
-            Some(r) => r,
-            None => return,
-        };
+        let end = stream(&mut link, &mut rep, commands, timings, stop);
         tracker = link.seq.clone();
-        if let Some(reason) = reason {
-            if !rep.send(NodeUpdate::Down(reason)) {
-                return;
+        match end {
+            StreamEnd::SinkGone => return,
+            StreamEnd::Stopped => {}
+            StreamEnd::LinkLost(reason) => {
+                if !rep.send(NodeUpdate::Down(reason)) {
+                    return;
+                }
+                sleep_unless_stopped(timings.retry, stop);
             }
-            sleep_unless_stopped(timings.retry, stop);
         }
     }
 }
 
-/// Stream until the link is lost (`Some(Some(reason))`), `stop`
-/// (`Some(None)`), or the sink is gone (`None`).
+/// Why [`stream`] returned.
+enum StreamEnd {
+    /// The link was lost: why.
+    LinkLost(String),
+    /// `stop` was set.
+    Stopped,
+    /// The gateway no longer listens (the sink is gone).
+    SinkGone,
+}
+
+/// Stream until the link is lost, `stop`, or the sink is gone.
 fn stream<P: Read + Write, S: Sink>(
     link: &mut Link<P>,
     rep: &mut Reporter<'_, S>,
     commands: &Receiver<NodeCommand>,
     timings: ReaderTimings,
     stop: &AtomicBool,
-) -> Option<Option<String>> {
+) -> StreamEnd {
     let start = Command::StartStream {
         frame_period_ms: None,
     };
     if let Err(e) = link.send(start.clone()) {
-        return Some(Some(e.to_string()));
+        return StreamEnd::LinkLost(e.to_string());
     }
     let mut last_frame = Instant::now();
     let mut last_start = Instant::now();
     let mut pending: Vec<(u16, NodeCommand, Instant)> = Vec::new();
     loop {
         if stop.load(Ordering::Relaxed) {
-            return Some(None);
+            return StreamEnd::Stopped;
         }
         match commands.try_recv() {
-            Ok(cmd) => match link.send(cmd.wire()) {
+            Ok(cmd) => match link.send(cmd.wire_command()) {
                 Ok(id) => pending.push((id, cmd, Instant::now())),
                 Err(e) => {
                     let detail = format!("not sent: {e}");
@@ -262,24 +237,24 @@ fn stream<P: Read + Write, S: Sink>(
                         ok: false,
                         detail,
                     }) {
-                        return None;
+                        return StreamEnd::SinkGone;
                     }
-                    return Some(Some(e.to_string()));
+                    return StreamEnd::LinkLost(e.to_string());
                 }
             },
             Err(TryRecvError::Empty | TryRecvError::Disconnected) => {}
         }
         let incs = match link.poll() {
             Ok(v) => v,
-            Err(e) => return Some(Some(e.to_string())),
+            Err(e) => return StreamEnd::LinkLost(e.to_string()),
         };
         if !incs.is_empty() {
             last_frame = Instant::now();
         } else if last_frame.elapsed() >= timings.silence_timeout {
-            return Some(Some(format!(
+            return StreamEnd::LinkLost(format!(
                 "no frame for {:.1} s",
                 last_frame.elapsed().as_secs_f64()
-            )));
+            ));
         }
         for inc in incs {
             let update = match inc {
@@ -299,7 +274,7 @@ fn stream<P: Read + Write, S: Sink>(
                             ok,
                             detail,
                         }) {
-                            return None;
+                            return StreamEnd::SinkGone;
                         }
                     }
                     // A node sends `Hello` only while it does not stream:
@@ -310,14 +285,14 @@ fn stream<P: Read + Write, S: Sink>(
                     {
                         last_start = Instant::now();
                         if let Err(e) = link.send(start.clone()) {
-                            return Some(Some(e.to_string()));
+                            return StreamEnd::LinkLost(e.to_string());
                         }
                     }
                     NodeUpdate::Frame(f, ev)
                 }
             };
             if !rep.send(update) {
-                return None;
+                return StreamEnd::SinkGone;
             }
         }
         let mut k = 0;
@@ -329,7 +304,7 @@ fn stream<P: Read + Write, S: Sink>(
                     ok: false,
                     detail: format!("no answer within {} s", COMMAND_TIMEOUT.as_secs()),
                 }) {
-                    return None;
+                    return StreamEnd::SinkGone;
                 }
             } else {
                 k += 1;
@@ -526,16 +501,5 @@ mod tests {
         assert!(got.contains(&Command::StartStream {
             frame_period_ms: None
         }));
-    }
-
-    #[test]
-    fn command_payloads_parse() {
-        assert_eq!(NodeCommand::parse(" ACK\n"), Some(NodeCommand::AckAlarm));
-        assert_eq!(
-            NodeCommand::parse("calibrate-dark"),
-            Some(NodeCommand::CalibrateDark)
-        );
-        assert_eq!(NodeCommand::parse("reset"), None);
-        assert_eq!(NodeCommand::parse(""), None);
     }
 }

@@ -24,8 +24,11 @@ pub struct NodeSnapshot {
     pub name: Option<String>,
     /// Its serial port.
     pub port: String,
-    /// Who it is (after the first handshake).
+    /// Who it is (after the first handshake; again after a restart).
     pub hello: Option<Hello>,
+    /// Its key, made once from its unique id by [`key_of`]: its name when
+    /// the config gives none, and what its Home Assistant ids are made of.
+    pub key: Option<String>,
     /// The serial link is up (handshake done, frames arriving).
     pub link_up: bool,
     /// The latest measurement: currents, temperature, detector state,
@@ -50,6 +53,7 @@ impl NodeSnapshot {
             name,
             port,
             hello: None,
+            key: None,
             link_up: false,
             reading: None,
             seq: None,
@@ -63,6 +67,18 @@ impl NodeSnapshot {
     pub fn age(&self, now: Instant) -> Option<Duration> {
         self.received.map(|t| now.saturating_duration_since(t))
     }
+}
+
+/// The key of node `index` with unique id `hello` among `nodes`: the id
+/// in hex; when another node already has that as its key or its name (two
+/// nodes with one id: virtual nodes share theirs), `-<index>` is added —
+/// the config position, stable across restarts.
+pub fn key_of(hello: &Hello, index: usize, nodes: &[NodeSnapshot]) -> String {
+    let id = fois_link::text::unique_id_hex(hello);
+    let taken = nodes.iter().any(|n| {
+        n.index != index && (n.key.as_deref() == Some(&id) || n.name.as_deref() == Some(&id))
+    });
+    if taken { format!("{id}-{index}") } else { id }
 }
 
 /// The shared snapshots of all nodes, in config order.
@@ -98,26 +114,19 @@ impl Fleet {
             .clone()
     }
 
-    /// A copy of node `index`'s snapshot.
-    pub fn node(&self, index: usize) -> Option<NodeSnapshot> {
+    /// `f` of node `index`'s snapshot, under the read lock (`None`: no such
+    /// node).
+    pub fn read<R>(&self, index: usize, f: impl FnOnce(&NodeSnapshot) -> R) -> Option<R> {
         self.nodes
             .read()
             .unwrap_or_else(PoisonError::into_inner)
             .get(index)
-            .cloned()
+            .map(f)
     }
 
-    /// Number of nodes.
-    pub fn len(&self) -> usize {
-        self.nodes
-            .read()
-            .unwrap_or_else(PoisonError::into_inner)
-            .len()
-    }
-
-    /// True when no node is configured.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
+    /// A copy of node `index`'s snapshot.
+    pub fn node(&self, index: usize) -> Option<NodeSnapshot> {
+        self.read(index, NodeSnapshot::clone)
     }
 
     /// Change node `index`'s snapshot (the gateway's writer side).
@@ -126,6 +135,28 @@ impl Fleet {
         if let Some(n) = nodes.get_mut(index) {
             f(n);
         }
+    }
+
+    /// Node `index` connected with `hello`: its link up, its hello kept, its
+    /// key made ([`key_of`]) when it has none or its unique id changed, and
+    /// named after its key when it has no name. Its name.
+    pub fn connected(&self, index: usize, hello: &Hello) -> Option<String> {
+        let mut nodes = self.nodes.write().unwrap_or_else(PoisonError::into_inner);
+        let same_id = nodes
+            .get(index)?
+            .hello
+            .as_ref()
+            .is_some_and(|h| h.unique_id == hello.unique_id);
+        let key = match nodes[index].key.clone() {
+            Some(k) if same_id => k,
+            _ => key_of(hello, index, &nodes),
+        };
+        let n = &mut nodes[index];
+        n.name.get_or_insert_with(|| key.clone());
+        n.key = Some(key);
+        n.hello = Some(hello.clone());
+        n.link_up = true;
+        n.name.clone()
     }
 }
 

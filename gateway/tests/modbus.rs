@@ -1,6 +1,6 @@
 //! The gateway's Modbus TCP server polled by an independent client
 //! (pymodbus, in the virtualenv `cargo xtask tools` makes): the gateway
-//! runs in a thread of the test (`driver::Service`, so the test reads the
+//! runs in a thread of the test (`service::Service`, so the test reads the
 //! same node snapshots the server answers from) with virtual nodes on
 //! pseudo-terminals, and no broker (the gateway keeps retrying it; Modbus
 //! does not need it).
@@ -13,10 +13,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use fois_gateway::config::{FileConfig, Overrides};
-use fois_gateway::driver::{RunLimits, Service};
+use fois_gateway::config::file::{FileConfig, Overrides};
 use fois_gateway::machine::GatewaySummary;
 use fois_gateway::modbus::status;
+use fois_gateway::service::{RunLimits, Service};
 use fois_gateway::snapshot::{Fleet, NodeSnapshot};
 use fois_vnode::Cover;
 use support::pymodbus::{self, Client};

@@ -1033,9 +1033,9 @@ fn an_oversized_retained_command_is_skipped_and_the_connection_stays() {
 
 #[test]
 fn another_front_end_reads_every_node_and_sends_commands_through_the_service() {
-    use fois_gateway::config::{FileConfig, Overrides};
-    use fois_gateway::driver::{FrontEndCommand, RunLimits, Service};
-    use fois_gateway::reader::NodeCommand;
+    use fois_gateway::command::{FrontEndCommand, NodeCommand};
+    use fois_gateway::config::file::{FileConfig, Overrides};
+    use fois_gateway::service::{RunLimits, Service};
     use std::sync::atomic::{AtomicBool, Ordering};
 
     let dir = tempfile::tempdir().unwrap();

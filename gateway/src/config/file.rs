@@ -1,13 +1,14 @@
 //! The config file as written: every key optional, unknown keys refused
 //! (a misspelt key is an error, not a silent default), and the command
-//! line's [`Overrides`]. [`FileConfig::resolve`] turns both into a checked
+//! line's [`Overrides`] (its flags declared here, with their parsers, once).
+//! [`FileConfig::resolve`] turns both into a checked
 //! [`GatewayConfig`](super::GatewayConfig).
 
 use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use super::{BrokerAddr, NodeSpec, Secret};
+use super::{BrokerAddr, MAX_INTERVAL_MS, MIN_QUEUE_MAX_BYTES, NodeSpec, Secret, is_valid_name};
 
 /// The file as written (every field optional; unknown keys refused).
 #[derive(Debug, Default, Deserialize)]
@@ -149,35 +150,90 @@ pub struct NodeFile {
     pub modbus_unit: Option<u8>,
 }
 
-/// Values from the command line that override the file.
-#[derive(Debug, Default, Clone)]
+/// The command-line flags that override the file (flattened into the
+/// gateway's command line; every one optional).
+#[derive(Debug, Default, Clone, clap::Args)]
 pub struct Overrides {
-    /// Gateway name.
+    /// Gateway name: a topic level (<prefix>/<name>/...) and part of every
+    /// Home Assistant id; 1 to 64 letters, digits, - and _ [default: the
+    /// host name].
+    #[arg(long, value_name = "NAME", value_parser = topic_name)]
     pub name: Option<String>,
-    /// The broker's host and port.
+    /// The broker, HOST, HOST:PORT or [IPv6]:PORT [default: 127.0.0.1:1883,
+    /// 8883 with TLS].
+    #[arg(long, value_name = "HOST[:PORT]", value_parser = broker_addr)]
     pub broker: Option<BrokerAddr>,
-    /// User name.
+    /// Broker user name.
+    #[arg(long, value_name = "USER")]
     pub username: Option<String>,
-    /// Password file.
+    /// A file whose first line is the broker password (there is no password
+    /// flag: other users can read a command line).
+    #[arg(long, value_name = "FILE")]
     pub password_file: Option<PathBuf>,
-    /// CA file (turns TLS on).
+    /// Connect with TLS, trusting the CA certificate(s) in this PEM file.
+    #[arg(long, value_name = "FILE.pem")]
     pub ca_file: Option<PathBuf>,
-    /// Client certificate.
+    /// Client certificate (PEM) for mutual TLS, with --client-key.
+    #[arg(
+        long = "client-cert",
+        value_name = "FILE.pem",
+        requires = "client_key_file"
+    )]
     pub client_cert_file: Option<PathBuf>,
-    /// Client key.
+    /// Private key (PEM) of the client certificate.
+    #[arg(
+        long = "client-key",
+        value_name = "FILE.pem",
+        requires = "client_cert_file"
+    )]
     pub client_key_file: Option<PathBuf>,
-    /// Extra nodes (`--node PATH[=NAME]`), after the file's.
+    /// A node: serial port (or pty) path, optionally =NAME for its topics
+    /// [default name: the node's unique id, hex]. Repeat for more nodes;
+    /// added to the config file's [[node]] tables.
+    #[arg(long = "node", value_name = "PATH[=NAME]", value_parser = gateway_node)]
     pub nodes: Vec<NodeSpec>,
-    /// Measurement interval, ms.
+    /// At most one measurement per node per this many ms of node time while
+    /// the broker is connected; 0 publishes every frame (10 per second per
+    /// node); at most 86400000 (a day) [default: 1000].
+    #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(..=MAX_INTERVAL_MS))]
     pub measurement_interval_ms: Option<u64>,
-    /// Offline measurement interval, ms.
+    /// The same while the broker is unreachable: what goes to the disk
+    /// queue [default: 10000].
+    #[arg(long, value_name = "MS", value_parser = clap::value_parser!(u64).range(..=MAX_INTERVAL_MS))]
     pub offline_measurement_interval_ms: Option<u64>,
-    /// Queue directory.
+    /// Directory of the store-and-forward queue [default:
+    /// $XDG_STATE_HOME/fois/gateway-<name>, else ~/.local/state/fois/...].
+    #[arg(long, value_name = "DIR")]
     pub queue_dir: Option<PathBuf>,
-    /// Queue bound.
+    /// Bound of the disk queue, bytes, at least 65536; the oldest records
+    /// are dropped first and counted [default: 268435456 = 256 MiB].
+    #[arg(long, value_name = "BYTES", value_parser = clap::value_parser!(u64).range(MIN_QUEUE_MAX_BYTES..))]
     pub queue_max_bytes: Option<u64>,
-    /// Switch Home Assistant discovery off.
+    /// Do not publish Home Assistant discovery configs.
+    #[arg(long)]
     pub no_homeassistant: bool,
+}
+
+/// A gateway name usable as one MQTT topic level and in Home Assistant ids:
+/// 1 to 64 letters, digits, `-` or `_`.
+fn topic_name(s: &str) -> Result<String, String> {
+    if is_valid_name(s) {
+        Ok(s.to_string())
+    } else {
+        Err(format!(
+            "`{s}` is not usable in topics: use 1 to 64 letters, digits, `-` or `_`"
+        ))
+    }
+}
+
+/// An MQTT broker, `HOST[:PORT]` ([`BrokerAddr::parse`]).
+fn broker_addr(s: &str) -> Result<BrokerAddr, String> {
+    BrokerAddr::parse(s).map_err(|e| format!("{e:#}"))
+}
+
+/// A gateway node, `PATH[=NAME]` ([`NodeSpec::parse_flag`]).
+fn gateway_node(s: &str) -> Result<NodeSpec, String> {
+    NodeSpec::parse_flag(s).map_err(|e| format!("{e:#}"))
 }
 
 impl FileConfig {

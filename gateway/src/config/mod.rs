@@ -4,10 +4,10 @@
 //!
 //! | module | what lives there |
 //! | --- | --- |
-//! | [`file`] | the file as written ([`FileConfig`]: every key optional, unknown keys refused) and the flags' [`Overrides`] |
+//! | [`file`] | the file as written ([`file::FileConfig`]: every key optional, unknown keys refused) and the flags' [`file::Overrides`] |
 //! | [`modbus`] | `[modbus]`: the Modbus TCP server's address, commands, stale time, unit ids |
-//! | `resolve` | [`FileConfig::resolve`]: flags over file over defaults, section by section, every check |
-//! | here | the resolved [`GatewayConfig`], [`Secret`], names, [`BrokerAddr`], [`NodeSpec`] |
+//! | [`resolve`] | [`file::FileConfig::resolve`]: flags over file over defaults, section by section, every check |
+//! | here (imports neither of the two) | the resolved [`GatewayConfig`], [`Secret`], names, [`BrokerAddr`], [`NodeSpec`] |
 //!
 //! Secrets (the broker password, the client key's path is not one) are held
 //! in [`Secret`], whose `Debug` and `Display` print `***`: a config printed
@@ -15,7 +15,7 @@
 
 pub mod file;
 pub mod modbus;
-mod resolve;
+pub mod resolve;
 
 use std::fmt;
 use std::path::PathBuf;
@@ -23,9 +23,7 @@ use std::time::Duration;
 
 use serde::Deserialize;
 
-pub use file::{FileConfig, Overrides};
 pub use modbus::ModbusConfig;
-pub use resolve::default_gateway_name;
 
 /// A value that must never be printed (a password).
 #[derive(Clone, Default, PartialEq, Eq, Deserialize)]

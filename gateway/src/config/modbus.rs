@@ -152,7 +152,7 @@ pub fn resolve_modbus(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{FileConfig, Overrides};
+    use crate::config::file::{FileConfig, Overrides};
 
     fn resolve(text: &str) -> anyhow::Result<Option<ModbusConfig>> {
         FileConfig::parse(text)?

@@ -33,7 +33,7 @@ use entities::{Entity, Source};
 pub use version::HaVersion;
 
 /// A node's device identifier and the `node_id` level of its discovery
-/// topics: from its hardware key ([`hardware_key`]).
+/// topics: from its key ([`crate::snapshot::key_of`]).
 pub fn node_id(key: &str) -> String {
     format!("fois_node_{key}")
 }
@@ -41,18 +41,6 @@ pub fn node_id(key: &str) -> String {
 /// The gateway's device identifier.
 pub fn gateway_id(gateway: &str) -> String {
     format!("fois_{gateway}")
-}
-
-/// The key a node's ids are made of: its unique id in hex; when another
-/// node of the same gateway reports the same id (a misconfigured fleet),
-/// `-<index>` is added so that neither's entities replace the other's.
-pub fn hardware_key(hello: &Hello, index: usize, others: &[Option<&Hello>]) -> String {
-    let id = unique_id_hex(hello);
-    let shared = others
-        .iter()
-        .enumerate()
-        .any(|(j, h)| j != index && h.is_some_and(|h| h.unique_id == hello.unique_id));
-    if shared { format!("{id}-{index}") } else { id }
 }
 
 /// What one gateway announces, and for which Home Assistant.
@@ -73,7 +61,7 @@ pub struct Discovery<'a> {
 pub struct NodeInfo<'a> {
     /// Its name in topics (the config's, or its unique id).
     pub name: &'a str,
-    /// Its hardware key ([`hardware_key`]).
+    /// Its key ([`crate::snapshot::key_of`]).
     pub key: &'a str,
     /// Its `Hello`.
     pub hello: &'a Hello,

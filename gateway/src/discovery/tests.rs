@@ -213,16 +213,7 @@ fn stale_configs_are_the_buttons_without_commands_and_the_name_based_ones() {
 }
 
 #[test]
-fn the_hardware_key_is_the_unique_id_unless_two_nodes_share_one() {
-    let (a, b, c) = (hello(1), hello(2), hello(1));
-    assert_eq!(
-        hardware_key(&a, 0, &[Some(&a), Some(&b), None]),
-        "010101010101010101010101"
-    );
-    assert_eq!(
-        hardware_key(&c, 2, &[Some(&a), Some(&b), Some(&c)]),
-        "010101010101010101010101-2"
-    );
+fn the_gateway_is_a_connectivity_sensor() {
     let g = Discovery {
         prefix: "homeassistant",
         topics: &Topics::new("fois", "gw", None),

@@ -25,13 +25,8 @@ use rumqttc::QoS;
 use tracing::{info, warn};
 
 use super::{Action, Gateway};
+use crate::command::{MAX_COMMAND_BYTES, NodeCommand, command_word};
 use crate::payload::CommandResultJson;
-use crate::reader::NodeCommand;
-
-/// The longest command message read, bytes: anything longer is skipped
-/// (the longest command, `{"command": "calibrate-dark"}` with blanks, is
-/// far below).
-pub const MAX_COMMAND_BYTES: usize = 256;
 
 /// After the SUBACK of the checking subscription, a retained copy has this
 /// long to arrive (it follows the SUBACK on the same connection at once).
@@ -96,16 +91,15 @@ impl Gateway {
         if self.cfg.command_topic.is_none() {
             return;
         }
-        let Some(k) = self.nodes.iter().position(|n| {
-            n.name
-                .as_deref()
-                .and_then(|name| self.topics.command(name))
+        let Some(k) = (0..self.nodes.len()).find(|&k| {
+            self.node_name(k)
+                .and_then(|name| self.topics.command(&name))
                 .is_some_and(|t| t == topic)
         }) else {
             warn!("ignored a message on {topic}: not a command topic");
             return;
         };
-        let name = self.nodes[k].name.clone().unwrap_or_default();
+        let name = self.node_name(k).unwrap_or_default();
         if payload.is_empty() {
             // An empty message deletes a retained one: not a command.
             return;
@@ -125,15 +119,7 @@ impl Gateway {
             return;
         }
         let text = String::from_utf8_lossy(payload).to_string();
-        // `{"command": "ack"}` or plain `ack`.
-        let word = serde_json::from_str::<serde_json::Value>(&text)
-            .ok()
-            .and_then(|v| {
-                v.get("command")
-                    .and_then(|c| c.as_str())
-                    .map(str::to_string)
-            })
-            .unwrap_or_else(|| text.clone());
+        let word = command_word(&text);
         let shown: String = word.trim().chars().take(40).collect();
         if shown.is_empty() {
             return;
@@ -211,7 +197,7 @@ impl Gateway {
             if passed {
                 self.request_command(k, &c.shown, c.command, "MQTT", now);
             } else {
-                let name = self.nodes[k].name.clone().unwrap_or_default();
+                let name = self.node_name(k).unwrap_or_default();
                 self.refuse_command(
                     &name,
                     &c.shown,
@@ -226,20 +212,20 @@ impl Gateway {
 
     /// The connection is gone: commands being checked cannot be checked.
     pub(super) fn drop_checks(&mut self) {
-        for n in &mut self.nodes {
-            if let Some(c) = n.check.take() {
+        for k in 0..self.nodes.len() {
+            if let Some(c) = self.nodes[k].check.take() {
                 warn!(
                     "command `{}` for {} dropped: the broker connection was lost before it \
                      could be checked",
                     c.shown,
-                    n.name.as_deref().unwrap_or("?")
+                    self.node_name(k).as_deref().unwrap_or("?")
                 );
             }
         }
     }
 
     /// A command from another front end (see
-    /// [`crate::driver::FrontEndCommand`]): the same checks as MQTT's.
+    /// [`crate::command::FrontEndCommand`]): the same checks as MQTT's.
     pub fn front_end_command(&mut self, node: usize, cmd: NodeCommand, now: Instant) {
         if node < self.nodes.len() {
             self.request_command(node, cmd.name(), cmd, "a front end", now);
@@ -256,8 +242,8 @@ impl Gateway {
         from: &str,
         now: Instant,
     ) {
-        let name = self.nodes[k].name.clone().unwrap_or_default();
-        if !self.nodes[k].online {
+        let name = self.node_name(k).unwrap_or_default();
+        if !self.online(k) {
             self.refuse_command(&name, shown, "the node is offline".into());
             return;
         }

@@ -7,7 +7,7 @@ use fois_link::Reading;
 use rumqttc::QoS;
 
 use super::Gateway;
-use crate::discovery::{self, Discovery, NodeInfo};
+use crate::discovery::{Discovery, NodeInfo};
 
 impl Gateway {
     /// How this gateway announces itself (None: discovery off).
@@ -29,15 +29,16 @@ impl Gateway {
                 return;
             };
             let slot = &self.nodes[k];
-            let (Some(name), Some(hello)) = (slot.name.as_deref(), slot.hello.as_ref()) else {
+            let Some((Some(name), Some(key), Some(hello))) = self
+                .fleet
+                .read(k, |n| (n.name.clone(), n.key.clone(), n.hello.clone()))
+            else {
                 return;
             };
-            let others: Vec<_> = self.nodes.iter().map(|n| n.hello.as_ref()).collect();
-            let key = discovery::hardware_key(hello, k, &others);
             let node = NodeInfo {
-                name,
+                name: &name,
                 key: &key,
-                hello,
+                hello: &hello,
                 estimate: slot.has_estimate,
                 gain: slot.has_gain,
             };
@@ -83,7 +84,7 @@ mod tests {
     };
 
     use super::super::{Action, Gateway};
-    use crate::config::{FileConfig, Overrides};
+    use crate::config::file::{FileConfig, Overrides};
     use crate::queue::{Queue, QueueLimits};
     use crate::reader::{NodeMsg, NodeUpdate};
 
@@ -99,7 +100,8 @@ mod tests {
             .resolve(&Overrides::default())
             .unwrap();
         let (queue, _) = Queue::open(dir, QueueLimits::for_max_bytes(1 << 20)).unwrap();
-        Gateway::new(cfg, queue, Instant::now())
+        let fleet = crate::snapshot::Fleet::of(&cfg);
+        Gateway::new(cfg, queue, fleet, Instant::now())
     }
 
     fn up() -> NodeMsg {

@@ -2,7 +2,7 @@
 //! (a node reader's report, the broker connecting or going away, a packet
 //! id going out, a PUBACK, a message on a command topic, a tick) and answers
 //! with [`Action`]s (publish, subscribe, hand a command to a node) that the
-//! driver ([`crate::driver`]) carries out with rumqttc — as rumqttc itself
+//! service ([`crate::service`]) carries out with rumqttc — as rumqttc itself
 //! keeps its `MqttState` apart from its `EventLoop`. Its tests need no
 //! broker. Its only IO is the disk queue it owns.
 //!
@@ -25,25 +25,22 @@ use std::collections::{HashMap, VecDeque};
 use std::time::{Duration, Instant};
 
 use fois_link::timefmt::unix_ms_now;
-use fois_protocol::Hello;
 use rumqttc::QoS;
 use tracing::{error, info, warn};
 
-use crate::config::{GatewayConfig, NodeSpec};
+use crate::command::NodeCommand;
+use crate::config::GatewayConfig;
 use crate::inflight::{InFlight, WINDOW};
 use crate::payload::{InfoJson, StateJson, StatusJson};
 use crate::queue::{Queue, Record};
-use crate::reader::NodeCommand;
 use crate::snapshot::Fleet;
 use crate::state_filter::StateFilter;
 use crate::topics::Topics;
 
-pub use commands::MAX_COMMAND_BYTES;
-
 /// Wait before reconnecting to the broker.
 pub const RECONNECT_DELAY: Duration = Duration::from_secs(1);
 
-/// What the driver is to do.
+/// What the service is to do.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Action {
     /// Publish a message.
@@ -92,11 +89,11 @@ pub struct GatewaySummary {
     pub frames_lost: u64,
 }
 
-pub(crate) struct NodeSlot {
-    spec: NodeSpec,
-    name: Option<String>,
-    hello: Option<Hello>,
-    online: bool,
+/// What the MQTT side keeps of a node beside its record in the [`Fleet`]
+/// (name, port, hello, key, link, latest reading and frames lost live
+/// there, once).
+#[derive(Default)]
+pub(crate) struct MqttNode {
     last_state: Option<StateJson>,
     /// When the state is published, with which (held) values.
     state_filter: StateFilter,
@@ -108,7 +105,6 @@ pub(crate) struct NodeSlot {
     /// Stale discovery configs emptied (once per node and run).
     stale_cleared: bool,
     subscribed: bool,
-    lost: u64,
     /// When the last command was handed to the node (rate limit).
     last_command: Option<Instant>,
     /// A command from MQTT waiting to be known as not retained.
@@ -119,11 +115,13 @@ pub(crate) struct NodeSlot {
 pub struct Gateway {
     cfg: GatewayConfig,
     topics: Topics,
-    nodes: Vec<NodeSlot>,
-    queue: Queue,
+    nodes: Vec<MqttNode>,
+    /// Every node's record: the truth, shared with the other front ends.
     fleet: Fleet,
+    queue: Queue,
     connected: bool,
-    down_said: Option<String>,
+    /// The broker failure last logged (a repeat of it is not logged again).
+    logged_down_reason: Option<String>,
     flight: InFlight,
     send_cursor: u64,
     started: Instant,
@@ -140,32 +138,11 @@ pub struct Gateway {
 }
 
 impl Gateway {
-    /// A gateway over an opened queue, not connected yet.
-    pub fn new(cfg: GatewayConfig, queue: Queue, now: Instant) -> Gateway {
+    /// A gateway over an opened queue, not connected yet, keeping its
+    /// nodes' records in `fleet` ([`Fleet::of`] this config).
+    pub fn new(cfg: GatewayConfig, queue: Queue, fleet: Fleet, now: Instant) -> Gateway {
         let topics = Topics::new(&cfg.topic_prefix, &cfg.name, cfg.command_topic.as_deref());
-        let nodes: Vec<NodeSlot> = cfg
-            .nodes
-            .iter()
-            .cloned()
-            .map(|spec| NodeSlot {
-                name: spec.name.clone(),
-                spec,
-                hello: None,
-                online: false,
-                last_state: None,
-                state_filter: StateFilter::default(),
-                last_meas_uptime: None,
-                has_estimate: false,
-                has_gain: false,
-                frames: 0,
-                stale_cleared: false,
-                subscribed: false,
-                lost: 0,
-                last_command: None,
-                check: None,
-            })
-            .collect();
-        let fleet = Fleet::of(&cfg);
+        let nodes = cfg.nodes.iter().map(|_| MqttNode::default()).collect();
         let send_cursor = queue.acked();
         Gateway {
             cfg,
@@ -174,7 +151,7 @@ impl Gateway {
             queue,
             fleet,
             connected: false,
-            down_said: None,
+            logged_down_reason: None,
             flight: InFlight::default(),
             send_cursor,
             started: now,
@@ -202,12 +179,6 @@ impl Gateway {
     /// The shared per-node snapshots.
     pub fn fleet(&self) -> Fleet {
         self.fleet.clone()
-    }
-
-    /// Keep the per-node snapshots in `fleet` (made with [`Fleet::of`] of
-    /// this config, handed out before the gateway runs).
-    pub fn share_fleet(&mut self, fleet: Fleet) {
-        self.fleet = fleet;
     }
 
     /// The topics.
@@ -276,7 +247,7 @@ impl Gateway {
         }
     }
 
-    /// The driver could not hand `actions` (the tail of what
+    /// The service could not hand `actions` (the tail of what
     /// [`Gateway::actions`] returned, in order) to the client: take them
     /// back, so records are sent again and subscriptions are made again.
     pub fn unsent(&mut self, actions: &[Action]) {
@@ -294,7 +265,7 @@ impl Gateway {
                     }
                 }
                 Action::Command { node, command } => {
-                    let name = self.node_name(*node).unwrap_or_default().to_string();
+                    let name = self.node_name(*node).unwrap_or_default();
                     self.publish_command_result(
                         &name,
                         command.name(),
@@ -307,23 +278,31 @@ impl Gateway {
         }
     }
 
-    fn node_name(&self, k: usize) -> Option<&str> {
-        self.nodes.get(k).and_then(|n| n.name.as_deref())
+    fn node_name(&self, k: usize) -> Option<String> {
+        self.fleet.read(k, |n| n.name.clone()).flatten()
+    }
+
+    fn node_port(&self, k: usize) -> String {
+        self.fleet.read(k, |n| n.port.clone()).unwrap_or_default()
+    }
+
+    fn online(&self, k: usize) -> bool {
+        self.fleet.read(k, |n| n.link_up).unwrap_or(false)
+    }
+
+    fn nodes_online(&self) -> usize {
+        (0..self.nodes.len()).filter(|&k| self.online(k)).count()
     }
 
     /// Availability, info, discovery, state and the command subscription
     /// of node `k` (retained: again after every reconnection).
     fn announce_node(&mut self, k: usize) {
-        let Some(slot) = self.nodes.get(k) else {
+        let Some((Some(name), online, port, hello)) = self.fleet.read(k, |n| {
+            (n.name.clone(), n.link_up, n.port.clone(), n.hello.clone())
+        }) else {
             return;
         };
-        let Some(name) = slot.name.clone() else {
-            return;
-        };
-        let online = slot.online;
-        let port = slot.spec.port.clone();
-        let hello = slot.hello.clone();
-        let state = slot.last_state.clone();
+        let state = self.nodes[k].last_state.clone();
         self.publish_now(
             self.topics.availability(&name),
             if online { "online" } else { "offline" }.into(),
@@ -379,7 +358,7 @@ impl Gateway {
         let s = StatusJson {
             gateway: self.cfg.name.clone(),
             nodes: self.nodes.len(),
-            nodes_online: self.nodes.iter().filter(|n| n.online).count(),
+            nodes_online: self.nodes_online(),
             records_acked: self.sum.records_acked,
             queue_records: self.queue.pending(),
             queue_bytes: self.queue.bytes(),
@@ -395,7 +374,7 @@ impl Gateway {
     /// send the queue from its acknowledged offset.
     pub fn on_connected(&mut self, now: Instant) {
         self.connected = true;
-        self.down_said = None;
+        self.logged_down_reason = None;
         self.sum.broker_connects += 1;
         self.flight.clear();
         self.send_cursor = self.queue.acked();
@@ -432,7 +411,7 @@ impl Gateway {
     /// The connection failed or was lost: forget what is in flight (it is
     /// sent again from the queue after the reconnect).
     pub fn on_disconnected(&mut self, reason: &str) {
-        if self.connected || self.down_said.as_deref() != Some(reason) {
+        if self.connected || self.logged_down_reason.as_deref() != Some(reason) {
             warn!(
                 "broker {} {}: {reason}; {} record(s) wait in the disk queue, retrying every {} s",
                 self.cfg.broker.describe(),
@@ -445,7 +424,7 @@ impl Gateway {
                 RECONNECT_DELAY.as_secs()
             );
         }
-        self.down_said = Some(reason.to_string());
+        self.logged_down_reason = Some(reason.to_string());
         self.connected = false;
         self.flight.clear();
         self.send_cursor = self.queue.acked();
@@ -483,7 +462,7 @@ impl Gateway {
         if now.saturating_duration_since(self.last_status) >= status_every {
             self.last_status = now;
             self.publish_status(now);
-            let online = self.nodes.iter().filter(|n| n.online).count();
+            let online = self.nodes_online();
             info!(
                 "status: {online}/{} node(s) online, {} frame(s) received, {} record(s) acknowledged, {} queued, {} lost by the queue{}; broker {}",
                 self.nodes.len(),
@@ -507,7 +486,7 @@ impl Gateway {
     /// Clean exit: nodes and gateway offline (retained).
     pub fn goodbye(&mut self, now: Instant) {
         for k in 0..self.nodes.len() {
-            if let Some(name) = self.node_name(k).map(str::to_string) {
+            if let Some(name) = self.node_name(k) {
                 self.publish_now(
                     self.topics.availability(&name),
                     b"offline".to_vec(),

@@ -7,8 +7,8 @@
 use std::time::{Duration, Instant};
 
 use fois_link::reading::{EventReading, Reading};
-use fois_link::text::{hello_text, unique_id_hex};
-use fois_protocol::{DeviceMsg, Hello, SeqEvent};
+use fois_link::text::hello_text;
+use fois_protocol::{DeviceMsg, SeqEvent};
 use rumqttc::QoS;
 use tracing::{info, warn};
 
@@ -17,28 +17,6 @@ use crate::payload::{EventJson, LinkEventJson, MeasurementJson, StateJson};
 use crate::reader::{NodeMsg, NodeUpdate};
 
 impl Gateway {
-    fn resolve_name(&mut self, k: usize, h: &Hello) {
-        if self.nodes[k].name.is_some() {
-            return;
-        }
-        let mut name = unique_id_hex(h);
-        if self
-            .nodes
-            .iter()
-            .any(|n| n.name.as_deref() == Some(name.as_str()))
-        {
-            // Two nodes with one id (virtual nodes share theirs): keep the
-            // config position, stable across restarts.
-            name = format!("{name}-{k}");
-        }
-        info!(
-            "node on {} has no name in the config: named {name} after its unique id",
-            self.nodes[k].spec.port
-        );
-        self.nodes[k].name = Some(name.clone());
-        self.fleet.update(k, |n| n.name = Some(name));
-    }
-
     fn link_event(
         &mut self,
         k: usize,
@@ -48,7 +26,7 @@ impl Gateway {
         frames_lost: Option<u64>,
         t_ms: u64,
     ) {
-        let Some(name) = self.node_name(k).map(str::to_string) else {
+        let Some(name) = self.node_name(k) else {
             return;
         };
         let mut e = LinkEventJson::new(&name, kind, detail, t_ms);
@@ -67,16 +45,15 @@ impl Gateway {
         let t = m.host_unix_ms;
         match m.update {
             NodeUpdate::Up(h) => {
-                self.resolve_name(k, &h);
-                let name = self.node_name(k).unwrap_or_default().to_string();
-                let port = self.nodes[k].spec.port.clone();
+                let port = self.node_port(k);
+                let named = self.node_name(k).is_none();
+                let name = self.fleet.connected(k, &h).unwrap_or_default();
+                if named {
+                    info!(
+                        "node on {port} has no name in the config: named {name} after its unique id"
+                    );
+                }
                 info!("node {name} on {port}: connected ({})", hello_text(&h));
-                self.nodes[k].hello = Some(h.clone());
-                self.nodes[k].online = true;
-                self.fleet.update(k, |n| {
-                    n.hello = Some(h.clone());
-                    n.link_up = true;
-                });
                 self.link_event(
                     k,
                     "link_up",
@@ -88,12 +65,11 @@ impl Gateway {
                 self.announce_node(k);
             }
             NodeUpdate::Down(reason) => {
-                let name = self.node_name(k).unwrap_or_default().to_string();
+                let name = self.node_name(k).unwrap_or_default();
                 warn!(
                     "node {name} on {}: link lost ({reason}); reconnecting",
-                    self.nodes[k].spec.port
+                    self.node_port(k)
                 );
-                self.nodes[k].online = false;
                 self.fleet.update(k, |n| n.link_up = false);
                 self.link_event(k, "link_lost", reason, None, None, t);
                 if !name.is_empty() {
@@ -108,7 +84,7 @@ impl Gateway {
             NodeUpdate::Unreachable(reason) => {
                 warn!(
                     "node on {}: cannot connect ({reason}); retrying",
-                    self.nodes[k].spec.port
+                    self.node_port(k)
                 );
             }
             NodeUpdate::Rejected => {}
@@ -117,7 +93,7 @@ impl Gateway {
                 ok,
                 detail,
             } => {
-                let name = self.node_name(k).unwrap_or_default().to_string();
+                let name = self.node_name(k).unwrap_or_default();
                 info!(
                     "command {} for {name}: {} ({detail})",
                     command.name(),
@@ -141,10 +117,8 @@ impl Gateway {
         self.nodes[k].frames += 1;
         match ev {
             SeqEvent::Gap(n) => {
-                self.nodes[k].lost += n;
                 self.sum.frames_lost += n;
-                let lost = self.nodes[k].lost;
-                self.fleet.update(k, |s| s.frames_lost = lost);
+                self.fleet.update(k, |s| s.frames_lost += n);
                 self.link_event(
                     k,
                     "frames_lost",
@@ -160,17 +134,18 @@ impl Gateway {
                     DeviceMsg::Hello(h) => format!("reset reason {:?}", h.reset_reason),
                     _ => "sequence number went back".into(),
                 };
-                let name = self.node_name(k).unwrap_or_default().to_string();
+                let name = self.node_name(k).unwrap_or_default();
                 warn!("node {name} restarted ({detail}) at seq {}", f.seq);
                 self.link_event(k, "node_restart", detail, Some(f.seq), None, t);
                 if let DeviceMsg::Hello(h) = &f.msg {
-                    self.nodes[k].hello = Some(h.clone());
+                    let h = h.clone();
+                    self.fleet.update(k, |n| n.hello = Some(h));
                     self.announce_node(k);
                 }
             }
             SeqEvent::First | SeqEvent::InOrder | SeqEvent::Duplicate => {}
         }
-        let Some(name) = self.node_name(k).map(str::to_string) else {
+        let Some(name) = self.node_name(k) else {
             return;
         };
         if let Some(reading) = Reading::of(&f.msg) {
@@ -184,7 +159,8 @@ impl Gateway {
     }
 
     fn on_reading(&mut self, k: usize, name: &str, seq: u32, r: Reading, t: u64, now: Instant) {
-        let frames = (self.nodes[k].frames, self.nodes[k].lost);
+        let lost = self.fleet.read(k, |n| n.frames_lost).unwrap_or(0);
+        let frames = (self.nodes[k].frames, lost);
         let state = StateJson::new(name, seq, &r, frames, t);
         self.nodes[k].last_state = Some(state.clone());
         self.new_entities(k, &r);

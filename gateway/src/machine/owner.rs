@@ -45,7 +45,7 @@ pub struct Instance {
 impl Instance {
     /// This process, now.
     pub fn this_process() -> Instance {
-        let host = crate::config::default_gateway_name();
+        let host = crate::config::resolve::default_gateway_name();
         let pid = std::process::id();
         let started_unix_ms = unix_ms_now();
         Instance {
@@ -131,7 +131,7 @@ impl Gateway {
     }
 
     /// Another gateway of this name started before this one: why this one
-    /// must stop (the driver stops without the goodbye).
+    /// must stop (the service stops without the goodbye).
     pub fn conflict(&self) -> Option<&str> {
         self.conflict.as_deref()
     }

@@ -10,9 +10,10 @@ use fois_protocol::{
 use rumqttc::QoS;
 
 use super::{Action, Gateway};
-use crate::config::{FileConfig, Overrides};
+use crate::command::NodeCommand;
+use crate::config::file::{FileConfig, Overrides};
 use crate::queue::{Queue, QueueLimits};
-use crate::reader::{NodeCommand, NodeMsg, NodeUpdate};
+use crate::reader::{NodeMsg, NodeUpdate};
 
 fn gateway(dir: &std::path::Path, extra: &str) -> Gateway {
     let text = format!(
@@ -24,7 +25,8 @@ fn gateway(dir: &std::path::Path, extra: &str) -> Gateway {
         .resolve(&Overrides::default())
         .unwrap();
     let (queue, _) = Queue::open(dir, QueueLimits::for_max_bytes(1 << 20)).unwrap();
-    Gateway::new(cfg, queue, Instant::now())
+    let fleet = crate::snapshot::Fleet::of(&cfg);
+    Gateway::new(cfg, queue, fleet, Instant::now())
 }
 
 fn hello() -> Hello {
@@ -453,4 +455,56 @@ fn the_older_of_two_gateways_claims_again_and_publishes_everything_again() {
     ] {
         assert!(t.contains(&topic.to_string()), "{topic} not in {t:?}");
     }
+}
+
+/// The node ids (`fois_node_<key>`) in the discovery topics of `actions`.
+fn discovered_keys(actions: &[Action]) -> std::collections::BTreeSet<String> {
+    topics(actions)
+        .iter()
+        .filter_map(|t| {
+            t.split('/')
+                .nth(2)?
+                .strip_prefix("fois_node_")
+                .map(str::to_string)
+        })
+        .collect()
+}
+
+#[test]
+fn a_node_has_one_key_for_its_topics_and_its_home_assistant_ids() {
+    // Two unnamed nodes (0 and 1, before the named `a`) with one unique id
+    // (virtual nodes share theirs):
+    // the first keeps the id, the second gets `-<its index>`, in its topics
+    // and its Home Assistant ids alike; the first's do not change when the
+    // second comes.
+    let dir = tempfile::tempdir().unwrap();
+    let mut gw = gateway(
+        dir.path(),
+        "[[node]]\nport = \"/dev/b\"\n[[node]]\nport = \"/dev/c\"\n",
+    );
+    let t0 = Instant::now();
+    gw.on_connected(t0);
+    gw.actions();
+    let id = "abababababababababababab";
+    let with = |node| NodeMsg { node, ..up() };
+    gw.on_node(with(0), t0);
+    let first = gw.actions();
+    assert_eq!(discovered_keys(&first), [id.to_string()].into());
+    assert!(topics(&first).contains(&format!("fois/gw/{id}/availability")));
+    gw.on_node(with(1), t0);
+    let second = gw.actions();
+    let key2 = format!("{id}-1");
+    assert_eq!(discovered_keys(&second), [key2.clone()].into());
+    assert!(topics(&second).contains(&format!("fois/gw/{key2}/availability")));
+    gw.on_connected(t0);
+    let again = gw.actions();
+    assert_eq!(
+        discovered_keys(&again),
+        [id.to_string(), key2.clone()].into()
+    );
+    let snaps = gw.fleet().nodes();
+    assert_eq!(snaps[0].name.as_deref(), Some(id));
+    assert_eq!(snaps[0].key.as_deref(), Some(id));
+    assert_eq!(snaps[1].name.as_deref(), Some(key2.as_str()));
+    assert_eq!(snaps[1].key.as_deref(), Some(key2.as_str()));
 }

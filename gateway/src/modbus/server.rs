@@ -1,8 +1,8 @@
 //! The Modbus TCP server: [`tokio_modbus`]'s server skeleton on the
 //! gateway's runtime, one [`Client`] per connection, every request
 //! answered from the shared snapshots ([`crate::snapshot::Fleet`]) by
-//! [`Units::answer`], and the alarm acknowledge handed to the gateway's
-//! command path ([`crate::driver::Service::commands`]: the node must be
+//! [`ModbusUnits::answer`], and the alarm acknowledge handed to the gateway's
+//! command path ([`crate::service::Service::commands`]: the node must be
 //! online, one command per node per `[commands] min_interval_ms`, the
 //! answer published on `<node>/command/result`).
 //!
@@ -28,9 +28,9 @@ use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
 use tracing::{debug, info, warn};
 
 use super::{ACK, ACK_VALUE, REGISTERS, register_map};
+use crate::command::FrontEndCommand;
+use crate::command::NodeCommand;
 use crate::config::ModbusConfig;
-use crate::driver::FrontEndCommand;
-use crate::reader::NodeCommand;
 use crate::snapshot::Fleet;
 
 /// Registers one read may ask for (Modbus: 125).
@@ -40,21 +40,21 @@ pub const MAX_WRITE: usize = 123;
 
 /// What the server answers from: the nodes' snapshots, the config, the
 /// command path, the count of connected clients.
-pub struct Units {
+pub struct ModbusUnits {
     fleet: Fleet,
     cfg: ModbusConfig,
     commands: mpsc::UnboundedSender<FrontEndCommand>,
     clients: AtomicUsize,
 }
 
-impl Units {
+impl ModbusUnits {
     /// A server's state over `fleet`.
     pub fn new(
         cfg: ModbusConfig,
         fleet: Fleet,
         commands: mpsc::UnboundedSender<FrontEndCommand>,
-    ) -> Units {
-        Units {
+    ) -> ModbusUnits {
+        ModbusUnits {
             fleet,
             cfg,
             commands,
@@ -153,13 +153,13 @@ impl Units {
 
 /// One connection: answers its requests, frees its place when dropped.
 pub struct Client {
-    units: Arc<Units>,
+    units: Arc<ModbusUnits>,
     peer: SocketAddr,
 }
 
 impl Client {
     /// A place for `peer`, or `None` when `max_clients` are connected.
-    fn admit(units: &Arc<Units>, peer: SocketAddr) -> Option<Client> {
+    fn admit(units: &Arc<ModbusUnits>, peer: SocketAddr) -> Option<Client> {
         let max = units.cfg.max_clients;
         let taken = units
             .clients
@@ -209,7 +209,7 @@ pub async fn bind(cfg: &ModbusConfig) -> anyhow::Result<TcpListener> {
 
 /// Serve Modbus TCP on `listener` until the task is dropped; a failing
 /// `accept` (out of file descriptors) is logged and retried after a second.
-pub async fn serve(listener: TcpListener, units: Arc<Units>) {
+pub async fn serve(listener: TcpListener, units: Arc<ModbusUnits>) {
     let server = Server::new(listener);
     let on_connected = |stream, peer| {
         let units = units.clone();

@@ -185,14 +185,20 @@ mod answers {
     use tokio::sync::mpsc;
     use tokio_modbus::{ExceptionCode, Request, Response};
 
-    use super::super::server::Units;
+    use super::super::server::ModbusUnits;
     use super::iced;
+    use crate::command::FrontEndCommand;
+    use crate::command::NodeCommand;
     use crate::config::ModbusConfig;
-    use crate::driver::FrontEndCommand;
-    use crate::reader::NodeCommand;
     use crate::snapshot::{Fleet, NodeSnapshot};
 
-    fn units(commands: bool) -> (Units, mpsc::UnboundedReceiver<FrontEndCommand>, Instant) {
+    fn units(
+        commands: bool,
+    ) -> (
+        ModbusUnits,
+        mpsc::UnboundedReceiver<FrontEndCommand>,
+        Instant,
+    ) {
         let t0 = Instant::now();
         let mut down = NodeSnapshot::new(1, Some("down".into()), "/dev/y".into());
         down.link_up = false;
@@ -205,7 +211,7 @@ mod answers {
             units: vec![5, 9],
         };
         let (tx, rx) = mpsc::unbounded_channel();
-        (Units::new(cfg, fleet, tx), rx, t0)
+        (ModbusUnits::new(cfg, fleet, tx), rx, t0)
     }
 
     const PEER: SocketAddr =

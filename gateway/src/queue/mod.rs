@@ -546,11 +546,6 @@ impl Queue {
         self.failing.as_ref().map(|(why, _)| why.as_str())
     }
 
-    /// Index the next record will get.
-    pub fn next_index(&self) -> u64 {
-        self.next
-    }
-
     /// Every record below this was acknowledged (or dropped).
     pub fn acked(&self) -> u64 {
         self.acked

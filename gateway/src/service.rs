@@ -13,11 +13,12 @@ use rumqttc::{AsyncClient, ConnectionError, Event, EventLoop, Incoming, Outgoing
 use tokio::sync::mpsc;
 use tracing::{info, warn};
 
+use crate::command::{FrontEndCommand, NodeCommand};
 use crate::config::GatewayConfig;
 use crate::machine::{Action, Gateway, GatewaySummary, RECONNECT_DELAY};
 use crate::mqtt::{describe, mqtt_options};
 use crate::queue::{Queue, QueueLimits};
-use crate::reader::{NodeCommand, NodeMsg, ReaderTimings, spawn_serial_reader};
+use crate::reader::{NodeMsg, ReaderTimings, spawn_serial_reader};
 use crate::snapshot::Fleet;
 use crate::topics::Topics;
 
@@ -96,16 +97,6 @@ pub struct RunLimits<'a> {
     pub status_every: Duration,
 }
 
-/// A command for a node from a front end other than MQTT; its answer is
-/// published on `<node>/command/result` and logged like an MQTT command's.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct FrontEndCommand {
-    /// The node's index in the config.
-    pub node: usize,
-    /// The command.
-    pub command: NodeCommand,
-}
-
 /// The gateway before it runs: its config, the shared snapshots, the
 /// command channel for other front ends.
 pub struct Service {
@@ -163,7 +154,7 @@ impl Service {
                 let listener = crate::modbus::server::bind(m).await?;
                 info!("{}", m.describe());
                 let units =
-                    crate::modbus::server::Units::new(m.clone(), fleet.clone(), commands_tx);
+                    crate::modbus::server::ModbusUnits::new(m.clone(), fleet.clone(), commands_tx);
                 Some(tokio::spawn(crate::modbus::server::serve(
                     listener,
                     Arc::new(units),
@@ -221,8 +212,7 @@ impl Service {
         drop(node_tx);
 
         let started = Instant::now();
-        let mut gw = Gateway::new(cfg, queue, started);
-        gw.share_fleet(fleet);
+        let mut gw = Gateway::new(cfg, queue, fleet, started);
         let mut io = Io {
             client,
             resume: resume_tx,

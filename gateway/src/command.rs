@@ -1,0 +1,91 @@
+//! The node command vocabulary shared by every front end: [`NodeCommand`]
+//! (the words `ack` and `calibrate-dark`, their parser, the protocol command
+//! the serial reader sends), how an MQTT command message names its word
+//! ([`command_word`]), and [`FrontEndCommand`], a command from a front end
+//! other than MQTT (Modbus) on its way to the state machine.
+
+use fois_protocol::Command;
+
+/// The longest command message read, bytes: anything longer is skipped
+/// (the longest command, `{"command": "calibrate-dark"}` with blanks, is
+/// far below).
+pub const MAX_COMMAND_BYTES: usize = 256;
+
+/// A command for a node, from any front end (MQTT, Modbus).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NodeCommand {
+    /// Acknowledge the ice alarm.
+    AckAlarm,
+    /// Take the dark baseline.
+    CalibrateDark,
+}
+
+impl NodeCommand {
+    /// Parse a command payload (`ack`, `calibrate-dark`; case and
+    /// surrounding blanks ignored).
+    pub fn parse(s: &str) -> Option<NodeCommand> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "ack" | "ack-alarm" | "ack_alarm" => Some(NodeCommand::AckAlarm),
+            "calibrate-dark" | "calibrate_dark" => Some(NodeCommand::CalibrateDark),
+            _ => None,
+        }
+    }
+
+    /// The command's name.
+    pub fn name(self) -> &'static str {
+        match self {
+            NodeCommand::AckAlarm => "ack",
+            NodeCommand::CalibrateDark => "calibrate-dark",
+        }
+    }
+
+    /// The protocol command the reader sends.
+    pub fn wire_command(self) -> Command {
+        match self {
+            NodeCommand::AckAlarm => Command::AckAlarm,
+            NodeCommand::CalibrateDark => Command::CalibrateDark,
+        }
+    }
+}
+
+/// The command word of an MQTT command message: `{"command": "ack"}` or
+/// plain `ack` (the text itself when it is not such a JSON object).
+pub fn command_word(text: &str) -> String {
+    serde_json::from_str::<serde_json::Value>(text)
+        .ok()
+        .and_then(|v| {
+            v.get("command")
+                .and_then(|c| c.as_str())
+                .map(str::to_string)
+        })
+        .unwrap_or_else(|| text.to_string())
+}
+
+/// A command for a node from a front end other than MQTT; its answer is
+/// published on `<node>/command/result` and logged like an MQTT command's.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrontEndCommand {
+    /// The node's index in the config.
+    pub node: usize,
+    /// The command.
+    pub command: NodeCommand,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn command_words_parse() {
+        assert_eq!(NodeCommand::parse(" ACK\n"), Some(NodeCommand::AckAlarm));
+        assert_eq!(
+            NodeCommand::parse("calibrate-dark"),
+            Some(NodeCommand::CalibrateDark)
+        );
+        assert_eq!(NodeCommand::parse("reset"), None);
+        assert_eq!(NodeCommand::parse(""), None);
+        assert_eq!(command_word(r#"{"command": "ack"}"#), "ack");
+        assert_eq!(command_word(" calibrate-dark\n"), " calibrate-dark\n");
+        assert_eq!(command_word(r#"{"cmd": "ack"}"#), r#"{"cmd": "ack"}"#);
+    }
+}
