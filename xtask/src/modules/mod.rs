@@ -60,10 +60,7 @@ pub const KNOWN_CIRCLES: &[&[&str]] = &[
         "gateway/src/config/file.rs",
         "gateway/src/config/mod.rs",
         "gateway/src/config/modbus.rs",
-        "gateway/src/config/resolve.rs",
     ],
-    // FrontEndCommand (driver.rs) against bind/serve (modbus/server.rs).
-    &["gateway/src/driver.rs", "gateway/src/modbus/server.rs"],
     // machine/mod.rs (Action, Gateway) against its children commands, owner.
     &[
         "gateway/src/machine/commands.rs",
