@@ -36,8 +36,9 @@ use embedded_hal::digital::{ErrorType, OutputPin};
 use rand_core::Rng;
 use rand_pcg::Pcg32;
 
-use crate::hal::{BoardInfo, FactoryCal, PhotoAdc, Storage};
+use crate::hal::{BoardInfo, FactoryCal, PhotoAdc};
 use crate::node::Node;
+use crate::storage::Storage;
 
 /// The noise stream's PCG state and stream constants (any fixed values).
 const NOISE_STATE: u64 = 0xcafe_f00d_d15e_a5e5;
@@ -47,7 +48,7 @@ const NOISE_STREAM: u64 = 0x0a02_bdbf_7bb3_c0a7;
 /// computes from the codes (`measure`, `ntc`, `vref`).
 pub mod codes {
     use crate::hal::{ADC_MAX, FactoryCal};
-    use crate::ntc::{BETA_K, R_FIXED_OHM, R25_OHM};
+    use crate::measure::ntc::{BETA_K, R_FIXED_OHM, R25_OHM};
 
     /// 0 °C in kelvin.
     pub const KELVIN_OFFSET: f64 = 273.15;

@@ -4,7 +4,7 @@
 //! saturation.
 //!
 //! The calibration measures *blocks*: synchronous detection as in a frame
-//! (`measure::acquire`, the config's settle time) with
+//! (`photocurrent::acquire`, the config's settle time) with
 //! [`CAL_BLOCK_CYCLES`] cycles each, whatever the frames' K (every cycle's
 //! net has the same expectation), back to back. After
 //! [`CAL_MIN_BLOCKS`] blocks it stops as soon as the standard error of the
@@ -45,8 +45,8 @@ use embedded_hal::digital::OutputPin;
 use fois_protocol::{Baseline, CalibrationRefusal, Config};
 
 use crate::hal::{FactoryCal, PhotoAdc};
-use crate::measure;
-use crate::vref;
+use crate::measure::photocurrent;
+use crate::measure::vref;
 
 /// Cycles per calibration block: short blocks give enough of them to see a
 /// trend or a step even at 5 ms settle (8 cycles × 2 × 5 ms = 80 ms a
@@ -388,15 +388,15 @@ where
     let plan = plan(config);
     let vdda_mv = vref::vdda_mv(cal, adc.read_vrefint());
     let conv_mv = vref::vdda_for_conversion(vdda_mv);
-    let sat = measure::saturation_code(conv_mv);
+    let sat = photocurrent::saturation_code(conv_mv);
     let loads = [config.load_r1_ohm, config.load_r2_ohm];
     let mut blocks = Blocks::new();
     while blocks.len() < plan.max_blocks {
-        let acq = measure::acquire(adc, led, delay, plan.block_cycles, config.settle_us, sat);
+        let acq = photocurrent::acquire(adc, led, delay, plan.block_cycles, config.settle_us, sat);
         if acq.saturated.iter().any(|s| *s) {
             return Err(CalibrationRefusal::Saturated);
         }
-        blocks.push(measure::currents(&acq, conv_mv, loads).net_na);
+        blocks.push(photocurrent::currents(&acq, conv_mv, loads).net_na);
         if blocks.precise_enough(&plan) {
             break;
         }

@@ -46,11 +46,11 @@ use sequential_storage::cache::page_pointers::ArrayPagePointers;
 use sequential_storage::cache::page_states::ArrayPageStates;
 use sequential_storage::map::{MapConfig, MapStorage};
 
-use crate::hal::{Storage, StorageError};
-use crate::persist::MAX_RECORD;
+use crate::storage::record::MAX_RECORD;
+use crate::storage::{Storage, StorageError};
 
 #[cfg(doc)]
-use crate::ram_flash::RamFlash;
+use crate::storage::ram_flash::RamFlash;
 
 /// Flash pages (erase units) the store uses: sequential-storage's map needs
 /// two, one always kept free to move into.
