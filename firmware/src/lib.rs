@@ -12,7 +12,7 @@
 //!   (a bank of grid Bayes filters over gain hypotheses, on the simulator's
 //!   table): its settings ([`estimator::params`]), the driver
 //!   ([`estimator::filter`]), the gain hypotheses ([`estimator::gain_bank`]),
-//!   one filter ([`estimator::grid`]) and the table ([`estimator::table`]).
+//!   one filter (`estimator::grid`) and the table ([`estimator::table`]).
 //! - [`calibration`]: the dark baseline under noise ([`calibration::dark`])
 //!   and the optical gain against a target ([`calibration::gain`]).
 //! - [`storage`]: persistence — the [`Storage`] seam, the record's bytes

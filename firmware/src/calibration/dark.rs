@@ -38,7 +38,7 @@
 //! Both conditions — significant *and* material — must hold, so noise alone
 //! (any level) never reads as drift, and a drift too small to matter never
 //! refuses. The time bound keeps the worst answer of a command inside the
-//! host's timeout (`reply_time`).
+//! host's timeout (`platform::reply_time`).
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
@@ -58,7 +58,7 @@ pub const CAL_MIN_BLOCKS: usize = 16;
 pub const CAL_MAX_BLOCKS: usize = 256;
 /// The calibration's time bound, ms: a block starts only if it ends within
 /// this, by the upper bound of its duration ([`block_max_us`]). Part of the
-/// worst answer time (`reply_time::WORST_REPLY_MS`).
+/// worst answer time (`platform::reply_time::WORST_REPLY_MS`).
 pub const CAL_MAX_MS: u32 = 2_000;
 /// The baseline's standard error must be at most onset / this (50 nA at the
 /// default 1 µA onset: the baseline error then moves the alarm threshold

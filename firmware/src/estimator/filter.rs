@@ -131,7 +131,7 @@ impl Estimator {
 
     /// The filtered optical evidence of every state of the most likely gain
     /// hypothesis, unnormalised, before the prior and the temperature:
-    /// (dry, [medium][row]) (tests, plots).
+    /// `(dry, [medium][row])` (tests, plots).
     pub fn cells(&self) -> (f32, &[[f32; ROWS]; 3]) {
         let mut best = 0;
         for (j, w) in self.weights.iter().enumerate() {

@@ -74,7 +74,7 @@ where
     /// output stays on while the ice holds); otherwise it runs a dark
     /// calibration (the user cleaned the dry face and pressed the button).
     /// Either way an unsolicited `Ack` (or `Error`) with id
-    /// [`BUTTON_ID`](crate::node::BUTTON_ID) reports what happened. The
+    /// [`BUTTON_ID`] reports what happened. The
     /// acknowledgement never writes flash.
     pub fn button_pressed(&mut self, now_ms: u64, tx: &mut impl FnMut(&[u8])) {
         let cmd = if self.rule.alarm() {
@@ -172,7 +172,7 @@ where
             return Err(ErrorCode::NotDry);
         }
         // Average as long as the noise needs, within the time bound; refuse
-        // a trend, a step, too much noise or saturation (`dark_cal`).
+        // a trend, a step, too much noise or saturation (`calibration::dark`).
         let baseline = dark::run(
             &mut self.adc,
             &mut self.led,

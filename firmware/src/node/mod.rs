@@ -236,7 +236,7 @@ where
 
     /// The programmable voltage detector reports V_DD below its threshold:
     /// saves wait until it does not (and the last V_DDA is healthy:
-    /// `supply`).
+    /// `storage::supply`).
     pub fn set_supply_low(&mut self, low: bool) {
         self.supply_low = low;
     }
@@ -249,7 +249,7 @@ where
         }
     }
 
-    /// Resume the rule's state after a reset (`boot::RuleSnapshot::resume`):
+    /// Resume the rule's state after a reset (`platform::boot::RuleSnapshot::resume`):
     /// the outputs follow at once.
     pub fn resume_rule(&mut self, snapshot: RuleSnapshot) {
         self.rule = Rule::resumed(snapshot.state, snapshot.acked);

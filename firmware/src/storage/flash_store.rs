@@ -1,4 +1,4 @@
-//! The node's [`Storage`] on NOR flash: the versioned record of `persist`
+//! The node's [`Storage`] on NOR flash: the versioned record of [`super::record`]
 //! kept as the one value of a `sequential-storage` map over two flash
 //! pages (sectors 6 and 7 of the F446 on the board, a [`RamFlash`] in
 //! tests).

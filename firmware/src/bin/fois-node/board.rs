@@ -201,7 +201,7 @@ const STORE_SECTOR_BYTES: u32 = fois_firmware::storage::flash_store::BOARD_SECTO
 const STORE_FIRST_SECTOR: u8 = 6;
 const STORE_SECTORS: u32 = 2;
 /// x32 parallelism needs V_DD ≥ 2.7 V (RM0390 §3.5, program/erase
-/// parallelism); the node starts a save only above it (`supply`).
+/// parallelism); the node starts a save only above it (`storage::supply`).
 const X32_MIN_VDDA_MV: u16 = fois_firmware::storage::supply::FLASH_WRITE_MIN_VDDA_MV;
 
 /// The V_DDA of the last frame, mV (0 before the first one): chooses the
