@@ -1,49 +1,51 @@
 #![doc = include_str!("../README.md")]
 //!
-//! ## Modules
+//! ## Layout
 //!
-//! - [`hal`]: the hardware seams ([`hal::PhotoAdc`], [`hal::Storage`], board info).
-//! - [`flash_store::FlashStore`]: the [`hal::Storage`] on NOR flash
-//!   (sequential-storage); [`ram_flash::RamFlash`]: a NOR flash in RAM that
-//!   can lose power mid-operation.
-//! - [`node::Node`]: the whole node behind them; [`schedule::Schedule`]: when
-//!   it sends `Hello` and runs its frames.
-//! - [`measure`], [`ntc`], [`vref`], [`rule`], [`persist`], [`dispatch`]: the pure parts.
-//! - [`dark_cal`]: the dark calibration under noise (how long to average, trend and step tests).
-//! - [`boot`]: what survives a reset (panic resets in a row, the rule's state) and what a boot does
-//!   with it; [`supply`]: flash writes wait for a healthy supply; [`field_link`]: baud rates,
-//!   their error against the node's clock, the RS-485 turn-taking.
-//! - [`watchdog`]: the IWDG prescaler, reload and timeout arithmetic the board
-//!   programs; [`reply_time`]: the worst time to answer a command (the
-//!   host's timeout).
-//! - [`estimator`]: ice thickness ± σ, medium and the sensor's optical gain (a bank of grid Bayes
-//!   filters over gain hypotheses, on the simulator's table); [`gain_cal`]: the gain's
-//!   calibration against a target, its kept prior, its saves and the out-of-band flag.
+//! - [`node`]: the [`Node`] the board, the virtual node and the HIL suite all
+//!   drive — [`node::dispatch`] (the host's commands and the button),
+//!   [`node::frame`] (one output frame: measure, rule, estimate, report),
+//!   [`node::saving`] (when the record is written), [`node::gain_keeping`]
+//!   (the learned gain: prior, out-of-band flag, when it is kept).
+//! - [`ice_rule`]: the ice rule (dry / wet / ice, debounce, hysteresis).
+//! - [`estimator`]: ice thickness ± σ, medium and the sensor's optical gain
+//!   (a bank of grid Bayes filters over gain hypotheses, on the simulator's
+//!   table): its settings ([`estimator::params`]), the driver
+//!   ([`estimator::filter`]), the gain hypotheses ([`estimator::gain_bank`]),
+//!   one filter (`estimator::grid`) and the table ([`estimator::table`]).
+//! - [`calibration`]: the dark baseline under noise ([`calibration::dark`])
+//!   and the optical gain against a target ([`calibration::gain`]).
+//! - [`storage`]: persistence — the [`Storage`] seam, the record's bytes
+//!   ([`storage::record`]), the store on NOR flash
+//!   ([`storage::flash_store`]), a NOR flash in RAM that can lose power
+//!   mid-operation ([`storage::ram_flash`]), flash writes waiting for a
+//!   healthy supply ([`storage::supply`]).
+//! - [`measure`]: codes to physical values — synchronous detection
+//!   ([`measure::photocurrent`]), the NTC ([`measure::ntc`]), V_DDA and the
+//!   die temperature ([`measure::vref`]).
+//! - [`platform`]: what the board runs the node on — boot and what survives
+//!   a reset ([`platform::boot`]), when frames and `Hello` run
+//!   ([`platform::schedule`]), the watchdog's timing
+//!   ([`platform::watchdog`]), the link's baud rates and RS-485 turn-taking
+//!   ([`platform::field_link`]), the worst time to answer a command
+//!   ([`platform::reply_time`]).
+//! - [`hal`]: the hardware seams ([`hal::PhotoAdc`], board info; the
+//!   [`Storage`] seam lives in [`storage`]).
 //! - `sim_board` (feature `sim-board`): a scripted simulated board for tests.
 
 #![cfg_attr(not(test), no_std)]
 
-pub mod boot;
-pub mod dark_cal;
-pub mod dispatch;
+pub mod calibration;
 pub mod estimator;
-pub mod field_link;
-pub mod flash_store;
-pub mod gain_cal;
 pub mod hal;
+pub mod ice_rule;
 pub mod measure;
 pub mod node;
-pub mod ntc;
-pub mod persist;
-pub mod ram_flash;
-pub mod reply_time;
-pub mod rule;
-pub mod schedule;
+pub mod platform;
 #[cfg(feature = "sim-board")]
 pub mod sim_board;
-pub mod supply;
-pub mod vref;
-pub mod watchdog;
+pub mod storage;
 
-pub use hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc, Storage, StorageError};
+pub use hal::{BoardInfo, FactoryCal, PhotoAdc};
 pub use node::Node;
+pub use storage::{MemStorage, Storage, StorageError};

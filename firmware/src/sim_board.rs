@@ -36,18 +36,19 @@ use embedded_hal::digital::{ErrorType, OutputPin};
 use rand_core::Rng;
 use rand_pcg::Pcg32;
 
-use crate::hal::{BoardInfo, FactoryCal, PhotoAdc, Storage};
+use crate::hal::{BoardInfo, FactoryCal, PhotoAdc};
 use crate::node::Node;
+use crate::storage::Storage;
 
 /// The noise stream's PCG state and stream constants (any fixed values).
 const NOISE_STATE: u64 = 0xcafe_f00d_d15e_a5e5;
 const NOISE_STREAM: u64 = 0x0a02_bdbf_7bb3_c0a7;
 
 /// Physical quantities → 12-bit ADC codes: the inverse of what the firmware
-/// computes from the codes (`measure`, `ntc`, `vref`).
+/// computes from the codes (`measure::photocurrent`, `measure::ntc`, `measure::vref`).
 pub mod codes {
     use crate::hal::{ADC_MAX, FactoryCal};
-    use crate::ntc::{BETA_K, R_FIXED_OHM, R25_OHM};
+    use crate::measure::ntc::{BETA_K, R_FIXED_OHM, R25_OHM};
 
     /// 0 °C in kelvin.
     pub const KELVIN_OFFSET: f64 = 273.15;
@@ -73,7 +74,7 @@ pub mod codes {
 
     /// A typical V_CE(sat) of a small NPN phototransistor, V (0.2–0.4 V at
     /// its rated current; the firmware flags saturation against the worst,
-    /// `measure::PHOTO_VCE_SAT_MV`).
+    /// `measure::photocurrent::PHOTO_VCE_SAT_MV`).
     pub const VCE_SAT_TYPICAL_V: f64 = 0.25;
 
     /// The emitter voltage of a phototransistor channel: `current_na`

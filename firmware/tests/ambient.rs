@@ -1,6 +1,6 @@
 //! Ambient light: a DC level plus a mains flicker must barely move I1/I2.
 //!
-//! Bound (derivation in `fois_firmware::measure`): each LED-on sample is
+//! Bound (derivation in `fois_firmware::measure::photocurrent`): each LED-on sample is
 //! compared with the mean of the LED-off samples one settle-plus-conversion
 //! time Δ before and after it, which cancels the linear part of the ambient
 //! change; what is left of a flicker A·sin(2πft) is at most A·(2πfΔ)²/2, plus

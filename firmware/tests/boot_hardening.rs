@@ -9,9 +9,9 @@ mod common;
 
 use common::*;
 use fois_firmware::MemStorage;
-use fois_firmware::boot::{self, RuleSnapshot, SkippableStorage};
-use fois_firmware::hal::Storage;
+use fois_firmware::platform::boot::{self, RuleSnapshot, SkippableStorage};
 use fois_firmware::sim_board;
+use fois_firmware::storage::Storage;
 use fois_protocol::*;
 
 fn events(fs: &[DeviceFrame]) -> Vec<EventKind> {

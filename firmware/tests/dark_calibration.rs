@@ -9,7 +9,7 @@
 mod common;
 
 use common::*;
-use fois_firmware::dark_cal::{self, CAL_MAX_MS};
+use fois_firmware::calibration::dark::{self, CAL_MAX_MS};
 use fois_protocol::*;
 
 /// Send `CalibrateDark`; the answer and how long the node took, ms.
@@ -130,7 +130,7 @@ fn the_slowest_config_stays_inside_the_time_bound() {
         ..Config::default()
     };
     command(&mut node, &w, 1, Command::SetConfigV3(slow.clone()));
-    let plan = dark_cal::plan(&slow);
+    let plan = dark::plan(&slow);
     let (answer, took_ms) = calibrate(&mut node, &w);
     assert_eq!(answer, refused(CalibrationRefusal::Noisy));
     // 23 blocks of 17 × 5.015 ms.

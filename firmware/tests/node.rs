@@ -6,7 +6,7 @@ mod common;
 
 use common::*;
 use fois_firmware::MemStorage;
-use fois_firmware::dispatch::BUTTON_ID;
+use fois_firmware::node::dispatch::BUTTON_ID;
 use fois_protocol::*;
 
 fn measurement(fs: &[DeviceFrame]) -> Measurement {
@@ -571,7 +571,7 @@ fn storage_failure_is_reported_and_the_change_holds() {
     assert!(node.save_pending(), "retried later");
     assert_eq!(
         node.save_due_ms().map(|t| t - t0),
-        Some(fois_firmware::node::SAVE_MIN_INTERVAL_MS + 1_000)
+        Some(fois_firmware::node::saving::SAVE_MIN_INTERVAL_MS + 1_000)
     );
 }
 
@@ -700,7 +700,7 @@ mod fuzz {
 
 mod saving {
     use super::*;
-    use fois_firmware::node::{SAVE_MAX_DELAY_MS, SAVE_MIN_INTERVAL_MS, SAVE_QUIET_MS};
+    use fois_firmware::node::saving::{SAVE_MAX_DELAY_MS, SAVE_MIN_INTERVAL_MS, SAVE_QUIET_MS};
 
     fn writes(node: SimNode) -> u32 {
         node.into_parts().5.writes

@@ -10,7 +10,7 @@ mod common;
 
 use common::*;
 use fois_firmware::estimator::UNKNOWN_GAIN_SD;
-use fois_firmware::hal::MemStorage;
+use fois_firmware::storage::MemStorage;
 use fois_protocol::*;
 
 /// A reference target: its currents at gain 1, nA.

@@ -3,7 +3,7 @@
 // A test crate: unwrap and expect are assertions here (helpers included).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use fois_firmware::rule::{Rule, RuleInput, Transition};
+use fois_firmware::ice_rule::{Rule, RuleInput, Transition};
 use fois_protocol::{Config, DetectorState, EventKind};
 
 fn cfg() -> Config {

@@ -7,13 +7,13 @@ mod common;
 
 use common::*;
 use fois_firmware::Storage;
-use fois_firmware::flash_store::FlashStore;
-use fois_firmware::persist::{self, MAX_RECORD, Record};
-use fois_firmware::ram_flash::{PowerCut, RamFlash};
+use fois_firmware::storage::flash_store::FlashStore;
+use fois_firmware::storage::ram_flash::{PowerCut, RamFlash};
+use fois_firmware::storage::record::{self, MAX_RECORD, Record};
 use fois_protocol::*;
 
 /// The board's geometry: two 128 KiB sectors (F446 sectors 6 and 7).
-const SECTOR: usize = fois_firmware::flash_store::BOARD_SECTOR_BYTES;
+const SECTOR: usize = fois_firmware::storage::flash_store::BOARD_SECTOR_BYTES;
 type BoardFlash = RamFlash<Vec<u8>, SECTOR, 2>;
 /// Small pages: a save changes page every few records (erase + move).
 const SMALL: usize = 256;
@@ -67,7 +67,7 @@ fn record(k: u32) -> Record {
 
 fn encoded(r: &Record) -> Vec<u8> {
     let mut buf = [0u8; MAX_RECORD];
-    let n = persist::encode(r, &mut buf);
+    let n = record::encode(r, &mut buf);
     buf[..n].to_vec()
 }
 
@@ -121,7 +121,7 @@ fn a_saved_record_survives_reboots_and_the_newest_wins() {
     let mut st = store(flash);
     let mut buf = [0u8; MAX_RECORD];
     let n = st.read(&mut buf).unwrap();
-    assert_eq!(persist::decode(&buf[..n]), Ok(record(5)));
+    assert_eq!(record::decode(&buf[..n]), Ok(record(5)));
     // Through the node: config and baseline back, no fault.
     let (c, b, defaulted, _) = boot(st.into_flash());
     assert_eq!((c, b), (record(5).config, record(5).baseline));

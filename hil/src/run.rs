@@ -173,7 +173,7 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
     // The ids our commands will carry, 1.. (so their Errors are not stray).
     let n_ids = f.commands.len() + usize::from(sc.config.is_some());
     let mut ids: Vec<u16> = (1u16..).take(n_ids).collect();
-    ids.push(fois_firmware::dispatch::BUTTON_ID);
+    ids.push(fois_firmware::node::dispatch::BUTTON_ID);
     let mut obs = Observer {
         env: env.clone(),
         record_estimates: f.accuracy,
@@ -221,7 +221,7 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
                 node.press_button(&mut |b: &[u8]| obs.wire(b));
                 obs.out
                     .sent
-                    .push((fois_firmware::dispatch::BUTTON_ID, c.at_s));
+                    .push((fois_firmware::node::dispatch::BUTTON_ID, c.at_s));
                 id += 1;
                 continue;
             }

@@ -38,7 +38,7 @@ pub const BAUD_RATE: u32 = 115_200;
 
 /// How long a host waits for the `Ack` or `Error` of a command, ms. The
 /// node answers every command within its worst case (`fois_firmware::
-/// reply_time::WORST_REPLY_MS`, 5.829 s: the command lands just as the node
+/// platform::reply_time::WORST_REPLY_MS`, 5.829 s: the command lands just as the node
 /// starts its longest frame and a save that erases a flash sector, and it
 /// is a dark calibration of its longest averaging time behind a full
 /// transmit pipe at the slowest link rate), which the firmware

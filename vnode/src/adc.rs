@@ -150,7 +150,7 @@ mod tests {
         assert_ne!(code, adc.frontend.internal_temp_code(-10.0));
         // The firmware's conversion reads it back within a step of the
         // 12-bit code (~0.4 K).
-        let centi = fois_firmware::vref::internal_temp_centi_c(
+        let centi = fois_firmware::measure::vref::internal_temp_centi_c(
             &fois_firmware::FactoryCal::TYPICAL,
             code,
             3_300,

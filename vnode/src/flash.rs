@@ -7,9 +7,9 @@
 //! `Hello` cadence and the host's command timeout see it.
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
-use fois_firmware::flash_store::{BOARD_SECTOR_BYTES, STORE_PAGES};
-use fois_firmware::ram_flash::{RamFlash, RamFlashError};
-use fois_firmware::watchdog::ERASE_128K_X32_MAX_MS;
+use fois_firmware::platform::watchdog::ERASE_128K_X32_MAX_MS;
+use fois_firmware::storage::flash_store::{BOARD_SECTOR_BYTES, STORE_PAGES};
+use fois_firmware::storage::ram_flash::{RamFlash, RamFlashError};
 
 use crate::VirtualClock;
 

@@ -167,8 +167,8 @@ mod tests {
         // The firmware reads our NTC code back as the same temperature.
         for t in [-20.0, -5.0, 0.5, 12.0] {
             let code = fe.ntc_code(t);
-            match fois_firmware::ntc::temperature(code) {
-                fois_firmware::ntc::NtcReading::Ok(c) => {
+            match fois_firmware::measure::ntc::temperature(code) {
+                fois_firmware::measure::ntc::NtcReading::Ok(c) => {
                     assert!((f64::from(c) / 100.0 - t).abs() < 0.1, "{t} °C read {c}")
                 }
                 other => panic!("{t} °C: {other:?}"),

@@ -17,8 +17,8 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use fois_firmware::estimator::EstimatorParams;
-use fois_firmware::flash_store::FlashStore;
-use fois_firmware::schedule::Schedule;
+use fois_firmware::platform::schedule::Schedule;
+use fois_firmware::storage::flash_store::FlashStore;
 use fois_firmware::{BoardInfo, MemStorage, Node, Storage, StorageError};
 use fois_protocol::ResetReason;
 
@@ -71,7 +71,7 @@ impl SharedStorage {
 
     fn try_new(mut initial: MemStorage) -> Result<Self, StorageError> {
         let this = Self::erased();
-        let mut buf = [0u8; fois_firmware::persist::MAX_RECORD];
+        let mut buf = [0u8; fois_firmware::storage::record::MAX_RECORD];
         let n = initial.read(&mut buf)?;
         if n > 0 {
             let record = buf.get(..n).ok_or(StorageError::Read)?;
@@ -111,7 +111,7 @@ impl SharedStorage {
     /// The newest record now (empty storage if there is none or the flash
     /// holds no readable record).
     pub fn snapshot(&self) -> MemStorage {
-        let mut buf = [0u8; fois_firmware::persist::MAX_RECORD];
+        let mut buf = [0u8; fois_firmware::storage::record::MAX_RECORD];
         let n = self
             .store
             .lock()
@@ -124,21 +124,21 @@ impl SharedStorage {
     /// Write `record` if the flash holds none (erased, or nothing readable
     /// as a record); a stored record is left as it is. Returns whether it
     /// wrote.
-    pub fn write_if_empty(&self, record: &fois_firmware::persist::Record) -> bool {
+    pub fn write_if_empty(&self, record: &fois_firmware::storage::record::Record) -> bool {
         let mut probe = self.clone();
-        let mut buf = [0u8; fois_firmware::persist::MAX_RECORD];
+        let mut buf = [0u8; fois_firmware::storage::record::MAX_RECORD];
         let empty = match probe.read(&mut buf) {
             Ok(n) => matches!(
-                fois_firmware::persist::decode(buf.get(..n).unwrap_or(&[])),
-                Err(fois_firmware::persist::LoadError::Empty)
+                fois_firmware::storage::record::decode(buf.get(..n).unwrap_or(&[])),
+                Err(fois_firmware::storage::record::LoadError::Empty)
             ),
             Err(_) => false,
         };
         if !empty {
             return false;
         }
-        let mut out = [0u8; fois_firmware::persist::MAX_RECORD];
-        let n = fois_firmware::persist::encode(record, &mut out);
+        let mut out = [0u8; fois_firmware::storage::record::MAX_RECORD];
+        let n = fois_firmware::storage::record::encode(record, &mut out);
         n > 0 && probe.write(out.get(..n).unwrap_or(&[])).is_ok()
     }
 
@@ -235,9 +235,9 @@ impl Default for NodeOptions {
 /// boot: the default config, no dark baseline, the gain calibration
 /// `(gain, relative sd)` and, as the learned gain, the same (the node's
 /// prior is then the calibration itself, not widened).
-pub fn factory_record(gain: f64, rel_sd: f64) -> fois_firmware::persist::Record {
-    let estimate = fois_firmware::gain_cal::to_estimate(gain as f32, rel_sd as f32);
-    fois_firmware::persist::Record {
+pub fn factory_record(gain: f64, rel_sd: f64) -> fois_firmware::storage::record::Record {
+    let estimate = fois_firmware::calibration::gain::to_estimate(gain as f32, rel_sd as f32);
+    fois_firmware::storage::record::Record {
         config: fois_protocol::Config::default(),
         baseline: None,
         gain: Some(estimate),
@@ -423,7 +423,7 @@ impl VirtualNode {
         self.schedule.next_wake_ms(true).saturating_mul(NS_PER_MS)
     }
 
-    /// The schedule the node runs on (the board's: `fois_firmware::schedule`).
+    /// The schedule the node runs on (the board's: `fois_firmware::platform::schedule`).
     pub fn schedule(&self) -> &Schedule {
         &self.schedule
     }
@@ -684,16 +684,22 @@ mod tests {
     #[test]
     fn a_factory_calibration_leaves_a_stored_record_alone() {
         let record = factory_record(0.9, 0.02);
-        let mut out = [0u8; fois_firmware::persist::MAX_RECORD];
-        let n = fois_firmware::persist::encode(&record, &mut out);
+        let mut out = [0u8; fois_firmware::storage::record::MAX_RECORD];
+        let n = fois_firmware::storage::record::encode(&record, &mut out);
         let storage = SharedStorage::new(MemStorage::with_bytes(&out[..n]));
         assert!(!storage.write_if_empty(&factory_record(1.0, 0.02)));
-        let mut buf = [0u8; fois_firmware::persist::MAX_RECORD];
+        let mut buf = [0u8; fois_firmware::storage::record::MAX_RECORD];
         let n = storage.snapshot().read(&mut buf).unwrap();
-        assert_eq!(fois_firmware::persist::decode(&buf[..n]).unwrap(), record);
+        assert_eq!(
+            fois_firmware::storage::record::decode(&buf[..n]).unwrap(),
+            record
+        );
         let erased = SharedStorage::new(MemStorage::new());
         assert!(erased.write_if_empty(&record));
         let n = erased.snapshot().read(&mut buf).unwrap();
-        assert_eq!(fois_firmware::persist::decode(&buf[..n]).unwrap(), record);
+        assert_eq!(
+            fois_firmware::storage::record::decode(&buf[..n]).unwrap(),
+            record
+        );
     }
 }

@@ -65,10 +65,10 @@ struct File {
 
 /// A `gain_calibration = [gain, relative sd]` as a file gives it, checked:
 /// the gain within what the node's calibration accepts
-/// (`fois_firmware::gain_cal::GAIN_RANGE`), the sd in (0, 1).
+/// (`fois_firmware::calibration::gain::GAIN_RANGE`), the sd in (0, 1).
 pub fn gain_calibration(spec: [f64; 2]) -> Result<(f64, f64), String> {
     let [gain, rel_sd] = spec;
-    let (lo, hi) = fois_firmware::gain_cal::GAIN_RANGE;
+    let (lo, hi) = fois_firmware::calibration::gain::GAIN_RANGE;
     if !(gain >= f64::from(lo) && gain <= f64::from(hi)) {
         return Err(format!(
             "gain_calibration: gain {gain} outside the node's range {lo}..={hi}"

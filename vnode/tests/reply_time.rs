@@ -12,9 +12,9 @@
 use std::sync::Arc;
 
 use fois_firmware::Storage;
-use fois_firmware::flash_store::FlashStore;
-use fois_firmware::persist::{self, MAX_RECORD, Record};
-use fois_firmware::reply_time::WORST_REPLY_MS;
+use fois_firmware::platform::reply_time::WORST_REPLY_MS;
+use fois_firmware::storage::flash_store::FlashStore;
+use fois_firmware::storage::record::{self, MAX_RECORD, Record};
 use fois_protocol::{
     AckResult, CalibrationRefusal, Command, Config, DeviceFrame, DeviceMsg, ErrorCode, ErrorReply,
     FrameDecoder, HostFrame, REPLY_TIMEOUT_MS, encode_to_vec,
@@ -35,7 +35,7 @@ fn longest_frames() -> Config {
 
 fn record_bytes(config: &Config) -> Vec<u8> {
     let mut out = [0u8; MAX_RECORD];
-    let n = persist::encode(
+    let n = record::encode(
         &Record {
             config: config.clone(),
             baseline: None,

@@ -1,4 +1,4 @@
-//! The virtual node runs the board's schedule (`fois_firmware::schedule`,
+//! The virtual node runs the board's schedule (`fois_firmware::platform::schedule`,
 //! the code the board binary's main loop polls): `Hello` and the first
 //! frame at boot, frames on a fixed grid, a new stream period applied at
 //! once from the last frame, `Hello` every second while not streaming.

@@ -14,10 +14,10 @@ use std::rc::Rc;
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::{ErrorType, OutputPin};
-use fois_firmware::flash_store::FlashStore;
 use fois_firmware::hal::{BoardInfo, PhotoAdc};
 use fois_firmware::node::Node;
-use fois_firmware::ram_flash::RamFlash;
+use fois_firmware::storage::flash_store::FlashStore;
+use fois_firmware::storage::ram_flash::RamFlash;
 use fois_protocol::{DeviceFrame, DeviceMsg, FrameDecoder, MAX_FRAME};
 use libfuzzer_sys::fuzz_target;
 

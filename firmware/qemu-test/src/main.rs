@@ -28,13 +28,15 @@ use cortex_m_semihosting::{debug, hprintln};
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::{ErrorType, OutputPin};
 use fois_firmware::estimator::Estimator;
-use fois_firmware::flash_store::FlashStore;
-use fois_firmware::hal::{BoardInfo, FactoryCal, MemStorage, PhotoAdc, Storage};
+use fois_firmware::hal::{BoardInfo, FactoryCal, PhotoAdc};
+use fois_firmware::ice_rule::{Rule, RuleInput};
+use fois_firmware::measure::{ntc, vref};
 use fois_firmware::node::Node;
-use fois_firmware::ram_flash::{PowerCut, RamFlash};
-use fois_firmware::rule::{Rule, RuleInput};
 use fois_firmware::sim_board::{self, SimBoard};
-use fois_firmware::{ntc, persist, vref};
+use fois_firmware::storage::flash_store::FlashStore;
+use fois_firmware::storage::ram_flash::{PowerCut, RamFlash};
+use fois_firmware::storage::record;
+use fois_firmware::storage::{MemStorage, Storage};
 use fois_protocol::{
     Ack, AckResult, Command, Config, DetectorState, DeviceFrame, DeviceMsg, ErrorCode, ErrorReply,
     EventKind, FrameDecoder, HostFrame, MAX_FRAME, encode, flags,
@@ -177,7 +179,7 @@ fn t_ntc_and_vref() -> TestResult {
 }
 
 fn t_persist() -> TestResult {
-    let rec = persist::Record {
+    let rec = record::Record {
         config: Config {
             onset_rise_na: 1_500,
             ..Config::default()
@@ -192,23 +194,23 @@ fn t_persist() -> TestResult {
         }),
         gain_calibration: None,
     };
-    let mut buf = [0u8; persist::MAX_RECORD];
-    let n = persist::encode(&rec, &mut buf);
+    let mut buf = [0u8; record::MAX_RECORD];
+    let n = record::encode(&rec, &mut buf);
     check!(
-        persist::decode(buf.get(..n).unwrap_or(&[])) == Ok(rec.clone()),
+        record::decode(buf.get(..n).unwrap_or(&[])) == Ok(rec.clone()),
         "    round trip"
     );
     for i in 0..n {
         let mut b = buf;
         b[i] ^= 0x04;
         check!(
-            persist::decode(&b[..n]).is_err(),
+            record::decode(&b[..n]).is_err(),
             "    flip in byte {} accepted",
             i
         );
     }
     check!(
-        persist::decode(&[0xFF; 32]) == Err(persist::LoadError::Empty),
+        record::decode(&[0xFF; 32]) == Err(record::LoadError::Empty),
         "    erased"
     );
     Ok(())
@@ -227,10 +229,10 @@ fn t_flash_store() -> TestResult {
         check!(false, "    layout");
         return Ok(());
     };
-    let mut buf = [0u8; persist::MAX_RECORD];
+    let mut buf = [0u8; record::MAX_RECORD];
     check!(st.read(&mut buf) == Ok(0), "    erased = empty");
     let record = |k: u32| {
-        let rec = persist::Record {
+        let rec = record::Record {
             config: Config {
                 onset_rise_na: 1_000 + k,
                 ..Config::default()
@@ -239,8 +241,8 @@ fn t_flash_store() -> TestResult {
             gain: None,
             gain_calibration: None,
         };
-        let mut b = [0u8; persist::MAX_RECORD];
-        let n = persist::encode(&rec, &mut b);
+        let mut b = [0u8; record::MAX_RECORD];
+        let n = record::encode(&rec, &mut b);
         (b, n)
     };
     for k in 0..60 {
@@ -578,7 +580,10 @@ fn main() -> ! {
             t_node_ice_onset_drives_the_alarm,
         ),
         ("flicker_bound", t_flicker_bound),
-        ("estimator_rime_and_bad_input", t_estimator_rime_and_bad_input),
+        (
+            "estimator_rime_and_bad_input",
+            t_estimator_rime_and_bad_input,
+        ),
     ];
     hprintln!("running {} tests on the emulated Cortex-M4F", tests.len());
     let mut failed = 0;

@@ -45,13 +45,13 @@ mod app {
     use embassy_sync::signal::Signal;
     use embassy_time::{Delay, Instant, Timer};
     use embedded_io_async::{Read, Write};
-    use fois_firmware::boot::{self, RuleSnapshot, SkippableStorage};
-    use fois_firmware::field_link;
-    use fois_firmware::flash_store::FlashStore;
     use fois_firmware::hal::BoardInfo;
     use fois_firmware::node::Node;
-    use fois_firmware::schedule::Schedule;
-    use fois_firmware::watchdog::MAX_SLEEP_MS;
+    use fois_firmware::platform::boot::{self, RuleSnapshot, SkippableStorage};
+    use fois_firmware::platform::field_link;
+    use fois_firmware::platform::schedule::Schedule;
+    use fois_firmware::platform::watchdog::MAX_SLEEP_MS;
+    use fois_firmware::storage::flash_store::FlashStore;
     use fois_protocol::ResetReason;
 
     use crate::board::{self, BoardAdc, BoardFlash};

@@ -5,8 +5,8 @@
 
 use std::rc::Rc;
 
-use fois_firmware::hal::{MemStorage, Storage};
 use fois_firmware::sim_board::{self, SimBoard};
+use fois_firmware::storage::{MemStorage, Storage};
 use fois_protocol::{DeviceFrame, FrameDecoder, HostFrame, encode_to_vec};
 
 /// The board a test drives: clock, output levels, scene.

@@ -197,12 +197,12 @@ impl PhotoAdc for BoardAdc {
 /// The store's two sectors: 6 and 7, 0x0804_0000..0x0808_0000 (memory.x
 /// keeps the program in sectors 0–5).
 const STORE_OFFSET: u32 = 0x0004_0000;
-const STORE_SECTOR_BYTES: u32 = fois_firmware::flash_store::BOARD_SECTOR_BYTES as u32;
+const STORE_SECTOR_BYTES: u32 = fois_firmware::storage::flash_store::BOARD_SECTOR_BYTES as u32;
 const STORE_FIRST_SECTOR: u8 = 6;
 const STORE_SECTORS: u32 = 2;
 /// x32 parallelism needs V_DD ≥ 2.7 V (RM0390 §3.5, program/erase
-/// parallelism); the node starts a save only above it (`supply`).
-const X32_MIN_VDDA_MV: u16 = fois_firmware::supply::FLASH_WRITE_MIN_VDDA_MV;
+/// parallelism); the node starts a save only above it (`storage::supply`).
+const X32_MIN_VDDA_MV: u16 = fois_firmware::storage::supply::FLASH_WRITE_MIN_VDDA_MV;
 
 /// The V_DDA of the last frame, mV (0 before the first one): chooses the
 /// erase parallelism.

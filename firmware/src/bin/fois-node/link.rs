@@ -12,7 +12,7 @@
 //!   once the USART reports transmission complete (TC).
 //!
 //! The rate is never a `Config` field: a wrong value sent over the link
-//! would cut the only link to a node on a tower (`fois_firmware::field_link`
+//! would cut the only link to a node on a tower (`fois_firmware::platform::field_link`
 //! states each rate's error against the node's clock).
 
 use embassy_stm32::gpio::Output;
@@ -86,7 +86,7 @@ pub fn field(
     strap: Peri<'static, peripherals::PC8>,
 ) -> Link {
     use embassy_stm32::gpio::{Input, Level, Pull, Speed};
-    use fois_firmware::field_link::LONG_CABLE_BAUD;
+    use fois_firmware::platform::field_link::LONG_CABLE_BAUD;
 
     // DE low first: the transceiver listens while the USART is set up.
     let de = Output::new(de, Level::Low, Speed::Low);

@@ -3,7 +3,7 @@
 //! its fail-over to HSI), the brown-out level (read only), the programmable
 //! voltage detector, the backup registers, and the panic and HardFault
 //! handlers that record the cause and reset at once. The decisions are the
-//! library's (`fois_firmware::boot`, `::supply`, `::watchdog`); this file
+//! library's (`fois_firmware::platform::boot`, `::supply`, `::watchdog`); this file
 //! only moves bits.
 
 use core::sync::atomic::{AtomicBool, Ordering};
@@ -11,12 +11,12 @@ use core::sync::atomic::{AtomicBool, Ordering};
 use cortex_m_rt::{ExceptionFrame, exception};
 use embassy_stm32::pac;
 use embassy_stm32::pac::iwdg::vals::{Key, Pr};
-use fois_firmware::{boot, watchdog};
+use fois_firmware::platform::{boot, watchdog};
 
 // ---- Watchdog ----
 
 /// The independent watchdog, programmed through the PAC with the prescaler
-/// and reload of `fois_firmware::watchdog` (timeout ≥ 8.17 s at the fastest
+/// and reload of `fois_firmware::platform::watchdog` (timeout ≥ 8.17 s at the fastest
 /// LSI). Zero-sized and `Copy`, so the flash erase can feed it too.
 #[derive(Clone, Copy)]
 pub struct Watchdog(());
@@ -107,7 +107,7 @@ fn hse_ready(bypass: bool) -> bool {
 /// times, the timer and the baud dividers are the same). With the 8 MHz HSE:
 /// PLL 8 / 4 × 64 / 8 = 16 MHz (VCO input 2 MHz, VCO 128 MHz, both in
 /// range); without it HSI 16 MHz (±1 % at 25 °C, −8 / +4.5 % over
-/// −40…105 °C: `fois_firmware::field_link`, hence CLOCK_FALLBACK). The
+/// −40…105 °C: `fois_firmware::platform::field_link`, hence CLOCK_FALLBACK). The
 /// low-speed domain stays off: embassy would otherwise select the LSI as
 /// the RTC clock at the first boot after a power-on and reset the backup
 /// domain to do so, which clears the backup registers.

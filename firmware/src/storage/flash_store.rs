@@ -1,4 +1,4 @@
-//! The node's [`Storage`] on NOR flash: the versioned record of `persist`
+//! The node's [`Storage`] on NOR flash: the versioned record of [`super::record`]
 //! kept as the one value of a `sequential-storage` map over two flash
 //! pages (sectors 6 and 7 of the F446 on the board, a [`RamFlash`] in
 //! tests).
@@ -46,11 +46,11 @@ use sequential_storage::cache::page_pointers::ArrayPagePointers;
 use sequential_storage::cache::page_states::ArrayPageStates;
 use sequential_storage::map::{MapConfig, MapStorage};
 
-use crate::hal::{Storage, StorageError};
-use crate::persist::MAX_RECORD;
+use crate::storage::record::MAX_RECORD;
+use crate::storage::{Storage, StorageError};
 
 #[cfg(doc)]
-use crate::ram_flash::RamFlash;
+use crate::storage::ram_flash::RamFlash;
 
 /// Flash pages (erase units) the store uses: sequential-storage's map needs
 /// two, one always kept free to move into.

@@ -75,7 +75,7 @@ pub fn temperature(code: u16) -> NtcReading {
     } else {
         centi - 0.5
     };
-    NtcReading::Ok(crate::vref::clamp_i16(rounded as i64))
+    NtcReading::Ok(crate::measure::vref::clamp_i16(rounded as i64))
 }
 
 #[cfg(test)]

@@ -24,7 +24,7 @@
 use fois_protocol::DetectorState;
 use fois_protocol::framing::CRC;
 
-use crate::hal::{Storage, StorageError};
+use crate::storage::{Storage, StorageError};
 
 /// Panic resets in a row after which the node boots without its flash
 /// store.

@@ -19,7 +19,7 @@
 //! loop), each at most a dark calibration, then runs a frame and the save
 //! work before an erase.
 
-use crate::dark_cal::CAL_MAX_MS;
+use crate::calibration::dark::CAL_MAX_MS;
 
 /// Slowest LSI, Hz (F446 datasheet, LSI oscillator characteristics).
 pub const LSI_MIN_HZ: u32 = 17_000;

@@ -16,9 +16,9 @@
 //! a quiet line and the driver enable ([`TURNAROUND_MAX_MS`]). (The save a command causes is
 //! deferred and coalesced: it never delays the command's own answer.)
 
-use crate::dark_cal::CAL_MAX_MS;
-use crate::field_link::TURNAROUND_MAX_MS;
-use crate::watchdog::{ERASE_128K_X16_MAX_MS, LONGEST_FRAME_MS};
+use crate::calibration::dark::CAL_MAX_MS;
+use crate::platform::field_link::TURNAROUND_MAX_MS;
+use crate::platform::watchdog::{ERASE_128K_X16_MAX_MS, LONGEST_FRAME_MS};
 
 /// Programming one record item and reading it back, ms (a ~50-byte item
 /// at ≤ 100 µs per 32-bit word, RM0390 t_PROG, with room).
@@ -27,7 +27,7 @@ pub const SAVE_PROGRAM_MAX_MS: u32 = 50;
 pub const TX_PIPE_BYTES: u32 = 1_024;
 /// The slowest link rate the board offers, Bd (the field link's long-cable
 /// rate).
-pub const SLOWEST_BAUD: u32 = crate::field_link::LONG_CABLE_BAUD;
+pub const SLOWEST_BAUD: u32 = crate::platform::field_link::LONG_CABLE_BAUD;
 /// The transmit pipe drained at [`SLOWEST_BAUD`], 10 bits a byte, ms
 /// (rounded up: 534 ms; 89 ms at 115 200 Bd).
 pub const TX_QUEUE_MAX_MS: u32 = (TX_PIPE_BYTES * 10 * 1_000).div_ceil(SLOWEST_BAUD);
@@ -64,7 +64,7 @@ mod tests {
         // milliseconds are HSI's: at its slowest (−8 % over −40…105 °C,
         // field_link::HSI_FULL_RANGE_PPM) the worst case takes 5 829 / 0.92
         // = 6 336 ms of the host's time, 1.66 s inside its timeout.
-        let slow = 1.0 - f64::from(crate::field_link::HSI_FULL_RANGE_PPM) * 1e-6;
+        let slow = 1.0 - f64::from(crate::platform::field_link::HSI_FULL_RANGE_PPM) * 1e-6;
         let real_ms = f64::from(WORST_REPLY_MS) / slow;
         assert!((6_335.0..6_337.0).contains(&real_ms), "{real_ms}");
         assert!(real_ms + 1_500.0 < fois_protocol::REPLY_TIMEOUT_MS as f64);

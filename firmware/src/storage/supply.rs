@@ -16,7 +16,7 @@ pub const FLASH_WRITE_MIN_VDDA_MV: u16 = 2_700;
 /// the PVD reports V_DD below its threshold.
 pub fn flash_write_allowed(vdda_mv: u16, pvd_low: bool) -> bool {
     // A VREFINT code of 0 reads as u16::MAX mV: out of range, not healthy.
-    !pvd_low && vdda_mv >= FLASH_WRITE_MIN_VDDA_MV && crate::vref::vdda_in_range(vdda_mv)
+    !pvd_low && vdda_mv >= FLASH_WRITE_MIN_VDDA_MV && crate::measure::vref::vdda_in_range(vdda_mv)
 }
 
 #[cfg(test)]
@@ -31,7 +31,7 @@ mod tests {
         assert!(!flash_write_allowed(3_300, true));
         // A VREFINT reading of 0 gives u16::MAX mV (out of range): the old
         // brown-out check let that pass.
-        let broken = crate::vref::vdda_mv(&crate::hal::FactoryCal::TYPICAL, 0);
+        let broken = crate::measure::vref::vdda_mv(&crate::hal::FactoryCal::TYPICAL, 0);
         assert!(!flash_write_allowed(broken, false));
         assert!(!flash_write_allowed(3_601, false));
         assert!(!flash_write_allowed(0, false));

@@ -4,7 +4,7 @@
 //! saturation.
 //!
 //! The calibration measures *blocks*: synchronous detection as in a frame
-//! (`measure::acquire`, the config's settle time) with
+//! (`photocurrent::acquire`, the config's settle time) with
 //! [`CAL_BLOCK_CYCLES`] cycles each, whatever the frames' K (every cycle's
 //! net has the same expectation), back to back. After
 //! [`CAL_MIN_BLOCKS`] blocks it stops as soon as the standard error of the
@@ -38,15 +38,15 @@
 //! Both conditions — significant *and* material — must hold, so noise alone
 //! (any level) never reads as drift, and a drift too small to matter never
 //! refuses. The time bound keeps the worst answer of a command inside the
-//! host's timeout (`reply_time`).
+//! host's timeout (`platform::reply_time`).
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use fois_protocol::{Baseline, CalibrationRefusal, Config};
 
 use crate::hal::{FactoryCal, PhotoAdc};
-use crate::measure;
-use crate::vref;
+use crate::measure::photocurrent;
+use crate::measure::vref;
 
 /// Cycles per calibration block: short blocks give enough of them to see a
 /// trend or a step even at 5 ms settle (8 cycles × 2 × 5 ms = 80 ms a
@@ -58,7 +58,7 @@ pub const CAL_MIN_BLOCKS: usize = 16;
 pub const CAL_MAX_BLOCKS: usize = 256;
 /// The calibration's time bound, ms: a block starts only if it ends within
 /// this, by the upper bound of its duration ([`block_max_us`]). Part of the
-/// worst answer time (`reply_time::WORST_REPLY_MS`).
+/// worst answer time (`platform::reply_time::WORST_REPLY_MS`).
 pub const CAL_MAX_MS: u32 = 2_000;
 /// The baseline's standard error must be at most onset / this (50 nA at the
 /// default 1 µA onset: the baseline error then moves the alarm threshold
@@ -388,15 +388,15 @@ where
     let plan = plan(config);
     let vdda_mv = vref::vdda_mv(cal, adc.read_vrefint());
     let conv_mv = vref::vdda_for_conversion(vdda_mv);
-    let sat = measure::saturation_code(conv_mv);
+    let sat = photocurrent::saturation_code(conv_mv);
     let loads = [config.load_r1_ohm, config.load_r2_ohm];
     let mut blocks = Blocks::new();
     while blocks.len() < plan.max_blocks {
-        let acq = measure::acquire(adc, led, delay, plan.block_cycles, config.settle_us, sat);
+        let acq = photocurrent::acquire(adc, led, delay, plan.block_cycles, config.settle_us, sat);
         if acq.saturated.iter().any(|s| *s) {
             return Err(CalibrationRefusal::Saturated);
         }
-        blocks.push(measure::currents(&acq, conv_mv, loads).net_na);
+        blocks.push(photocurrent::currents(&acq, conv_mv, loads).net_na);
         if blocks.precise_enough(&plan) {
             break;
         }

@@ -83,7 +83,7 @@ impl Rule {
     }
 
     /// The rule resumed in `state` after a reset (counters at zero; the
-    /// acknowledgement kept only while iced): see `boot::RuleSnapshot`.
+    /// acknowledgement kept only while iced): see `platform::boot::RuleSnapshot`.
     pub const fn resumed(state: DetectorState, acked: bool) -> Self {
         let mut rule = Rule::new();
         rule.state = state;

@@ -1,0 +1,381 @@
+//! The filter's driver: one [`Estimator::step`] per frame gathers the
+//! frames, and once per `update_period_s` predicts every hypothesis' grid
+//! over the elapsed time and updates it with the frames' robust mean (the
+//! first valid frame sets them at once); then the bank learns the gain and
+//! the output posterior is the weighted mixture of the grids'.
+
+use fois_protocol::IceEstimate;
+
+use super::gain_bank::{GAIN_STEP_MAX, GAINS, UNKNOWN_GAIN_SD};
+use super::grid::{self, Grid, Moments, Shared};
+use super::params::{EstimatorParams, within};
+use super::{Estimator, Posterior, ROWS, STEP_MM, Update, fast_math, row_mm};
+
+/// Prior probability of the dry face; the three media share the rest.
+const PRIOR_DRY: f32 = 0.25;
+
+/// Largest Δt one step accepts, s (longer gaps count as this).
+const MAX_DT_S: f32 = 86_400.0;
+
+/// Largest |current| that counts as a measurement, µA (far beyond the
+/// 330 µA full scale of the default front end).
+const MAX_CURRENT_UA: f32 = 10_000.0;
+
+/// Most frames averaged into one update.
+pub const MAX_PENDING: usize = 16;
+
+/// ln(1 + eˣ), without overflow.
+fn softplus(x: f32) -> f32 {
+    if x > 20.0 {
+        x
+    } else {
+        fast_math::ln(1.0 + fast_math::exp(x))
+    }
+}
+
+impl Estimator {
+    /// A filter with these settings (sanitised), waiting for its first
+    /// frame, its gain unknown (1 ± [`UNKNOWN_GAIN_SD`]).
+    #[inline(never)]
+    pub fn new(params: EstimatorParams) -> Self {
+        let params = params.sanitized();
+        let mut sum = 0.0f32;
+        for i in 0..ROWS {
+            sum += fast_math::exp(-row_mm(i) / params.water_scale_mm);
+        }
+        let mut est = Estimator {
+            params,
+            grids: [const { Grid::new() }; GAINS],
+            ln_gains: [0.0; GAINS],
+            gain_step: GAIN_STEP_MAX,
+            prior: (0.0, UNKNOWN_GAIN_SD),
+            evidence: [0.0; GAINS],
+            evidence_started: false,
+            tempco_per_k: 0.0,
+            tempco_sd_per_k: 0.0,
+            optics_temp_c: None,
+            water_log_norm: fast_math::ln(if sum > 0.0 { sum } else { 1.0 }),
+            air_temp_c: None,
+            pending: [[0.0; 2]; MAX_PENDING],
+            pending_n: 0,
+            pending_negative: 0,
+            pending_dt_s: 0.0,
+            update: Update::Waiting,
+            posterior: None,
+            weights: [0.0; GAINS],
+        };
+        est.set_gain_prior(1.0, UNKNOWN_GAIN_SD);
+        est
+    }
+
+    /// The settings in force.
+    pub fn params(&self) -> &EstimatorParams {
+        &self.params
+    }
+
+    /// Forget the face: the next valid frame starts afresh. The gain prior
+    /// stays; what the frames had taught about the gain is forgotten.
+    pub fn reset(&mut self) {
+        for g in self.grids.iter_mut() {
+            g.reset();
+        }
+        self.evidence = [0.0; GAINS];
+        self.evidence_started = false;
+        self.air_temp_c = None;
+        self.clear_pending();
+        self.update = Update::Waiting;
+        self.posterior = None;
+        self.weights = self.prior_weights();
+    }
+
+    /// The face is known to be clean and dry (a dark calibration has just
+    /// been taken on it): all probability on *dry*. Ice must then grow
+    /// through thin layers, which the currents show, before the filter can
+    /// believe in a thick one (thick clear ice reads almost like a dry face).
+    /// The gain's evidence stays.
+    pub fn set_dry(&mut self) {
+        for g in self.grids.iter_mut() {
+            g.set_dry();
+        }
+        self.clear_pending();
+        self.update = Update::Initialised;
+        self.summarise();
+    }
+
+    /// Each hypothesis' own posterior (tests, plots).
+    pub fn hypothesis_posteriors(&self) -> [Option<Posterior>; GAINS] {
+        let shared = self.shared();
+        let mut out = [None; GAINS];
+        for (o, g) in out.iter_mut().zip(self.grids.iter()) {
+            *o = g
+                .summarise(&shared)
+                .and_then(|m| Moments::mixture(core::iter::once((1.0, m))));
+        }
+        out
+    }
+
+    /// What the last step did.
+    pub fn last_update(&self) -> Update {
+        self.update
+    }
+
+    /// The posterior after the last step (`None` before the first valid frame).
+    pub fn posterior(&self) -> Option<Posterior> {
+        self.posterior
+    }
+
+    /// The estimate as the protocol carries it.
+    pub fn estimate(&self) -> Option<IceEstimate> {
+        self.posterior.map(|p| p.ice_estimate())
+    }
+
+    /// The filtered optical evidence of every state of the most likely gain
+    /// hypothesis, unnormalised, before the prior and the temperature:
+    /// `(dry, [medium][row])` (tests, plots).
+    pub fn cells(&self) -> (f32, &[[f32; ROWS]; 3]) {
+        let mut best = 0;
+        for (j, w) in self.weights.iter().enumerate() {
+            if *w > self.weights.get(best).copied().unwrap_or(0.0) {
+                best = j;
+            }
+        }
+        let g = self.grids.get(best).unwrap_or(&self.grids[0]);
+        (g.dry, &g.cells)
+    }
+
+    /// One frame: `dt_s` since the previous frame, the baseline-corrected
+    /// currents in µA (`None` for an invalid or saturated frame) and the air
+    /// temperature in °C (`None` when the NTC has failed). Frames are
+    /// gathered and the filter updates once per `update_period_s` on their
+    /// robust mean (the first valid frame at once). Returns the estimate
+    /// after the frame (`None` until the first valid frame).
+    pub fn step(
+        &mut self,
+        dt_s: f32,
+        currents_ua: Option<[f32; 2]>,
+        air_temp_c: Option<f32>,
+    ) -> Option<IceEstimate> {
+        let dt_s = within(dt_s, 0.0, MAX_DT_S, 0.0);
+        let x = currents_ua
+            .filter(|x| x.iter().all(|v| v.is_finite() && v.abs() <= MAX_CURRENT_UA))
+            .map(|x| [x[0] * 1000.0, x[1] * 1000.0]);
+        self.air_temp_c = air_temp_c
+            .filter(|t| t.is_finite())
+            .map(|t| t.clamp(-100.0, 200.0));
+        // Below zero by more than 6σ of the noise fits no state (Sensor B
+        // reads ≥ 0; the Gaussian tails of a broad state would otherwise
+        // take it): e.g. a baseline taken with ice on the face.
+        let r = self.params.noise_ua;
+        let negative = x.is_some_and(|x| x[0] < -6000.0 * r[0] || x[1] < -6000.0 * r[1]);
+        if !self.grids.iter().any(|g| g.initialised) {
+            self.clear_pending();
+            let x = if negative { None } else { x };
+            return match x {
+                Some(x) => self.initialise(x),
+                None => {
+                    self.update = Update::Waiting;
+                    None
+                }
+            };
+        }
+        self.pending_dt_s += dt_s;
+        match x {
+            Some(_) if negative => self.pending_negative += 1,
+            Some(x) => {
+                if let Some(slot) = self.pending.get_mut(self.pending_n) {
+                    *slot = x;
+                    self.pending_n += 1;
+                }
+            }
+            None => {}
+        }
+        if self.pending_dt_s + 1e-4 >= self.params.update_period_s || self.pending_n >= MAX_PENDING
+        {
+            self.run_update();
+        }
+        self.estimate()
+    }
+
+    fn clear_pending(&mut self) {
+        self.pending_n = 0;
+        self.pending_negative = 0;
+        self.pending_dt_s = 0.0;
+    }
+
+    /// The robust mean of the pending frames, nA: the median per channel,
+    /// frames further from it than max(6σ of the noise, 10 % of the median)
+    /// dropped (a spike, a flicker burst), the mean of the rest.
+    fn pending_mean(&self) -> Option<[f32; 2]> {
+        let frames = self.pending.get(..self.pending_n)?;
+        if frames.is_empty() {
+            return None;
+        }
+        let mut median = [0.0f32; 2];
+        for (ch, m) in median.iter_mut().enumerate() {
+            let mut v = [0.0f32; MAX_PENDING];
+            for (a, f) in v.iter_mut().zip(frames) {
+                *a = f[ch];
+            }
+            let v = v.get_mut(..frames.len())?;
+            v.sort_unstable_by(f32::total_cmp);
+            *m = *v.get(v.len() / 2)?;
+        }
+        let r = self.params.noise_ua;
+        let tol = [
+            (6000.0 * r[0]).max(0.1 * median[0].abs()),
+            (6000.0 * r[1]).max(0.1 * median[1].abs()),
+        ];
+        let (mut sum, mut n) = ([0.0f32; 2], 0.0f32);
+        for f in frames {
+            if (f[0] - median[0]).abs() <= tol[0] && (f[1] - median[1]).abs() <= tol[1] {
+                sum[0] += f[0];
+                sum[1] += f[1];
+                n += 1.0;
+            }
+        }
+        if n > 0.0 {
+            Some([sum[0] / n, sum[1] / n])
+        } else {
+            Some(median)
+        }
+    }
+
+    /// The shared factors of this update: noise, the within-hypothesis gain
+    /// spread, prior × temperature per medium.
+    fn shared(&self) -> Shared {
+        let p = &self.params;
+        let (ln_water_t, ln_ice_t) = match self.air_temp_c {
+            Some(t) => (
+                -softplus(-(t - p.water_min_c) / p.temp_scale_c),
+                -softplus(-(p.ice_max_c - t) / p.temp_scale_c),
+            ),
+            None => (0.0, 0.0),
+        };
+        // Prior: dry PRIOR_DRY; each medium (1 − PRIOR_DRY)/3, flat in
+        // thickness for ice, ∝ exp(−d / scale) for water.
+        let medium = (1.0 - PRIOR_DRY) / 3.0;
+        let ice_row = medium / ROWS as f32;
+        let within = self.within_gain_sd();
+        Shared {
+            r_na2: [
+                (p.noise_ua[0] * 1000.0) * (p.noise_ua[0] * 1000.0),
+                (p.noise_ua[1] * 1000.0) * (p.noise_ua[1] * 1000.0),
+            ],
+            g2: within * within,
+            dry_factor: PRIOR_DRY,
+            factor: [
+                medium * fast_math::exp(ln_water_t - self.water_log_norm),
+                ice_row * fast_math::exp(ln_ice_t),
+                ice_row * fast_math::exp(ln_ice_t),
+            ],
+            row_ratio: [fast_math::exp(-STEP_MM / p.water_scale_mm), 1.0, 1.0],
+        }
+    }
+
+    /// The first frame with currents that fit some state sets every grid
+    /// with full weight.
+    #[inline(never)]
+    fn initialise(&mut self, x: [f32; 2]) -> Option<IceEstimate> {
+        let shared = self.shared();
+        let gains = self.gains_now();
+        let mut ln_z = [f32::NEG_INFINITY; GAINS];
+        let mut any = false;
+        for ((g, gain), z) in self.grids.iter_mut().zip(gains).zip(ln_z.iter_mut()) {
+            let s = g.initialise(x, gain, &self.params, &shared);
+            if let Some(l) = s.ln_z {
+                *z = l;
+                any = true;
+            }
+        }
+        if !any {
+            self.reset();
+            return None;
+        }
+        self.learn_gain(0.0, &ln_z);
+        self.update = Update::Initialised;
+        self.summarise();
+        self.estimate()
+    }
+
+    /// Predict over the pending time and update every grid with the pending
+    /// frames' robust mean.
+    #[inline(never)]
+    fn run_update(&mut self) {
+        let dt_s = self.pending_dt_s;
+        let x = self.pending_mean();
+        let negative = x.is_none() && self.pending_negative > 0;
+        self.clear_pending();
+        let shared = self.shared();
+        let gains = self.gains_now();
+        if negative {
+            for g in self.grids.iter_mut() {
+                g.forget(dt_s, &self.params);
+            }
+            self.update = Update::Outlier;
+            self.summarise();
+            return;
+        }
+        let mut ln_z = [f32::NEG_INFINITY; GAINS];
+        let mut all_have = x.is_some();
+        let mut updates = [Update::NoCurrents; GAINS];
+        for (j, (g, gain)) in self.grids.iter_mut().zip(gains).enumerate() {
+            let s = if g.initialised {
+                g.update(dt_s, x, gain, &self.params, &shared)
+            } else {
+                match x {
+                    Some(x) => g.initialise(x, gain, &self.params, &shared),
+                    None => grid::Step {
+                        update: Update::Waiting,
+                        ln_z: None,
+                        best_q: f32::INFINITY,
+                    },
+                }
+            };
+            if let Some(u) = updates.get_mut(j) {
+                *u = s.update;
+            }
+            match (s.ln_z, ln_z.get_mut(j)) {
+                (Some(l), Some(z)) => *z = l,
+                _ => all_have = false,
+            }
+        }
+        // What the bank did: measured if the likely hypotheses measured.
+        let mut best = 0;
+        for (j, w) in self.weights.iter().enumerate() {
+            if *w > self.weights.get(best).copied().unwrap_or(0.0) {
+                best = j;
+            }
+        }
+        self.update = updates.get(best).copied().unwrap_or(Update::NoCurrents);
+        if self.update == Update::Waiting {
+            self.update = Update::NoCurrents;
+        }
+        if all_have {
+            self.learn_gain(dt_s, &ln_z);
+        }
+        self.summarise();
+    }
+
+    /// The output posterior: the weighted mixture of the grids'.
+    pub(super) fn summarise(&mut self) {
+        let shared = self.shared();
+        let mut parts = [None; GAINS];
+        for (p, g) in parts.iter_mut().zip(self.grids.iter()) {
+            *p = g.summarise(&shared);
+        }
+        let post = Moments::mixture(
+            parts
+                .iter()
+                .zip(self.weights)
+                .filter_map(|(m, w)| m.map(|m| (w, m))),
+        );
+        if post.is_none() {
+            // A state that cannot be normalised (never expected) restarts
+            // the filter rather than report nonsense.
+            let update = self.update;
+            self.reset();
+            self.update = update;
+        }
+        self.posterior = post;
+    }
+}

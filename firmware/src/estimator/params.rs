@@ -1,0 +1,126 @@
+//! The estimator's settings ([`EstimatorParams`]): library settings with
+//! documented defaults (the board and the virtual node pass them), not part
+//! of the protocol `Config`; out-of-range values take their defaults.
+
+/// The estimator's settings. Library settings with documented defaults (the
+/// board and the virtual node pass them); they are not part of the protocol
+/// `Config`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EstimatorParams {
+    /// Forgetting time constant τ, s: the posterior carries about one
+    /// observation's worth of the last τ of frames (default 30 s).
+    pub forget_time_s: f32,
+    /// Largest accretion rate, mm/h (default 10: severe in-cloud icing).
+    pub max_growth_mm_per_h: f32,
+    /// Largest melting / evaporation rate, mm/h (default 5).
+    pub max_shrink_mm_per_h: f32,
+    /// Rate of shedding (the whole layer falls off), per hour (default 0.5).
+    pub shed_per_h: f32,
+    /// Rate of a change of medium at the same thickness, per hour (default 0.5).
+    pub switch_per_h: f32,
+    /// Measurement noise and baseline uncertainty of I1, I2 (standard
+    /// deviation), µA (default 0.15 µA: ~2 ADC steps at 10 kΩ; covers the
+    /// frame noise, the worst mains-flicker residual after averaging, and a
+    /// baseline drift).
+    pub noise_ua: [f32; 2],
+    /// Relative standard deviation of the gain calibration (LED flux ×
+    /// responsivity against the simulator's absolute scale) (default 0.02).
+    pub gain_sd: f32,
+    /// Ice is plausible up to this air temperature, °C (default +1.0: the
+    /// NTC's ±0.5 K and ice that is still melting).
+    pub ice_max_c: f32,
+    /// Water is plausible down to this air temperature, °C (default −1.0).
+    pub water_min_c: f32,
+    /// Width of both temperature transitions, K (default 0.5).
+    pub temp_scale_c: f32,
+    /// Scale of the prior of a water film's thickness, mm: films drain, so
+    /// P(d) ∝ exp(−d / scale) (default 1.0 mm). Ice has a flat prior.
+    pub water_scale_mm: f32,
+    /// A frame whose currents are further than this squared Mahalanobis
+    /// distance from every state fits no state and is skipped (default 50:
+    /// p ≈ 10⁻¹¹ for a correct model).
+    pub outlier_distance2: f32,
+    /// The filter updates once per this period on the robust mean of the
+    /// frames gathered in it, s (default 1.0: ten frames at 10 Hz; the
+    /// alarm rule still runs every frame).
+    pub update_period_s: f32,
+    /// Memory of the gain's evidence, s of frames that tell the gain
+    /// hypotheses apart (default 3600: one accretion's deviations persist
+    /// along it, so the evidence is one observation's worth per hour).
+    pub gain_memory_s: f32,
+    /// Smallest relative gain spread within one gain hypothesis (default
+    /// 0.02): a calibrated gain's hypotheses lie close together, each with
+    /// at least this spread, so that none alone claims the ice is where the
+    /// table's narrowest states sit (thick rime reads like 2 mm of rime at
+    /// a few per cent more gain).
+    pub gain_within_min: f32,
+}
+
+impl Default for EstimatorParams {
+    fn default() -> Self {
+        EstimatorParams {
+            forget_time_s: 30.0,
+            max_growth_mm_per_h: 10.0,
+            max_shrink_mm_per_h: 5.0,
+            shed_per_h: 0.5,
+            switch_per_h: 0.5,
+            noise_ua: [0.15, 0.15],
+            gain_sd: 0.02,
+            ice_max_c: 1.0,
+            water_min_c: -1.0,
+            temp_scale_c: 0.5,
+            water_scale_mm: 1.0,
+            outlier_distance2: 50.0,
+            update_period_s: 1.0,
+            gain_memory_s: 3600.0,
+            gain_within_min: 0.02,
+        }
+    }
+}
+
+/// `x` if finite and within `lo..=hi`, else `default`.
+pub(super) fn within(x: f32, lo: f32, hi: f32, default: f32) -> f32 {
+    if x.is_finite() && x >= lo && x <= hi {
+        x
+    } else {
+        default
+    }
+}
+
+impl EstimatorParams {
+    /// Every field in its valid range; a field that is not (NaN, negative,
+    /// absurd) takes its default.
+    pub fn sanitized(self) -> Self {
+        let d = EstimatorParams::default();
+        EstimatorParams {
+            forget_time_s: within(self.forget_time_s, 0.1, 86_400.0, d.forget_time_s),
+            max_growth_mm_per_h: within(
+                self.max_growth_mm_per_h,
+                0.0,
+                1_000.0,
+                d.max_growth_mm_per_h,
+            ),
+            max_shrink_mm_per_h: within(
+                self.max_shrink_mm_per_h,
+                0.0,
+                1_000.0,
+                d.max_shrink_mm_per_h,
+            ),
+            shed_per_h: within(self.shed_per_h, 0.0, 3_600.0, d.shed_per_h),
+            switch_per_h: within(self.switch_per_h, 0.0, 3_600.0, d.switch_per_h),
+            noise_ua: [
+                within(self.noise_ua[0], 0.001, 100.0, d.noise_ua[0]),
+                within(self.noise_ua[1], 0.001, 100.0, d.noise_ua[1]),
+            ],
+            gain_sd: within(self.gain_sd, 0.0, 1.0, d.gain_sd),
+            ice_max_c: within(self.ice_max_c, -50.0, 50.0, d.ice_max_c),
+            water_min_c: within(self.water_min_c, -50.0, 50.0, d.water_min_c),
+            temp_scale_c: within(self.temp_scale_c, 0.01, 20.0, d.temp_scale_c),
+            water_scale_mm: within(self.water_scale_mm, 0.01, 1_000.0, d.water_scale_mm),
+            outlier_distance2: within(self.outlier_distance2, 1.0, 1.0e6, d.outlier_distance2),
+            update_period_s: within(self.update_period_s, 0.0, 60.0, d.update_period_s),
+            gain_memory_s: within(self.gain_memory_s, 1.0, 1.0e7, d.gain_memory_s),
+            gain_within_min: within(self.gain_within_min, 0.0, 0.5, d.gain_within_min),
+        }
+    }
+}

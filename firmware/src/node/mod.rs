@@ -1,0 +1,335 @@
+//! The whole node behind the hardware traits: measurement, the ice rule,
+//! outputs, persistence and the command link. The board binary, the host's
+//! virtual node and the HIL suite all drive this same type.
+//!
+//! This file holds the node's state and its life cycle (build, what the
+//! board tells it, what it reports about itself). What it does is in the
+//! files beside it:
+//! - [`dispatch`]: the host's commands and the button, decoded and carried
+//!   out (one `match` over every command);
+//! - [`frame`]: one output frame — measure, rule, estimate, outputs, report;
+//! - [`saving`]: when the record is written (coalescing, rate limit,
+//!   retries);
+//! - [`gain_keeping`]: the learned optical gain — the estimator's prior, the
+//!   out-of-band flag, when it is worth keeping.
+
+pub mod dispatch;
+pub mod frame;
+pub mod gain_keeping;
+pub mod saving;
+
+use embedded_hal::delay::DelayNs;
+use embedded_hal::digital::OutputPin;
+use fois_protocol::{
+    Baseline, Config, DetectorState, DeviceFrame, DeviceMsg, FrameDecoder, GainEstimate, Hello,
+    MAX_FRAME, Measurement, PROTOCOL_VERSION, encode, flags,
+};
+
+use crate::estimator::{Estimator, EstimatorParams};
+use crate::hal::{BoardInfo, PhotoAdc};
+use crate::ice_rule::Rule;
+use crate::platform::boot::RuleSnapshot;
+use crate::storage::Storage;
+use crate::storage::record::{self, LoadError, MAX_RECORD, Record};
+
+/// Firmware version sent in [`Hello`] (the crate's version).
+pub const FIRMWARE_VERSION: [u8; 3] = [
+    parse_u8(env!("CARGO_PKG_VERSION_MAJOR")),
+    parse_u8(env!("CARGO_PKG_VERSION_MINOR")),
+    parse_u8(env!("CARGO_PKG_VERSION_PATCH")),
+];
+
+const fn parse_u8(s: &str) -> u8 {
+    let b = s.as_bytes();
+    let mut i = 0;
+    let mut v: u8 = 0;
+    while i < b.len() {
+        v = v.wrapping_mul(10).wrapping_add(b[i].wrapping_sub(b'0'));
+        i += 1;
+    }
+    v
+}
+
+/// An unsaved change: when the first and the last one came (when it is
+/// written: [`saving`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+struct PendingSave {
+    first_ms: u64,
+    last_ms: u64,
+}
+
+/// The node. Type parameters: ADC, LED (PB0), alarm output (PA9), indicator
+/// (LD2, PA5), delay (settle waits), storage (config + baseline record).
+pub struct Node<A, L, AL, IND, D, S>
+where
+    A: PhotoAdc,
+    L: OutputPin,
+    AL: OutputPin,
+    IND: OutputPin,
+    D: DelayNs,
+    S: Storage,
+{
+    adc: A,
+    led: L,
+    alarm: AL,
+    indicator: IND,
+    delay: D,
+    storage: S,
+    info: BoardInfo,
+    config: Config,
+    baseline: Option<Baseline>,
+    config_defaulted: bool,
+    storage_failed: bool,
+    clock_fallback: bool,
+    /// Boot faults the board found (`BOR_NOT_SET`, `STORE_SKIPPED`).
+    boot_faults: u16,
+    /// The PVD reports V_DD below its threshold: saves wait.
+    supply_low: bool,
+    /// A panic reset to report once: (line, resets in a row).
+    panic_report: Option<(u32, u8)>,
+    /// The record the storage holds, as far as the node knows.
+    stored: Option<Record>,
+    pending_save: Option<PendingSave>,
+    last_save_ms: Option<u64>,
+    rule: Rule,
+    seq: u32,
+    streaming: bool,
+    stream_period_ms: Option<u32>,
+    decoder: FrameDecoder<MAX_FRAME>,
+    reported_faults: u16,
+    reset_request: bool,
+    last: Option<Measurement>,
+    estimator: Estimator,
+    last_frame_ms: Option<u64>,
+    /// The learned gain as stored (at the temperature model's reference).
+    gain_kept: Option<GainEstimate>,
+    /// The last gain calibration against a target.
+    gain_calibration: Option<GainEstimate>,
+    /// `GAIN_OUT_OF_BAND` is raised (with hysteresis).
+    gain_out_of_band: bool,
+    /// When the learned gain was last considered for a save, ms.
+    gain_checked_ms: u64,
+}
+
+impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
+where
+    A: PhotoAdc,
+    L: OutputPin,
+    AL: OutputPin,
+    IND: OutputPin,
+    D: DelayNs,
+    S: Storage,
+{
+    /// Build the node: loads config + baseline from `storage`. An empty store
+    /// gives the defaults; a corrupt or old record, or a store that cannot
+    /// be read, gives the defaults and the `CONFIG_DEFAULTED` fault. The LED
+    /// and the outputs start off.
+    pub fn new(
+        adc: A,
+        led: L,
+        alarm: AL,
+        indicator: IND,
+        delay: D,
+        mut storage: S,
+        info: BoardInfo,
+    ) -> Self {
+        let mut buf = [0xFFu8; MAX_RECORD];
+        let loaded = match storage.read(&mut buf) {
+            Ok(n) => record::decode(buf.get(..n).unwrap_or(&[])),
+            Err(_) => Err(LoadError::Corrupt),
+        };
+        let (stored, config_defaulted) = match loaded {
+            Ok(r) => (Some(r), false),
+            Err(LoadError::Empty) => (None, false),
+            Err(_) => (None, true),
+        };
+        let (config, baseline, gain_kept, gain_calibration) = match &stored {
+            Some(r) => (r.config.clone(), r.baseline, r.gain, r.gain_calibration),
+            None => (Config::default(), None, None, None),
+        };
+        let info = BoardInfo {
+            cal: info.cal.or_typical(),
+            ..info
+        };
+        let mut node = Node {
+            adc,
+            led,
+            alarm,
+            indicator,
+            delay,
+            storage,
+            info,
+            streaming: config.stream_on_boot,
+            config,
+            baseline,
+            config_defaulted,
+            storage_failed: false,
+            clock_fallback: false,
+            boot_faults: 0,
+            supply_low: false,
+            panic_report: None,
+            stored,
+            pending_save: None,
+            last_save_ms: None,
+            rule: Rule::new(),
+            seq: 0,
+            stream_period_ms: None,
+            decoder: FrameDecoder::new(),
+            reported_faults: 0,
+            reset_request: false,
+            last: None,
+            estimator: Estimator::default(),
+            last_frame_ms: None,
+            gain_kept,
+            gain_calibration,
+            gain_out_of_band: false,
+            gain_checked_ms: 0,
+        };
+        node.start_estimator();
+        let _ = node.led.set_low();
+        node.drive_outputs();
+        node
+    }
+
+    /// Who this node is.
+    pub fn hello(&self) -> Hello {
+        Hello {
+            protocol_version: PROTOCOL_VERSION,
+            firmware_version: FIRMWARE_VERSION,
+            board: Hello::board_from_str(self.info.board),
+            unique_id: self.info.unique_id,
+            reset_reason: self.info.reset_reason,
+        }
+    }
+
+    /// Send a `Hello` frame.
+    pub fn send_hello(&mut self, tx: &mut impl FnMut(&[u8])) {
+        let hello = self.hello();
+        self.send(DeviceMsg::Hello(hello), tx);
+    }
+
+    /// Tell the node it runs on its internal oscillator because the external
+    /// clock did not start (raises `CLOCK_FALLBACK`).
+    pub fn set_clock_fallback(&mut self, fallback: bool) {
+        self.clock_fallback = fallback;
+    }
+
+    /// Faults the board found at boot: the brown-out level in the option
+    /// bytes is not the provisioned one (`BOR_NOT_SET`), or the node booted
+    /// without its flash store after repeated panic resets
+    /// (`STORE_SKIPPED`). Raised with the first frame.
+    pub fn set_boot_faults(&mut self, bor_not_set: bool, store_skipped: bool) {
+        self.boot_faults = 0;
+        if bor_not_set {
+            self.boot_faults |= flags::BOR_NOT_SET;
+        }
+        if store_skipped {
+            self.boot_faults |= flags::STORE_SKIPPED;
+        }
+    }
+
+    /// This boot followed a panic reset: send `EventKind::PanicReset` once,
+    /// with the next frame.
+    pub fn report_panic_reset(&mut self, line: u32, resets_in_row: u8) {
+        self.panic_report = Some((line, resets_in_row));
+    }
+
+    /// The programmable voltage detector reports V_DD below its threshold:
+    /// saves wait until it does not (and the last V_DDA is healthy:
+    /// `storage::supply`).
+    pub fn set_supply_low(&mut self, low: bool) {
+        self.supply_low = low;
+    }
+
+    /// The rule's state, for the board to keep across a reset.
+    pub fn rule_snapshot(&self) -> RuleSnapshot {
+        RuleSnapshot {
+            state: self.rule.state(),
+            acked: self.rule.acked(),
+        }
+    }
+
+    /// Resume the rule's state after a reset (`platform::boot::RuleSnapshot::resume`):
+    /// the outputs follow at once.
+    pub fn resume_rule(&mut self, snapshot: RuleSnapshot) {
+        self.rule = Rule::resumed(snapshot.state, snapshot.acked);
+        self.drive_outputs();
+    }
+
+    /// The output frame period now in force, ms (the `StartStream` rate
+    /// while streaming with one, else the config's).
+    pub fn frame_period_ms(&self) -> u32 {
+        self.stream_period_ms.unwrap_or(self.config.frame_period_ms)
+    }
+
+    /// True while measurements are streamed.
+    pub fn is_streaming(&self) -> bool {
+        self.streaming
+    }
+
+    /// The ice rule's state.
+    pub fn state(&self) -> DetectorState {
+        self.rule.state()
+    }
+
+    /// The config in force.
+    pub fn config(&self) -> &Config {
+        &self.config
+    }
+
+    /// The dark baseline in use (`None`: zero baseline, `NO_BASELINE` flag).
+    pub fn baseline(&self) -> Option<Baseline> {
+        self.baseline
+    }
+
+    /// The last frame's measurement (also when not streaming).
+    pub fn last_measurement(&self) -> Option<&Measurement> {
+        self.last.as_ref()
+    }
+
+    /// The ice estimator (its posterior, its settings).
+    pub fn estimator(&self) -> &Estimator {
+        &self.estimator
+    }
+
+    /// Set the estimator's settings (library settings, not part of the
+    /// protocol `Config`); the filter starts afresh (with the kept gain).
+    pub fn set_estimator_params(&mut self, params: EstimatorParams) {
+        self.estimator = Estimator::new(params);
+        self.start_estimator();
+    }
+
+    /// Frames sent so far (the next frame's sequence number).
+    pub fn next_seq(&self) -> u32 {
+        self.seq
+    }
+
+    /// True once after a `Reset` command was acknowledged: the board then
+    /// resets; the virtual node builds a new `Node`.
+    pub fn take_reset_request(&mut self) -> bool {
+        core::mem::replace(&mut self.reset_request, false)
+    }
+
+    /// Give the parts back (tests, the virtual node's restart).
+    pub fn into_parts(self) -> (A, L, AL, IND, D, S) {
+        (
+            self.adc,
+            self.led,
+            self.alarm,
+            self.indicator,
+            self.delay,
+            self.storage,
+        )
+    }
+
+    fn send(&mut self, msg: DeviceMsg, tx: &mut impl FnMut(&[u8])) {
+        let frame = DeviceFrame { seq: self.seq, msg };
+        let mut buf = [0u8; MAX_FRAME];
+        if let Ok(n) = encode(&frame, &mut buf)
+            && let Some(bytes) = buf.get(..n)
+        {
+            tx(bytes);
+            self.seq = self.seq.wrapping_add(1);
+        }
+    }
+}
