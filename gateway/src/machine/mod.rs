@@ -14,10 +14,12 @@
 //! broker without persistence forgets them. It also keeps every node's
 //! latest state in the shared [`Fleet`] for other front ends.
 
+pub mod claim;
 mod commands;
 mod homeassistant;
 mod nodes;
 pub mod owner;
+mod retained_check;
 #[cfg(test)]
 mod tests;
 
@@ -108,7 +110,7 @@ pub(crate) struct MqttNode {
     /// When the last command was handed to the node (rate limit).
     last_command: Option<Instant>,
     /// A command from MQTT waiting to be known as not retained.
-    check: Option<commands::Check>,
+    check: Option<retained_check::Check>,
 }
 
 /// The state machine.
@@ -128,7 +130,7 @@ pub struct Gateway {
     last_status: Instant,
     sum: GatewaySummary,
     out: Vec<Action>,
-    instance: owner::Instance,
+    instance: claim::Instance,
     conflict: Option<String>,
     reannounce_at: Option<Instant>,
     /// Subscriptions handed to the client, in order (`Outgoing::Subscribe`
@@ -158,7 +160,7 @@ impl Gateway {
             last_status: now,
             sum: GatewaySummary::default(),
             out: Vec::new(),
-            instance: owner::Instance::this_process(),
+            instance: claim::Instance::this_process(),
             conflict: None,
             reannounce_at: None,
             sub_fifo: VecDeque::new(),
@@ -167,7 +169,7 @@ impl Gateway {
     }
 
     /// Who this gateway says it is in its name claim (tests set their own).
-    pub fn set_instance(&mut self, instance: owner::Instance) {
+    pub fn set_instance(&mut self, instance: claim::Instance) {
         self.instance = instance;
     }
 
