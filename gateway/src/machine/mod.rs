@@ -17,6 +17,7 @@
 pub mod claim;
 mod commands;
 mod homeassistant;
+pub mod journal;
 mod nodes;
 pub mod owner;
 mod retained_check;
@@ -137,6 +138,8 @@ pub struct Gateway {
     /// gives their packet ids in the same order), and by packet id.
     sub_fifo: VecDeque<Option<usize>>,
     sub_pkids: HashMap<u16, Option<usize>>,
+    /// The rate limit of the nodes' lines in the log.
+    journal: journal::Limiter,
 }
 
 impl Gateway {
@@ -165,6 +168,7 @@ impl Gateway {
             reannounce_at: None,
             sub_fifo: VecDeque::new(),
             sub_pkids: HashMap::new(),
+            journal: journal::Limiter::default(),
         }
     }
 
@@ -457,6 +461,7 @@ impl Gateway {
     pub fn tick(&mut self, now: Instant, status_every: Duration) {
         self.queue.tick();
         self.finish_checks(now);
+        self.report_suppressed(now);
         if self.reannounce_at.is_some_and(|at| now >= at) {
             self.reannounce_at = None;
             self.announce_all(now);

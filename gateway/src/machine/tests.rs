@@ -508,3 +508,5 @@ fn a_node_has_one_key_for_its_topics_and_its_home_assistant_ids() {
     assert_eq!(snaps[1].name.as_deref(), Some(key2.as_str()));
     assert_eq!(snaps[1].key.as_deref(), Some(key2.as_str()));
 }
+
+mod journal;
