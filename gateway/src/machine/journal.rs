@@ -3,6 +3,11 @@
 //! lost link, with the node's name and the numbers that matter, and the
 //! rate limit that keeps a flapping node from flooding the journal.
 //!
+//! Each line names the node, the temperature and, when the node sends an
+//! ice estimate, its latest one (thickness ± σ, medium and its
+//! probability; at an ice onset the estimator may lag the detector's rule,
+//! then the line says `(not ice yet)`).
+//!
 //! | kind | level | when |
 //! | --- | --- | --- |
 //! | `ice_onset`, `ice_cleared` | INFO | the node's detector enters / leaves ice (its alarm output) |
@@ -20,6 +25,7 @@ use std::collections::HashMap;
 use std::time::{Duration, Instant};
 
 use fois_link::reading::{EstimateReading, EventReading, Reading};
+use fois_protocol::Medium;
 
 /// Lines per node and kind within [`WINDOW`].
 pub const LINES_PER_WINDOW: u32 = 5;
@@ -46,10 +52,11 @@ pub struct Line {
     pub text: String,
 }
 
-/// ` thickness ± σ mm medium (p …)`: what the node's estimate says.
+/// `estimate thickness ± σ mm medium (p …)`: what the node's estimate
+/// says.
 fn estimate_words(e: &EstimateReading) -> String {
     format!(
-        "{:.1} ± {:.1} mm {} (p {:.2})",
+        "estimate {:.1} ± {:.1} mm {} (p {:.2})",
         e.thickness_mm,
         e.thickness_sigma_mm,
         e.medium.name(),
@@ -67,6 +74,14 @@ pub fn event_line(name: &str, e: &EventReading, estimate: Option<&EstimateReadin
     );
     let est = estimate.map(|x| format!("{}, ", estimate_words(x)));
     let est = est.as_deref().unwrap_or("");
+    // The detector's rule answers before the estimator, which may still
+    // see no ice at the onset: said so, not left to look like a contradiction.
+    let ice_est = match estimate {
+        Some(x) if matches!(x.medium, Medium::Dry | Medium::Water) => {
+            format!("{} (not ice yet), ", estimate_words(x))
+        }
+        _ => est.to_string(),
+    };
     let faults = if e.faults.is_empty() {
         "(none named)".to_string()
     } else {
@@ -75,7 +90,7 @@ pub fn event_line(name: &str, e: &EventReading, estimate: Option<&EstimateReadin
     let (level, text) = match e.kind {
         "ice_onset" => (
             Level::Info,
-            format!("node {name}: ice onset (alarm on): {est}{temp}, {rise}"),
+            format!("node {name}: ice onset (alarm on): {ice_est}{temp}, {rise}"),
         ),
         "ice_cleared" => (
             Level::Info,

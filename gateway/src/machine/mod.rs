@@ -490,9 +490,11 @@ impl Gateway {
         }
     }
 
-    /// Clean exit: nodes and gateway offline (retained).
+    /// Clean exit: nodes offline, the final status (no node online: the
+    /// readers have stopped), the gateway offline (all retained).
     pub fn goodbye(&mut self, now: Instant) {
         for k in 0..self.nodes.len() {
+            self.fleet.update(k, |n| n.link_up = false);
             if let Some(name) = self.node_name(k) {
                 self.publish_now(
                     self.topics.availability(&name),

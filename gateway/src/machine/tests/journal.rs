@@ -121,7 +121,7 @@ fn an_ice_onset_is_an_info_line_with_thickness_medium_and_temperature() {
     assert_eq!(
         lines,
         [
-            "INFO node a: ice onset (alarm on): 1.2 ± 0.3 mm glazed (p 0.87), -5.1 °C, channel 1 \
+            "INFO node a: ice onset (alarm on): estimate 1.2 ± 0.3 mm glazed (p 0.87), -5.1 °C, channel 1 \
           +25.0 µA over its dark baseline for 12 frame(s)"
         ]
     );
@@ -152,9 +152,9 @@ fn a_fault_is_a_warning_naming_it_and_an_acknowledgement_is_logged_once() {
         lines,
         [
             "WARN node a: fault raised: ntc_open (-5.1 °C)",
-            "INFO node a: alarm acknowledged (the output stays on while ice remains): 1.2 ± 0.3 mm \
+            "INFO node a: alarm acknowledged (the output stays on while ice remains): estimate 1.2 ± 0.3 mm \
              glazed (p 0.87), -5.0 °C",
-            "INFO node a: wet (a water film above freezing, no alarm): 1.2 ± 0.3 mm glazed \
+            "INFO node a: wet (a water film above freezing, no alarm): estimate 1.2 ± 0.3 mm glazed \
              (p 0.87), -5.1 °C, channel 1 +25.0 µA over its dark baseline for 12 frame(s)",
             "WARN node a on /dev/a: link lost (no frame for 8 s); reconnecting",
         ]
