@@ -75,7 +75,9 @@ pub struct GatewayArgs {
     pub print_config: bool,
     /// Check the config (file, flags, password file, TLS certificates and
     /// key) without opening a serial port or the broker; exit 0 when it is
-    /// usable, 2 with the reason when not.
+    /// usable, 2 with the reason when not. A serial port that does not
+    /// exist is a warning on stderr, not an error (exit 0: a USB adapter
+    /// may be plugged in later).
     #[arg(long, conflicts_with = "print_config")]
     pub check_config: bool,
     /// Log only warnings and errors (RUST_LOG, when set, decides instead).
@@ -138,6 +140,30 @@ pub fn check_config(cfg: &GatewayConfig) -> anyhow::Result<String> {
     ))
 }
 
+/// `--check-config`'s warnings: each configured serial port that does not
+/// exist (now). Not an error: a USB adapter may be plugged in later, and
+/// the gateway keeps trying to open the port.
+pub fn missing_ports(cfg: &GatewayConfig) -> Vec<String> {
+    cfg.nodes
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| !std::path::Path::new(&n.port).exists())
+        .map(|(k, n)| {
+            let who = match &n.name {
+                Some(name) => format!("node {name}"),
+                None => format!("node {}", k + 1),
+            };
+            format!(
+                "{who}: the serial port {} does not exist. Not an error (a USB adapter may be \
+                 plugged in later; the gateway starts and tries to open it every {} ms), but \
+                 check the path if the node is connected (`ls /dev/serial/by-id/`)",
+                n.port,
+                crate::reader::RETRY_INTERVAL.as_millis()
+            )
+        })
+        .collect()
+}
+
 /// Run the gateway until `stop` or the duration; prints the totals.
 pub fn run(args: GatewayArgs, stop: &'static AtomicBool) -> anyhow::Result<()> {
     let cfg = args.resolve()?;
@@ -146,7 +172,11 @@ pub fn run(args: GatewayArgs, stop: &'static AtomicBool) -> anyhow::Result<()> {
         return Ok(());
     }
     if args.check_config {
-        println!("{}", check_config(&cfg)?);
+        let ok = check_config(&cfg)?;
+        for w in missing_ports(&cfg) {
+            eprintln!("warning: {w}");
+        }
+        println!("{ok}");
         return Ok(());
     }
     let limits = RunLimits {

@@ -155,6 +155,33 @@ fn check_config_validates_certificates_and_opens_nothing() {
     );
     assert!(out.contains("Modbus TCP off"), "{out}");
     assert!(!dir.path().join("q").exists(), "the queue was not created");
+    // The ports do not exist: a warning each (by name, else by position),
+    // still exit 0 (a USB adapter may be plugged in later).
+    let warnings: Vec<&str> = err.lines().filter(|l| l.starts_with("warning: ")).collect();
+    assert_eq!(warnings.len(), 2, "{err}");
+    assert!(
+        warnings[0].starts_with(
+            "warning: node a: the serial port /dev/does-not-exist-1 does not exist. Not an error \
+             (a USB adapter may be plugged in later; the gateway starts and tries to open it \
+             every 500 ms)"
+        ),
+        "{err}"
+    );
+    assert!(
+        warnings[1].starts_with("warning: node 2: the serial port /dev/does-not-exist-2 does not"),
+        "{err}"
+    );
+    // A port that exists (here a plain file standing for it): no warning.
+    let present = write(dir.path(), "ttyFOIS0", "");
+    let present_cfg = write(
+        dir.path(),
+        "present.toml",
+        &format!("[queue]\ndir = \"{d}/q3\"\n[[node]]\nport = \"{present}\"\n"),
+    );
+    let (code, out, err) = gateway(&["--config", &present_cfg, "--check-config"]);
+    assert_eq!(code, Some(0), "{out}{err}");
+    assert!(out.contains("config OK"), "{out}");
+    assert!(!err.contains("warning"), "{err}");
     // Modbus on a port another program holds: --check-config does not
     // listen, so it is OK; the run stops at once with exit 1 and the reason.
     let taken = std::net::TcpListener::bind("127.0.0.1:0").unwrap();

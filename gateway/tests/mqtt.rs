@@ -168,6 +168,53 @@ fn three_nodes_every_record_arrives_once_with_discovery_and_state() {
     let gw_av = sub.on("fois/gw/availability");
     assert_eq!(gw_av.first().unwrap().text(), "online");
     assert_eq!(gw_av.last().unwrap().text(), "offline");
+    // The final status, retained after the stop: no node online, what
+    // the queue holds then; it comes before the gateway's offline.
+    let late = Subscriber::start(
+        broker.port,
+        "t-late",
+        &["fois/gw/status"],
+        SubOptions::default(),
+    );
+    late.wait_for("the retained status", Duration::from_secs(5), |m| {
+        !m.is_empty()
+    });
+    let status = late.on("fois/gw/status");
+    let last = status.last().unwrap();
+    assert!(last.retain);
+    let last = last.json();
+    assert_eq!(
+        (last["nodes"].as_u64(), last["nodes_online"].as_u64()),
+        (Some(3), Some(0)),
+        "{last}"
+    );
+    assert_eq!(last["queue_records"], 0, "{last}");
+    let order: Vec<&str> = msgs
+        .iter()
+        .filter(|m| m.topic == "fois/gw/status" || m.topic == "fois/gw/availability")
+        .map(|m| m.topic.as_str())
+        .collect();
+    assert_eq!(order.last(), Some(&"fois/gw/availability"), "{order:?}");
+    assert_eq!(order[order.len() - 2], "fois/gw/status", "{order:?}");
+
+    // The log (the journal under systemd) says when a node ices or wets,
+    // with its numbers.
+    let onset = out
+        .lines()
+        .find(|l| l.contains("node iced: ice onset (alarm on): "))
+        .unwrap_or_else(|| panic!("no ice onset line: {out}"));
+    assert!(onset.contains("INFO"), "{onset}");
+    // The virtual node runs the firmware's estimator: its estimate is in
+    // the line (or said to lag when it does not see ice yet).
+    assert!(
+        onset.contains(": estimate ") && onset.contains(" mm ") && onset.contains("-5.0 °C"),
+        "{onset}"
+    );
+    assert!(
+        out.lines()
+            .any(|l| l.contains("INFO") && l.contains("node wet: wet (a water film")),
+        "{out}"
+    );
 
     // Home Assistant discovery: what HA needs to build the entities, each
     // node a device named by its hardware id (`cargo xtask ha-check` runs

@@ -7,7 +7,11 @@
 //! | [`file`] | the file as written ([`file::FileConfig`]: every key optional, unknown keys refused) and the flags' [`file::Overrides`] |
 //! | [`modbus`] | `[modbus]`: the Modbus TCP server's address, commands, stale time, unit ids |
 //! | [`resolve`] | [`file::FileConfig::resolve`]: flags over file over defaults, section by section, every check |
-//! | here (imports neither of the two) | the resolved [`GatewayConfig`], [`Secret`], names, [`BrokerAddr`], [`NodeSpec`] |
+//! | here (reads only [`modbus`]) | the resolved [`GatewayConfig`], [`Secret`], names, [`BrokerAddr`], [`NodeSpec`] |
+//!
+//! The imports go one way: `modbus` reads none of its siblings (its tests,
+//! which parse whole files, live in `modbus/tests.rs`), this file reads
+//! `modbus`, `file` reads both, `resolve` reads all three.
 //!
 //! Secrets (the broker password, the client key's path is not one) are held
 //! in [`Secret`], whose `Debug` and `Display` print `***`: a config printed

@@ -14,36 +14,21 @@
 //! So before a command is carried out the gateway subscribes to its topic
 //! again: the broker then sends the topic's retained message, if there is
 //! one, flagged retained, right after its SUBACK. A command is carried out
-//! only when [`RETAINED_GRACE`] after that SUBACK no retained copy of it
-//! came; a copy means it was retained: refused and deleted. This costs a
+//! only when [`RETAINED_GRACE`](super::retained_check::RETAINED_GRACE)
+//! after that SUBACK no retained copy of it came (the check itself:
+//! [`super::retained_check`]); a copy means it was retained: refused and deleted. This costs a
 //! command one round trip and the grace.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use fois_link::timefmt::unix_ms_now;
 use rumqttc::QoS;
 use tracing::{info, warn};
 
+use super::retained_check::{CHECK_TIMEOUT, Check, Verdict};
 use super::{Action, Gateway};
 use crate::command::{MAX_COMMAND_BYTES, NodeCommand, command_word};
 use crate::payload::CommandResultJson;
-
-/// After the SUBACK of the checking subscription, a retained copy has this
-/// long to arrive (it follows the SUBACK on the same connection at once).
-pub const RETAINED_GRACE: Duration = Duration::from_millis(200);
-
-/// A command whose SUBACK does not come within this is refused.
-pub const CHECK_TIMEOUT: Duration = Duration::from_secs(10);
-
-/// A command from MQTT being checked for a retained copy.
-#[derive(Debug, Clone)]
-pub(super) struct Check {
-    command: NodeCommand,
-    shown: String,
-    payload: Vec<u8>,
-    started: Instant,
-    subacked: Option<Instant>,
-}
 
 impl Gateway {
     /// `<node>/command/result`: what became of a command from MQTT (QoS 0,
@@ -160,22 +145,14 @@ impl Gateway {
             );
             return;
         }
-        self.nodes[k].check = Some(Check {
-            command: cmd,
-            shown,
-            payload: payload.to_vec(),
-            started: now,
-            subacked: None,
-        });
+        self.nodes[k].check = Some(Check::new(cmd, shown, payload.to_vec(), now));
         self.subscribe(topic.to_string(), Some(k));
     }
 
     /// The checking subscription of node `k` was confirmed.
     pub(super) fn check_subscribed(&mut self, k: usize, now: Instant) {
-        if let Some(c) = self.nodes.get_mut(k).and_then(|n| n.check.as_mut())
-            && c.subacked.is_none()
-        {
-            c.subacked = Some(now);
+        if let Some(c) = self.nodes.get_mut(k).and_then(|n| n.check.as_mut()) {
+            c.subscribed(now);
         }
     }
 
@@ -183,18 +160,17 @@ impl Gateway {
     /// whose check got no SUBACK.
     pub(super) fn finish_checks(&mut self, now: Instant) {
         for k in 0..self.nodes.len() {
-            let Some(c) = &self.nodes[k].check else {
-                continue;
+            let verdict = match &self.nodes[k].check {
+                Some(c) => c.verdict(now),
+                None => continue,
             };
-            let passed = c.subacked.is_some_and(|t| now >= t + RETAINED_GRACE);
-            let late = now >= c.started + CHECK_TIMEOUT;
-            if !passed && !late {
+            if verdict == Verdict::Waiting {
                 continue;
             }
             let Some(c) = self.nodes[k].check.take() else {
                 continue;
             };
-            if passed {
+            if verdict == Verdict::Passed {
                 self.request_command(k, &c.shown, c.command, "MQTT", now);
             } else {
                 let name = self.node_name(k).unwrap_or_default();

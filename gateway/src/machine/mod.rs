@@ -14,10 +14,13 @@
 //! broker without persistence forgets them. It also keeps every node's
 //! latest state in the shared [`Fleet`] for other front ends.
 
+pub mod claim;
 mod commands;
 mod homeassistant;
+pub mod journal;
 mod nodes;
 pub mod owner;
+mod retained_check;
 #[cfg(test)]
 mod tests;
 
@@ -108,7 +111,7 @@ pub(crate) struct MqttNode {
     /// When the last command was handed to the node (rate limit).
     last_command: Option<Instant>,
     /// A command from MQTT waiting to be known as not retained.
-    check: Option<commands::Check>,
+    check: Option<retained_check::Check>,
 }
 
 /// The state machine.
@@ -128,13 +131,15 @@ pub struct Gateway {
     last_status: Instant,
     sum: GatewaySummary,
     out: Vec<Action>,
-    instance: owner::Instance,
+    instance: claim::Instance,
     conflict: Option<String>,
     reannounce_at: Option<Instant>,
     /// Subscriptions handed to the client, in order (`Outgoing::Subscribe`
     /// gives their packet ids in the same order), and by packet id.
     sub_fifo: VecDeque<Option<usize>>,
     sub_pkids: HashMap<u16, Option<usize>>,
+    /// The rate limit of the nodes' lines in the log.
+    journal: journal::Limiter,
 }
 
 impl Gateway {
@@ -158,16 +163,17 @@ impl Gateway {
             last_status: now,
             sum: GatewaySummary::default(),
             out: Vec::new(),
-            instance: owner::Instance::this_process(),
+            instance: claim::Instance::this_process(),
             conflict: None,
             reannounce_at: None,
             sub_fifo: VecDeque::new(),
             sub_pkids: HashMap::new(),
+            journal: journal::Limiter::default(),
         }
     }
 
     /// Who this gateway says it is in its name claim (tests set their own).
-    pub fn set_instance(&mut self, instance: owner::Instance) {
+    pub fn set_instance(&mut self, instance: claim::Instance) {
         self.instance = instance;
     }
 
@@ -455,6 +461,7 @@ impl Gateway {
     pub fn tick(&mut self, now: Instant, status_every: Duration) {
         self.queue.tick();
         self.finish_checks(now);
+        self.report_suppressed(now);
         if self.reannounce_at.is_some_and(|at| now >= at) {
             self.reannounce_at = None;
             self.announce_all(now);
@@ -483,9 +490,11 @@ impl Gateway {
         }
     }
 
-    /// Clean exit: nodes and gateway offline (retained).
+    /// Clean exit: nodes offline, the final status (no node online: the
+    /// readers have stopped), the gateway offline (all retained).
     pub fn goodbye(&mut self, now: Instant) {
         for k in 0..self.nodes.len() {
+            self.fleet.update(k, |n| n.link_up = false);
             if let Some(name) = self.node_name(k) {
                 self.publish_now(
                     self.topics.availability(&name),

@@ -13,10 +13,40 @@ use rumqttc::QoS;
 use tracing::{info, warn};
 
 use super::Gateway;
+use super::journal::{self, Level, Line};
 use crate::payload::{EventJson, LinkEventJson, MeasurementJson, StateJson};
 use crate::reader::{NodeMsg, NodeUpdate};
 
 impl Gateway {
+    /// Write `line` about node `k` to the log unless its rate limit
+    /// holds it back.
+    fn journal(&mut self, k: usize, line: Line, now: Instant) {
+        self.report_suppressed(now);
+        if !self.journal.admit(k, line.kind, now) {
+            return;
+        }
+        match line.level {
+            Level::Info => info!("{}", line.text),
+            Level::Warn => warn!("{}", line.text),
+        }
+    }
+
+    /// Say how many lines the rate limit left out, for each window that
+    /// has ended.
+    pub(super) fn report_suppressed(&mut self, now: Instant) {
+        for (k, kind, n) in self.journal.lifted(now) {
+            let name = self.node_name(k).unwrap_or_else(|| self.node_port(k));
+            warn!(
+                "node {name}: {n} more `{kind}` line(s) were left out of the log in the last {} s \
+                 (at most {} per node and kind per {} s are written; every event still went \
+                 to MQTT)",
+                journal::WINDOW.as_secs(),
+                journal::LINES_PER_WINDOW,
+                journal::WINDOW.as_secs()
+            );
+        }
+    }
+
     fn link_event(
         &mut self,
         k: usize,
@@ -66,10 +96,15 @@ impl Gateway {
             }
             NodeUpdate::Down(reason) => {
                 let name = self.node_name(k).unwrap_or_default();
-                warn!(
-                    "node {name} on {}: link lost ({reason}); reconnecting",
-                    self.node_port(k)
-                );
+                let line = Line {
+                    kind: "link_lost",
+                    level: Level::Warn,
+                    text: format!(
+                        "node {name} on {}: link lost ({reason}); reconnecting",
+                        self.node_port(k)
+                    ),
+                };
+                self.journal(k, line, now);
                 self.fleet.update(k, |n| n.link_up = false);
                 self.link_event(k, "link_lost", reason, None, None, t);
                 if !name.is_empty() {
@@ -152,6 +187,11 @@ impl Gateway {
             self.on_reading(k, &name, f.seq, reading, t, now);
         } else if let DeviceMsg::Event(e) = &f.msg {
             let r = EventReading::new(e);
+            let estimate = self
+                .fleet
+                .read(k, |n| n.reading.as_ref().and_then(|x| x.estimate))
+                .flatten();
+            self.journal(k, journal::event_line(&name, &r, estimate.as_ref()), now);
             let payload =
                 serde_json::to_vec(&EventJson::new(&name, f.seq, &r, t)).unwrap_or_default();
             self.queue_record(self.topics.event(&name), payload);
@@ -161,6 +201,13 @@ impl Gateway {
     fn on_reading(&mut self, k: usize, name: &str, seq: u32, r: Reading, t: u64, now: Instant) {
         let lost = self.fleet.read(k, |n| n.frames_lost).unwrap_or(0);
         let frames = (self.nodes[k].frames, lost);
+        let was_acked = self
+            .fleet
+            .read(k, |n| n.reading.as_ref().map(|x| x.alarm_acked))
+            .flatten();
+        if r.alarm_acked && was_acked == Some(false) {
+            self.journal(k, journal::acknowledged_line(name, &r), now);
+        }
         let state = StateJson::new(name, seq, &r, frames, t);
         self.nodes[k].last_state = Some(state.clone());
         self.new_entities(k, &r);

@@ -15,64 +15,22 @@
 //!
 //! A restart after a crash is no conflict: the crashed instance's claim
 //! was made before the new one started.
+//!
+//! The claim's payload ([`Claim`], [`Instance`](super::claim::Instance))
+//! lives in [`super::claim`], which the gateway's record reads too.
 
 use std::time::{Duration, Instant};
 
 use fois_link::timefmt::{iso_utc, unix_ms_now};
 use rumqttc::QoS;
-use serde::{Deserialize, Serialize};
 use tracing::{error, warn};
 
 use super::Gateway;
+use super::claim::Claim;
 
 /// After seeing a younger gateway of its name, the older one publishes its
 /// retained messages again this long later (when the younger has stopped).
 pub const REANNOUNCE_AFTER: Duration = Duration::from_secs(3);
-
-/// Who a running gateway is.
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Instance {
-    /// Unique per run: `<host>/<pid>/<started_unix_ms>`.
-    pub instance: String,
-    /// Host name.
-    pub host: String,
-    /// Process id.
-    pub pid: u32,
-    /// When this run started, Unix ms.
-    pub started_unix_ms: u64,
-}
-
-impl Instance {
-    /// This process, now.
-    pub fn this_process() -> Instance {
-        let host = crate::config::resolve::default_gateway_name();
-        let pid = std::process::id();
-        let started_unix_ms = unix_ms_now();
-        Instance {
-            instance: format!("{host}/{pid}/{started_unix_ms}"),
-            host,
-            pid,
-            started_unix_ms,
-        }
-    }
-
-    /// True when this instance started before `other` (ties broken by id).
-    pub fn older_than(&self, other: &Instance) -> bool {
-        (self.started_unix_ms, &self.instance) < (other.started_unix_ms, &other.instance)
-    }
-}
-
-/// `<prefix>/<gw>/owner` (retained).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
-pub struct Claim {
-    /// Gateway name.
-    pub gateway: String,
-    /// Who claims it.
-    #[serde(flatten)]
-    pub by: Instance,
-    /// When the claim was made (at a connection), Unix ms.
-    pub claimed_unix_ms: u64,
-}
 
 impl Gateway {
     /// Claim the name: subscribe to the owner topic, then publish the claim

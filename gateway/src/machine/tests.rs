@@ -376,7 +376,7 @@ fn requests_the_client_refused_are_sent_again() {
 }
 
 fn claim(instance: &str, started_unix_ms: u64, claimed_unix_ms: u64) -> Vec<u8> {
-    use super::owner::{Claim, Instance};
+    use super::claim::{Claim, Instance};
     serde_json::to_vec(&Claim {
         gateway: "gw".into(),
         by: Instance {
@@ -390,8 +390,8 @@ fn claim(instance: &str, started_unix_ms: u64, claimed_unix_ms: u64) -> Vec<u8> 
     .unwrap()
 }
 
-fn me(started_unix_ms: u64) -> super::owner::Instance {
-    super::owner::Instance {
+fn me(started_unix_ms: u64) -> super::claim::Instance {
+    super::claim::Instance {
         instance: "me".into(),
         host: "here".into(),
         pid: 1,
@@ -508,3 +508,5 @@ fn a_node_has_one_key_for_its_topics_and_its_home_assistant_ids() {
     assert_eq!(snaps[1].name.as_deref(), Some(key2.as_str()));
     assert_eq!(snaps[1].key.as_deref(), Some(key2.as_str()));
 }
+
+mod journal;
