@@ -133,6 +133,11 @@ pub struct Scene {
     /// The node's factory gain calibration (gain, relative sd), from a
     /// scenario file; `None`: its gain unknown.
     pub gain_calibration: Option<(f64, f64)>,
+    /// The node's config at first boot, from a scenario's `[config]`.
+    pub config: Option<fois_protocol::Config>,
+    /// Keys of the scenario file only the hardware-in-loop checker uses
+    /// (ignored here; said so when the node starts).
+    pub ignored: Vec<&'static str>,
 }
 
 impl SceneArgs {
@@ -150,6 +155,8 @@ impl SceneArgs {
                 speed,
                 duration,
                 gain_calibration: sc.gain_calibration,
+                config: sc.config,
+                ignored: sc.ignored,
             });
         }
         let ice = self.ice.map_or(d.ice, Cover::from);
@@ -178,12 +185,22 @@ impl SceneArgs {
             speed,
             duration,
             gain_calibration: None,
+            config: None,
+            ignored: Vec::new(),
         })
     }
 }
 
 /// One line saying what the scene is.
 pub fn describe(scene: &Scene) -> String {
+        let ignored = if scene.ignored.is_empty() {
+            String::new()
+        } else {
+            format!(
+                " (the hardware-in-loop checker's keys {} are not used here)",
+                scene.ignored.join(", ")
+            )
+        };
     let segs = scene.timeline.segments();
     if segs.len() > 2 || (segs.len() == 2 && segs[0].cover != Cover::Dry) {
         let parts: Vec<String> = segs
@@ -191,7 +208,7 @@ pub fn describe(scene: &Scene) -> String {
             .map(|s| format!("{} {:.0} s", s.cover.name(), s.duration_s))
             .collect();
         return format!(
-            "scenario: {}; sensor {:?}, speed ×{}",
+            "scenario: {}; sensor {:?}, speed ×{}{ignored}",
             parts.join(" → "),
             scene.sensor,
             scene.speed
@@ -207,7 +224,7 @@ pub fn describe(scene: &Scene) -> String {
         String::new()
     };
     format!(
-        "{dry}{} at {} mm/h, air {} °C, sensor {:?}, speed ×{}",
+        "{dry}{} at {} mm/h, air {} °C, sensor {:?}, speed ×{}{ignored}",
         last.cover.name(),
         last.rate_mm_per_h,
         last.air_temp_c,
@@ -234,7 +251,64 @@ pub fn build_node_with_state(scene: &Scene, state: Option<PathBuf>) -> VirtualNo
             seed: scene.seed,
             state_file: state,
             gain_calibration: scene.gain_calibration,
+            config: scene.config.clone(),
             ..NodeOptions::default()
         },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        scene: SceneArgs,
+    }
+
+    fn resolve(args: &[&str]) -> anyhow::Result<Scene> {
+        let cli = Cli::try_parse_from(std::iter::once("foisctl").chain(args.iter().copied()))?;
+        cli.scene.resolve(VIRTUAL_NODE_DEFAULTS)
+    }
+
+    /// `--scenario` loads every file of the hardware-in-loop suite (the
+    /// suite's own keys ignored, its overlays and config kept).
+    #[test]
+    fn every_hil_scenario_loads_through_the_scenario_flag() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../hil/scenarios");
+        let mut files: Vec<_> = std::fs::read_dir(&dir)
+            .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
+            .unwrap_or_default();
+        files.retain(|p| p.extension().is_some_and(|e| e == "toml"));
+        assert_eq!(files.len(), 44);
+        let mut with_config = 0;
+        for f in &files {
+            let scene = resolve(&["--scenario", &f.display().to_string()])
+                .unwrap_or_else(|e| panic!("{}: {e:#}", f.display()));
+            assert!(scene.ignored.contains(&"class"), "{}", f.display());
+            assert!(describe(&scene).contains("class"), "{}", f.display());
+            with_config += usize::from(scene.config.is_some());
+        }
+        assert!(with_config >= 10, "{with_config} files carry a [config]");
+        let sun = resolve(&[
+            "--scenario",
+            &dir.join("glazed-sun-step.toml").display().to_string(),
+        ])
+        .unwrap();
+        assert!(
+            sun.timeline.segments().len() > 2,
+            "the sun step's overlay splits the timeline"
+        );
+        let own = resolve(&[
+            "--scenario",
+            concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/scenarios/water-then-freeze.toml"
+            ),
+        ])
+        .unwrap();
+        assert!(own.ignored.is_empty());
+    }
 }
