@@ -3,6 +3,7 @@
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
@@ -35,6 +36,24 @@ pub struct MonitorOptions {
     pub plain: bool,
     /// Print nothing but errors and the summary.
     pub quiet: bool,
+    /// Also print the protocol's chatter: the node's `Hello` in full (its
+    /// 24-hex-digit unique id, reset reason), every `Ack`.
+    pub verbose: bool,
+    /// Print the legend of the status lines before the first one.
+    pub legend: bool,
+    /// What is really on the face, as one status line (the demo knows it
+    /// from the virtual node's environment); `None` for a real node.
+    pub truth: Option<TruthFn>,
+}
+
+/// A source of the "truth" status line (the demo's virtual environment).
+#[derive(Clone)]
+pub struct TruthFn(pub Arc<dyn Fn() -> String + Send + Sync>);
+
+impl std::fmt::Debug for TruthFn {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("TruthFn")
+    }
 }
 
 impl MonitorOptions {
@@ -50,6 +69,9 @@ impl MonitorOptions {
             handshake_timeout: Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS),
             plain: false,
             quiet: false,
+            verbose: false,
+            legend: true,
+            truth: None,
         }
     }
 }
@@ -117,16 +139,16 @@ impl View {
         }
     }
 
-    fn status(&mut self, [a, b, c]: [String; 3]) {
+    fn status(&mut self, lines: &[String]) {
         if self.quiet {
             return;
         }
         match &self.bar {
-            Some(bar) => bar.set_message(format!("{a}\n  {b}\n  {c}")),
+            Some(bar) => bar.set_message(lines.join("\n  ")),
             None => {
                 if self.last_line.elapsed() >= Duration::from_secs(1) {
                     self.last_line = Instant::now();
-                    println!("{a}  | {b}  | {c}");
+                    println!("{}", lines.join("  | "));
                 }
             }
         }
@@ -196,6 +218,32 @@ pub fn status_lines(m: Option<&Measurement>, s: &MonitorSummary) -> [String; 3] 
     ]
 }
 
+/// The faults the node reports in `m`, by name (`faults ntc_open`), with
+/// what they mean for the readings; `None` when there is none.
+pub fn fault_line(m: &Measurement) -> Option<String> {
+    let names = fois_link::reading::fault_names(m.flags);
+    if names.is_empty() {
+        return None;
+    }
+    let mut hints = Vec::new();
+    if m.flags & (flags::NTC_OPEN | flags::NTC_SHORT) != 0 {
+        hints.push("temperature from the MCU's internal sensor: check the NTC wiring");
+    }
+    if m.flags & flags::GAIN_OUT_OF_BAND != 0 {
+        hints.push("optical gain outside its band: clean the face, check the LED");
+    }
+    if m.flags & flags::STORAGE_FAILED != 0 {
+        hints.push("config or baseline not saved to flash");
+    }
+    let mut line = format!("FAULT {}", names.join(", "));
+    if !hints.is_empty() {
+        line.push_str(" (");
+        line.push_str(&hints.join("; "));
+        line.push(')');
+    }
+    Some(line)
+}
+
 /// The status on one line (plain output).
 pub fn status_line(m: Option<&Measurement>, s: &MonitorSummary) -> String {
     let [a, b, c] = status_lines(m, s);
@@ -205,6 +253,8 @@ pub fn status_line(m: Option<&Measurement>, s: &MonitorSummary) -> String {
 struct Session<'a> {
     log: Option<CsvLog>,
     view: View,
+    verbose: bool,
+    truth: Option<TruthFn>,
     sum: MonitorSummary,
     stop: &'a AtomicBool,
     /// Node uptime of the last measurement or event, ms.
@@ -285,8 +335,13 @@ impl Session<'_> {
                             self.sum.ice_onsets += 1;
                         }
                         let r = EventReading::new(e);
+                        let faults = if r.faults.is_empty() {
+                            String::new()
+                        } else {
+                            format!(" [{}]", r.faults.join(", "))
+                        };
                         self.view.say(&format!(
-                            "* event {} at uptime {:.1} s: I1 {:.3} µA, rise {:.3} µA, {:.2} °C",
+                            "* event {}{faults} at uptime {:.1} s: I1 {:.3} µA, rise {:.3} µA, {:.2} °C",
                             event_name(&e.kind),
                             e.uptime_ms as f64 / 1000.0,
                             r.i1_ua,
@@ -294,9 +349,17 @@ impl Session<'_> {
                             r.temperature_c
                         ));
                     }
-                    DeviceMsg::Ack(a) => self.view.say(&format!("  ack {}", ack_text(a))),
+                    DeviceMsg::Ack(a) => {
+                        if self.verbose {
+                            self.view.say(&format!("  ack {}", ack_text(a)));
+                        }
+                    }
                     DeviceMsg::Error(e) => self.view.say(&format!("! error {}", error_text(e))),
-                    DeviceMsg::Hello(h) => self.view.say(&format!("  hello {}", hello_text(h))),
+                    DeviceMsg::Hello(h) => {
+                        if self.verbose {
+                            self.view.say(&format!("  hello {}", hello_text(h)));
+                        }
+                    }
                 }
                 self.row(Row::device(f.seq, &f.msg))?;
             }
@@ -308,8 +371,14 @@ impl Session<'_> {
         if let Some(log) = &mut self.log {
             log.tick()?;
         }
-        let lines = status_lines(self.sum.last.as_ref(), &self.sum);
-        self.view.status(lines);
+        let mut lines = status_lines(self.sum.last.as_ref(), &self.sum).to_vec();
+        if let Some(f) = self.sum.last.as_ref().and_then(fault_line) {
+            lines.push(f);
+        }
+        if let Some(t) = &self.truth {
+            lines.push((t.0)());
+        }
+        self.view.status(&lines);
         Ok(())
     }
 }
@@ -321,9 +390,14 @@ pub fn run(opts: &MonitorOptions, stop: &AtomicBool) -> anyhow::Result<MonitorSu
         Some(p) => Some(CsvLog::open(p)?),
         None => None,
     };
+    if opts.legend && !opts.quiet {
+        println!("{}", crate::legend::LEGEND);
+    }
     let mut s = Session {
         log,
         view: View::new(opts.plain, opts.quiet),
+        verbose: opts.verbose,
+        truth: opts.truth.clone(),
         sum: MonitorSummary::default(),
         stop,
         last_uptime_ms: None,
@@ -382,8 +456,17 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
         };
         waiting_said = false;
         let text = hello_text(&hello);
+        let shown = if s.verbose {
+            text.clone()
+        } else {
+            format!(
+                "{}, protocol {}",
+                hello.board_name(),
+                hello.protocol_version
+            )
+        };
         s.view.say(&format!(
-            "{} {} ({text})",
+            "{} {} ({shown})",
             if connected_once {
                 "reconnected to"
             } else {

@@ -25,6 +25,13 @@ pub struct MonitorArgs {
     /// Print a plain status line each second instead of a redrawn one.
     #[arg(long)]
     pub plain: bool,
+    /// Also print the protocol's chatter: every answer (`ack ...`) and the
+    /// node's full hello (its 24-hex-digit unique id, reset reason).
+    #[arg(long)]
+    pub verbose: bool,
+    /// Do not print the legend of the status lines at the start.
+    #[arg(long)]
+    pub no_legend: bool,
 }
 
 /// Run `foisctl monitor` until `stop`, the duration, or an error that
@@ -34,6 +41,8 @@ pub fn run(args: MonitorArgs, stop: &AtomicBool) -> anyhow::Result<()> {
     opts.baud = args.port.baud;
     opts.log = args.log;
     opts.plain = args.plain;
+    opts.verbose = args.verbose;
+    opts.legend = !args.no_legend;
     opts.duration = args.duration.map(Duration::from_secs_f64);
     let sum = monitor::run(&opts, stop)?;
     println!(

@@ -193,14 +193,14 @@ impl SceneArgs {
 
 /// One line saying what the scene is.
 pub fn describe(scene: &Scene) -> String {
-        let ignored = if scene.ignored.is_empty() {
-            String::new()
-        } else {
-            format!(
-                " (the hardware-in-loop checker's keys {} are not used here)",
-                scene.ignored.join(", ")
-            )
-        };
+    let ignored = if scene.ignored.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " (the hardware-in-loop checker's keys {} are not used here)",
+            scene.ignored.join(", ")
+        )
+    };
     let segs = scene.timeline.segments();
     if segs.len() > 2 || (segs.len() == 2 && segs[0].cover != Cover::Dry) {
         let parts: Vec<String> = segs
