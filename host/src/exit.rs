@@ -28,6 +28,19 @@ pub const TABLE: &str = "Exit codes: 0 success; 1 other failure (I/O, unreadable
 5 node speaks an incompatible protocol version; 6 node refused the command (Error reply); \
 7 KEY=VALUE refused on the host (unknown key, not a number, out of range).";
 
+/// The exit codes of the commands that work on files only (plot, compare,
+/// estimate, sim, bench-decode), for their `--help`.
+pub const OFFLINE_TABLE: &str = "Exit codes: 0 success; 1 failure (an input cannot be read or is \
+not the file expected, an output cannot be written, a figure cannot be drawn); 2 bad command line \
+(unknown flag, value out of range or negative where it must not be, figure format other than .png \
+or .svg).";
+
+/// The exit codes of `virtual-node` and `demo`, for their `--help`.
+pub const SERVE_TABLE: &str = "Exit codes: 0 success (a first Ctrl-C stops cleanly and exits 0); \
+1 failure (no pseudo-terminal, a bad scenario or --state file, a log that cannot be written); \
+2 bad command line; demo only: 3, 4, 5 as for `foisctl monitor` if its monitor cannot open or talk \
+to the node's pseudo-terminal; 130 a second Ctrl-C (stops at once).";
+
 /// An error with the exit code it maps to.
 #[derive(Debug)]
 pub struct Exit {

@@ -28,6 +28,9 @@ pub struct DemoArgs {
     /// node's full hello (its 24-hex-digit unique id, reset reason).
     #[arg(long)]
     pub verbose: bool,
+    /// Do not print the legend of the status lines at the start.
+    #[arg(long)]
+    pub no_legend: bool,
 }
 
 /// `foisctl demo`: a virtual node and the monitor in one process.
@@ -37,6 +40,7 @@ pub fn run(args: DemoArgs, stop: &AtomicBool) -> anyhow::Result<monitor::Monitor
         log,
         plain,
         verbose,
+        no_legend,
     } = args;
     let scene = scene.resolve(DEMO_DEFAULTS)?;
     println!("FOIS demo: {}", describe(&scene));
@@ -75,6 +79,7 @@ pub fn run(args: DemoArgs, stop: &AtomicBool) -> anyhow::Result<monitor::Monitor
     opts.log = log;
     opts.plain = plain;
     opts.verbose = verbose;
+    opts.legend = !no_legend;
     opts.truth = Some(truth);
     opts.duration = scene.duration;
     let result = monitor::run(&opts, stop);

@@ -20,7 +20,7 @@ pub struct MonitorArgs {
     #[arg(long, value_name = "FILE")]
     pub log: Option<PathBuf>,
     /// Stop after this many seconds (default: run until Ctrl-C).
-    #[arg(long, value_name = "SECONDS", value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "SECONDS", value_parser = non_negative)]
     pub duration: Option<f64>,
     /// Print a plain status line each second instead of a redrawn one.
     #[arg(long)]

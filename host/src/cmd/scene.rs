@@ -36,7 +36,7 @@ pub struct SceneArgs {
     pub temp_c: Option<f64>,
     /// Virtual seconds of dry face before the film starts to form (the node
     /// dark-calibrates at 1 s) [default: 30 for virtual-node, 60 for demo].
-    #[arg(long, value_name = "SECONDS", value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "SECONDS", value_parser = non_negative)]
     pub dry_s: Option<f64>,
     /// Ambient (sun) DC photocurrent, µA: one value for both channels or
     /// `A1,A2` [default: 0].
@@ -44,7 +44,7 @@ pub struct SceneArgs {
     pub ambient: Option<[f64; 2]>,
     /// Amplitude of the 100 Hz mains flicker of the ambient light, µA, both
     /// channels [default: 0].
-    #[arg(long, value_name = "UA", value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "UA", value_parser = non_negative)]
     pub flicker: Option<f64>,
     /// LED output relative to nominal (0..=10), 0.7 = 30 % weaker [default: 1].
     #[arg(long, value_name = "FACTOR", value_parser = f64_in(0.0, 10.0))]
@@ -65,7 +65,7 @@ pub struct SceneArgs {
     pub speed: Option<f64>,
     /// Stop after this many real seconds [default: never for virtual-node
     /// (Ctrl-C), 40 for demo].
-    #[arg(long, value_name = "SECONDS", value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "SECONDS", value_parser = non_negative)]
     pub duration: Option<f64>,
 }
 

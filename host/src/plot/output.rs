@@ -57,7 +57,7 @@ pub fn format_of(out: &Path) -> Result<Format, Exit> {
         return Err(Exit::new(
             FAILURE,
             format!(
-                "cannot write {}: the directory {} does not exist (create it, or choose another --out)",
+                "cannot write {}: the directory {} does not exist (create it, or write the figure elsewhere)",
                 out.display(),
                 dir.display()
             ),
