@@ -255,6 +255,10 @@ struct Session<'a> {
     view: View,
     verbose: bool,
     truth: Option<TruthFn>,
+    /// Lines typed on the terminal ([`crate::keys`]).
+    keys: Option<std::sync::mpsc::Receiver<Result<crate::keys::Key, String>>>,
+    /// Ids of the commands sent from typed keys, awaiting their answer.
+    pending: Vec<u16>,
     sum: MonitorSummary,
     stop: &'a AtomicBool,
     /// Node uptime of the last measurement or event, ms.
@@ -350,7 +354,9 @@ impl Session<'_> {
                         ));
                     }
                     DeviceMsg::Ack(a) => {
-                        if self.verbose {
+                        let asked = self.pending.contains(&a.id);
+                        self.pending.retain(|&id| id != a.id);
+                        if self.verbose || asked {
                             self.view.say(&format!("  ack {}", ack_text(a)));
                         }
                     }
@@ -362,6 +368,31 @@ impl Session<'_> {
                     }
                 }
                 self.row(Row::device(f.seq, &f.msg))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Send the commands typed since the last call.
+    fn typed(&mut self, link: &mut Link<Box<dyn serialport::SerialPort>>) -> anyhow::Result<()> {
+        let Some(rx) = &self.keys else { return Ok(()) };
+        let typed: Vec<_> = rx.try_iter().collect();
+        for k in typed {
+            match k {
+                Ok(key) => match key.command() {
+                    Some(cmd) => {
+                        let name = format!("{cmd:?}");
+                        let id = link.send(cmd)?;
+                        self.pending.push(id);
+                        self.view.say(&format!("> {name} sent"));
+                    }
+                    None => self.view.say(crate::legend::LEGEND),
+                },
+                Err(line) => self.view.say(&format!(
+                    "> `{}` is no key; {}",
+                    line.trim(),
+                    crate::keys::HELP
+                )),
             }
         }
         Ok(())
@@ -393,11 +424,20 @@ pub fn run(opts: &MonitorOptions, stop: &AtomicBool) -> anyhow::Result<MonitorSu
     if opts.legend && !opts.quiet {
         println!("{}", crate::legend::LEGEND);
     }
+    if !opts.quiet && std::io::stdin().is_terminal() {
+        println!("{}", crate::keys::HELP);
+    }
     let mut s = Session {
         log,
         view: View::new(opts.plain, opts.quiet),
         verbose: opts.verbose,
         truth: opts.truth.clone(),
+        keys: if opts.quiet {
+            None
+        } else {
+            crate::keys::spawn()
+        },
+        pending: Vec::new(),
         sum: MonitorSummary::default(),
         stop,
         last_uptime_ms: None,
@@ -491,6 +531,7 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
                 }
                 Err(e) => break Some(e),
             }
+            s.typed(&mut link)?;
             s.tick()?;
         };
         tracker = link.seq.clone();
