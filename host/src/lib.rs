@@ -4,7 +4,8 @@
 //!
 //! - [`cmd`]: one module per command, each owning its arguments and its `run`.
 //! - [`monitor`]: the live session behind `monitor` and `demo`; [`csvlog`] its durable CSV log;
-//!   [`legend`] what its status lines mean; [`keys`] commands typed into it.
+//!   [`legend`] what its status lines mean; [`keys`] commands typed into it;
+//!   [`status`] its status lines.
 //! - [`estimate`]: a log or a simulated curve replayed through the node's ice estimator.
 //! - [`compare`]: a log against the simulator's band; [`plot`]: every figure.
 //! - [`exit`]: the exit codes; [`mod@bench`]: the decoder benchmark and the
@@ -24,5 +25,6 @@ pub mod keys;
 pub mod legend;
 pub mod monitor;
 pub mod plot;
+pub mod status;
 
 pub use fois_link::text;

@@ -206,7 +206,7 @@ pub fn plot_crlb(
             xy(|v| v.0),
         ));
         s.push(Series::new(
-            Some(&format!("… gain uncalibrated, mean currents alone")),
+            Some("… gain uncalibrated, mean currents alone"),
             C_MAGENTA,
             Kind::Dashed,
             xy(|v| v.1),
