@@ -313,11 +313,12 @@ impl Session<'_> {
             log.tick()?;
         }
         let mut lines = status_lines(self.sum.last.as_ref(), &self.sum).to_vec();
+        // The demo's truth right below the estimate it is to be compared with.
+        if let Some(t) = &self.truth {
+            lines.insert(2, (t.0)());
+        }
         if let Some(f) = self.sum.last.as_ref().and_then(fault_line) {
             lines.push(f);
-        }
-        if let Some(t) = &self.truth {
-            lines.push((t.0)());
         }
         self.view.status(&lines);
         Ok(())
