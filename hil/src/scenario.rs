@@ -1,11 +1,13 @@
 //! The scenario file format (TOML, one file per case) and its translation
 //! into a [`Timeline`] of the virtual hardware.
 //!
-//! The timeline keys (`sensor`, `seed`, `[[segment]]`) are the virtual
-//! node's scenario format (`fois_vnode::scenario`, also read by
-//! `foisctl virtual-node --scenario`): the segment tables are the vnode
-//! crate's own `SegmentSpec`, checked by its `timeline`; this module adds the name, class, config, overlays, commands,
-//! sweep, lossy link and expectations.
+//! The keys that shape the run (`sensor`, `seed`, `gain_calibration`,
+//! `[[segment]]`, `[[overlay]]`, `[config]`) are the virtual node's
+//! scenario format (`fois_vnode::scenario`, also read by
+//! `foisctl virtual-node --scenario`, which accepts and ignores the keys
+//! below): the segment and overlay tables are the vnode crate's own
+//! `SegmentSpec` / `OverlaySpec`, checked there; this module adds the name,
+//! class, commands, sweep, lossy link and expectations.
 //!
 //! Every table is `deny_unknown_fields`: a misspelt key is an error naming
 //! the file and the key. The format is documented key by key in
@@ -14,9 +16,10 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, bail, ensure};
+use anyhow::{Context, ensure};
+use fois_vnode::overlay::{self, OverlaySpec};
 use fois_vnode::scenario::{self, SegmentSpec};
-use fois_vnode::{Cover, Segment, Timeline};
+use fois_vnode::{Cover, Timeline};
 
 use fois_protocol::Config;
 use serde::Deserialize;
@@ -126,32 +129,6 @@ pub struct ScenarioFile {
 }
 
 fn one() -> u64 {
-    1
-}
-
-/// A temporary change: from `start_s` for `duration_s`, repeated `repeat`
-/// times every `period_s`. Sets the given keys over whatever the segments say.
-#[derive(Debug, Clone, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct OverlaySpec {
-    /// First start, s.
-    pub start_s: f64,
-    /// Length of each occurrence, s.
-    pub duration_s: f64,
-    /// Occurrences (default 1).
-    #[serde(default = "one_u32")]
-    pub repeat: u32,
-    /// Start-to-start period when `repeat` > 1, s.
-    pub period_s: Option<f64>,
-    /// Ambient DC per channel during the overlay, µA.
-    pub ambient_ua: Option<[f64; 2]>,
-    /// Flicker amplitude per channel during the overlay, µA.
-    pub flicker_ua: Option<[f64; 2]>,
-    /// ADC noise during the overlay, rms LSB.
-    pub adc_noise_lsb: Option<f64>,
-}
-
-fn one_u32() -> u32 {
     1
 }
 
@@ -434,7 +411,7 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
         .unwrap_or_default();
     let name = file.name.clone().unwrap_or(stem);
     ensure!(!file.segments.is_empty(), "no [[segment]]");
-    let config = build_config(&file.config)?;
+    let config = scenario::config(&file.config).map_err(anyhow::Error::msg)?;
     validate_commands(&file.commands)?;
     validate_expect(&file.expect)?;
     if let Some(spec) = file.gain_calibration {
@@ -500,7 +477,7 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
             segments.iter().all(|s| s.duration_s.is_finite()) || f.end_s.is_some(),
             "a segment lasts \"inf\": set end_s"
         );
-        let segments = apply_overlays(segments, &f.overlays)?;
+        let segments = overlay::apply(segments, &f.overlays).map_err(anyhow::Error::msg)?;
         let timeline = Timeline::new(segments);
         let end_s = f.end_s.unwrap_or_else(|| timeline.duration_s());
         ensure!(end_s > 0.0 && end_s.is_finite(), "end_s must be > 0");
@@ -532,25 +509,6 @@ fn build(path: &Path, file: ScenarioFile) -> anyhow::Result<Vec<Scenario>> {
         });
     }
     Ok(out)
-}
-
-fn build_config(table: &BTreeMap<String, toml::Value>) -> anyhow::Result<Option<Config>> {
-    if table.is_empty() {
-        return Ok(None);
-    }
-    let mut cfg = Config::default();
-    for (key, value) in table {
-        let text = match value {
-            toml::Value::Integer(i) => i.to_string(),
-            toml::Value::Boolean(b) => b.to_string(),
-            other => bail!("[config] {key} = {other}: expected an integer or a boolean"),
-        };
-        cfg.set_from_str(key, &text)
-            .map_err(|e| anyhow::anyhow!("[config] {key} = {text}: {e}"))?;
-    }
-    cfg.validate()
-        .map_err(|e| anyhow::anyhow!("[config] is refused by the node's rule: {e}"))?;
-    Ok(Some(cfg))
 }
 
 fn validate_commands(cmds: &[CommandSpec]) -> anyhow::Result<()> {
@@ -627,105 +585,9 @@ fn host_scenario(f: &ScenarioFile) -> anyhow::Result<fois_vnode::Scenario> {
             .map(scenario::gain_calibration)
             .transpose()
             .map_err(anyhow::Error::msg)?,
+        config: None,
+        ignored: Vec::new(),
     })
-}
-
-/// Occurrences of the overlays: (start, end, overlay index), validated.
-fn overlay_intervals(overlays: &[OverlaySpec]) -> anyhow::Result<Vec<(f64, f64, usize)>> {
-    let mut out = Vec::new();
-    for (i, o) in overlays.iter().enumerate() {
-        let n = i + 1;
-        ensure!(
-            o.start_s.is_finite() && o.start_s >= 0.0,
-            "[[overlay]] #{n}: start_s must be ≥ 0"
-        );
-        ensure!(
-            o.duration_s.is_finite() && o.duration_s > 0.0,
-            "[[overlay]] #{n}: duration_s must be > 0"
-        );
-        ensure!(o.repeat >= 1, "[[overlay]] #{n}: repeat must be ≥ 1");
-        let period = match (o.repeat, o.period_s) {
-            (1, p) => p.unwrap_or(0.0),
-            (_, Some(p)) if p.is_finite() && p > o.duration_s => p,
-            (_, _) => bail!("[[overlay]] #{n}: repeat > 1 needs period_s > duration_s"),
-        };
-        ensure!(
-            o.ambient_ua.is_some() || o.flicker_ua.is_some() || o.adc_noise_lsb.is_some(),
-            "[[overlay]] #{n}: sets nothing (ambient_ua, flicker_ua or adc_noise_lsb)"
-        );
-        for k in 0..o.repeat {
-            let a = o.start_s + f64::from(k) * period;
-            out.push((a, a + o.duration_s, i));
-        }
-    }
-    Ok(out)
-}
-
-/// Split the segments at every overlay edge and apply the overlays. Ramps
-/// are split into sub-ramps; thickness stays continuous.
-fn apply_overlays(
-    segments: Vec<Segment>,
-    overlays: &[OverlaySpec],
-) -> anyhow::Result<Vec<Segment>> {
-    let intervals = overlay_intervals(overlays)?;
-    if intervals.is_empty() {
-        return Ok(segments);
-    }
-    let mut cuts: Vec<f64> = intervals.iter().flat_map(|&(a, b, _)| [a, b]).collect();
-    cuts.sort_by(f64::total_cmp);
-    cuts.dedup();
-    let mut out = Vec::new();
-    let mut t0 = 0.0;
-    for seg in segments {
-        let t1 = t0 + seg.duration_s;
-        let mut edges = vec![t0];
-        edges.extend(cuts.iter().copied().filter(|&c| c > t0 && c < t1));
-        edges.push(t1);
-        for (k, w) in edges.windows(2).enumerate() {
-            let (a, b) = (w[0], w[1]);
-            if b <= a {
-                continue;
-            }
-            let frac = |t: f64| (t - t0) / seg.duration_s;
-            let lerp = |x: f64, end: Option<f64>, f: f64| end.map_or(x, |e| x + (e - x) * f);
-            let mut piece = seg.clone();
-            piece.duration_s = b - a;
-            piece.air_temp_c = lerp(seg.air_temp_c, seg.air_temp_end_c, frac(a));
-            piece.air_temp_end_c = seg
-                .air_temp_end_c
-                .map(|_| lerp(seg.air_temp_c, seg.air_temp_end_c, frac(b)));
-            piece.led_factor = lerp(seg.led_factor, seg.led_factor_end, frac(a));
-            piece.led_factor_end = seg
-                .led_factor_end
-                .map(|_| lerp(seg.led_factor, seg.led_factor_end, frac(b)));
-            piece.face_transmission =
-                lerp(seg.face_transmission, seg.face_transmission_end, frac(a));
-            piece.face_transmission_end = seg
-                .face_transmission_end
-                .map(|_| lerp(seg.face_transmission, seg.face_transmission_end, frac(b)));
-            if k > 0 {
-                piece.start_thickness_mm = None;
-            }
-            let mid = 0.5 * (a + b);
-            for &(oa, ob, i) in &intervals {
-                if mid >= oa && mid < ob {
-                    let o = &overlays[i];
-                    if let Some(x) = o.ambient_ua {
-                        piece.ambient_ua = x;
-                    }
-                    if let Some(x) = o.flicker_ua {
-                        piece.flicker_ua = x;
-                    }
-                    if let Some(x) = o.adc_noise_lsb {
-                        piece.adc_noise_lsb = x;
-                    }
-                }
-            }
-            out.push(piece);
-        }
-        t0 = t1;
-    }
-    Ok(out)
 }
 
 /// When ice is first on the face in `timeline` (a flat, glazed or rime

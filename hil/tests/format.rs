@@ -279,3 +279,35 @@ fn the_report_reseeds_accuracy_runs_from_a_given_first_seed() {
     ];
     assert_eq!(got, want);
 }
+
+/// One format for both: every shipped file loads through the virtual node's
+/// reader (`foisctl virtual-node --scenario`), which builds the same
+/// timeline (overlays applied), sensor, seed, gain calibration and config
+/// as the suite does for the file's own seed and noise.
+#[test]
+fn every_shipped_file_runs_the_same_on_the_virtual_node() {
+    let files = scenario::files_in(&scenario::default_dir()).unwrap();
+    assert_eq!(files.len(), 44, "hil/scenarios holds 44 files");
+    let mut compared = 0;
+    for path in &files {
+        let v = fois_vnode::scenario::load(path).unwrap_or_else(|e| panic!("{e:#}"));
+        assert!(
+            v.ignored.contains(&"class"),
+            "{}: class is the suite's key",
+            path.display()
+        );
+        let runs = scenario::load(path).unwrap();
+        let hil = &runs[0];
+        assert_eq!(v.sensor, hil.sensor, "{}", path.display());
+        assert_eq!(v.config, hil.config, "{}", path.display());
+        let sweep = hil.file.sweep.as_ref();
+        if sweep.is_none_or(|s| s.seed.is_empty()) {
+            assert_eq!(v.seed, hil.seed, "{}", path.display());
+        }
+        if sweep.is_none_or(|s| s.adc_noise_lsb.is_empty()) {
+            assert_eq!(v.timeline, hil.timeline, "{}", path.display());
+            compared += 1;
+        }
+    }
+    assert!(compared >= 40, "{compared} timelines compared");
+}

@@ -223,8 +223,8 @@ pub fn with_noise(mut band: Vec<McPoint>, noise_ua: f64) -> Vec<McPoint> {
 /// The text report.
 pub fn report(c: &Comparison) -> String {
     let mut s = format!(
-        "{} samples, thickness {:.2}..{:.2} mm; band mu(d) +/- {}*sigma(d) \
-         (sigma: Monte Carlo spread and measurement noise in quadrature)\n",
+        "{} samples, thickness {:.2}..{:.2} mm; band μ(d) ± {}σ(d) \
+         (σ: Monte Carlo spread and measurement noise in quadrature)\n",
         c.samples.len(),
         c.samples
             .iter()
@@ -238,13 +238,13 @@ pub fn report(c: &Comparison) -> String {
     );
     for (name, ch) in ["I1", "I2"].iter().zip(c.channels.iter()) {
         s.push_str(&format!(
-            "{name}: RMS deviation {:.3} uA, mean deviation {:+.3} uA, {:.1} % of samples inside the band\n",
+            "{name}: RMS deviation {:.3} µA, mean deviation {:+.3} µA, {:.1} % of samples inside the band\n",
             ch.rms_ua,
             ch.bias_ua,
             100.0 * ch.inside
         ));
     }
-    s.push_str("  d (mm)     n   I1 log    mu1   sigma1 |  I2 log    mu2   sigma2\n");
+    s.push_str("  d (mm)     n   I1 log     μ1      σ1 |  I2 log     μ2      σ2   (µA)\n");
     for lo in 0..15 {
         let lo = f64::from(lo);
         let bin: Vec<&Sample> = c
@@ -272,7 +272,59 @@ pub fn report(c: &Comparison) -> String {
             sg[1]
         ));
     }
+    s.push_str(&verdict(c));
+    s.push('\n');
     s
+}
+
+/// Percentage points a channel's fraction inside the band may fall short
+/// of a Gaussian band's coverage and still agree: a log's samples are
+/// correlated from frame to frame (the ice and the gain drift slowly), so
+/// their fraction inside scatters far more than independent draws would.
+pub const VERDICT_MARGIN_POINTS: f64 = 10.0;
+
+/// The fraction of a normal distribution within ±k standard deviations
+/// (erf(k/√2)), by Simpson's rule on the density (error < 1e-9 for k ≤ 10).
+pub fn normal_coverage(k: f64) -> f64 {
+    let k = k.clamp(0.0, 10.0);
+    let n = 2000;
+    let h = k / f64::from(n);
+    let f = |x: f64| (-0.5 * x * x).exp();
+    let mut sum = f(0.0) + f(k);
+    for i in 1..n {
+        let w = if i % 2 == 1 { 4.0 } else { 2.0 };
+        sum += w * f(f64::from(i) * h);
+    }
+    2.0 * sum * h / 3.0 / (2.0 * std::f64::consts::PI).sqrt()
+}
+
+/// The one-line verdict: the log agrees with the simulation when each
+/// channel has at least the Gaussian coverage of the ±kσ band
+/// ([`normal_coverage`], 68.3 % at k = 1) less [`VERDICT_MARGIN_POINTS`]
+/// of its samples inside the band.
+pub fn verdict(c: &Comparison) -> String {
+    let expected = 100.0 * normal_coverage(c.k_sigma);
+    let need = expected - VERDICT_MARGIN_POINTS;
+    let pct: Vec<f64> = c.channels.iter().map(|ch| 100.0 * ch.inside).collect();
+    let shown = ["I1", "I2"]
+        .iter()
+        .zip(&pct)
+        .map(|(n, p)| format!("{n} {p:.1} %"))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let why = format!(
+        "inside the ±{}σ band; at least {need:.1} % needed: a Gaussian band holds {expected:.1} %, \
+         {VERDICT_MARGIN_POINTS:.0} points allowed because a log's samples are correlated",
+        c.k_sigma
+    );
+    if pct.iter().all(|&p| p >= need) {
+        format!("verdict: AGREES with the simulation ({shown} {why})")
+    } else {
+        format!(
+            "verdict: DIFFERS from the simulation ({shown} {why}); check the medium (--ice), the \
+             thickness source, the node's gain calibration and dark baseline"
+        )
+    }
 }
 
 #[cfg(test)]
@@ -290,6 +342,31 @@ mod tests {
                 }
             })
             .collect()
+    }
+
+    #[test]
+    fn the_verdict_compares_the_fraction_inside_with_the_gaussian_coverage() {
+        assert!((normal_coverage(1.0) - 0.682_689_492).abs() < 1e-8);
+        assert!((normal_coverage(2.0) - 0.954_499_736).abs() < 1e-8);
+        let with = |inside: [f64; 2]| Comparison {
+            samples: Vec::new(),
+            band: Vec::new(),
+            k_sigma: 1.0,
+            channels: inside.map(|f| ChannelStats {
+                rms_ua: 0.0,
+                bias_ua: 0.0,
+                inside: f,
+            }),
+        };
+        let v = verdict(&with([0.74, 0.60]));
+        assert!(v.starts_with("verdict: AGREES"), "{v}");
+        assert!(
+            v.contains("I1 74.0 %") && v.contains("58.3 % needed"),
+            "{v}"
+        );
+        let v = verdict(&with([0.74, 0.58]));
+        assert!(v.starts_with("verdict: DIFFERS"), "{v}");
+        assert_eq!(v.lines().count(), 1);
     }
 
     #[test]

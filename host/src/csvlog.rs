@@ -21,7 +21,8 @@
 //! | `state` | | `Dry`, `Wet`, `Ice` |
 //! | `alarm` | 0/1 | alarm output on |
 //! | `valid` | 0/1 | currents usable (no saturation) |
-//! | `flags` | | raw flag bits (`fois_protocol::flags`) |
+//! | `flags` | | the node's status bits as one number (`fois_protocol::flags`: 1 ch1 saturated, 2 ch2 saturated, 4 NTC open, 8 NTC short, 16 config defaulted, 32 no dark baseline, 64 alarm on, 128 alarm acknowledged, 256 V_DDA out of range, 512 flash write failed, 1024 clock fallback, 2048 brown-out level not set, 4096 store skipped, 8192 gain out of band) |
+//! | `faults` | | the fault bits among them by name, space-separated (`ntc_open gain_out_of_band`); on `fault_raised`/`fault_cleared` event rows the faults raised or cleared. Logs written before this column existed read the same (columns are found by name) |
 //! | `frames_lost` | frames | `gap` rows: frames missing from the sequence |
 //! | `detail` | | event kind, error, answer, reason |
 //! | `est_thickness_mm` | mm | the node's ice estimate: posterior mean thickness (protocol v2 nodes; empty for v1) |
@@ -44,7 +45,7 @@ use fois_link::timefmt::{iso_utc, unix_ms_now};
 use fois_protocol::{DeviceMsg, Event};
 
 /// The header line (without newline).
-pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,frames_lost,detail,est_thickness_mm,est_sigma_mm,est_kind,est_p,est_gain,est_gain_sigma";
+pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,faults,frames_lost,detail,est_thickness_mm,est_sigma_mm,est_kind,est_p,est_gain,est_gain_sigma";
 
 /// Rows reach the kernel at least this often (kill -9 loses at most this).
 pub const FLUSH_INTERVAL: Duration = Duration::from_millis(250);
@@ -70,7 +71,7 @@ pub enum LogError {
     },
     /// The file exists with another first line.
     #[error(
-        "log file {0} exists but is not a foisctl log of this layout (its header differs); choose another file"
+        "log file {0} exists but is not a foisctl log of this layout (its header differs: another program's file, or a log of an older foisctl, which plot, compare and estimate still read); log to another file"
     )]
     ForeignHeader(PathBuf),
 }
@@ -320,7 +321,7 @@ fn fixed(v: Option<f64>, decimals: usize) -> String {
 /// The fields of a row, in the order of [`HEADER`]. The values come from
 /// the row's [`Reading`] or [`EventReading`] (units converted there); this
 /// only chooses the decimals.
-pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 23] {
+pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 24] {
     let m = r.reading.as_ref();
     let e = r.event.as_ref();
     let est = m.and_then(|m| m.estimate.as_ref());
@@ -342,6 +343,9 @@ pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 23] {
         opt(m.map(|m| u8::from(m.alarm))),
         opt(m.map(|m| u8::from(m.valid))),
         opt(m.map(|m| m.flags)),
+        m.map(|m| &m.faults)
+            .or(e.map(|e| &e.faults))
+            .map_or(String::new(), |f| f.join(" ")),
         opt(r.frames_lost),
         r.detail.clone(),
         fixed(est.map(|e| e.thickness_mm), 3),
@@ -544,11 +548,40 @@ mod tests {
     }
 
     #[test]
+    fn the_faults_column_names_the_fault_bits_beside_flags() {
+        let mut m = meas();
+        m.flags = flags::ALARM | flags::NTC_OPEN | flags::GAIN_OUT_OF_BAND;
+        let line = format_row(0, &Row::device(7, &DeviceMsg::Measurement(m)));
+        let f = fields(&line);
+        let col = |name: &str| HEADER.split(',').position(|c| c == name).unwrap();
+        assert_eq!(f[col("flags")], "8260");
+        assert_eq!(f[col("faults")], "ntc_open gain_out_of_band");
+        let ev = fois_protocol::Event {
+            uptime_ms: 5,
+            kind: fois_protocol::EventKind::FaultRaised(flags::NTC_SHORT),
+            i1_na: 0,
+            i2_na: 0,
+            rise1_na: 0,
+            temperature_centi_c: 0,
+            frames: 1,
+        };
+        let f = fields(&format_row(0, &Row::device(8, &DeviceMsg::Event(ev))));
+        assert_eq!(f[col("faults")], "ntc_short");
+        assert_eq!(
+            fields(&format_row(
+                0,
+                &Row::device(9, &DeviceMsg::Measurement(meas()))
+            ))[col("faults")],
+            ""
+        );
+    }
+
+    #[test]
     fn row_text_matches_header() {
         let line = format_row(0, &Row::device(42, &DeviceMsg::Measurement(meas())));
         assert_eq!(
             line,
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,,\n"
         );
         let v2 = DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 {
             measurement: meas(),
@@ -561,7 +594,7 @@ mod tests {
         });
         assert_eq!(
             format_row(0, &Row::device(42, &v2)),
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,2.345,0.310,rime,0.970,,\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,2.345,0.310,rime,0.970,,\n"
         );
         let v3 = DeviceMsg::MeasurementV3(fois_protocol::MeasurementV3 {
             measurement: meas(),
@@ -573,13 +606,13 @@ mod tests {
         });
         assert_eq!(
             format_row(0, &Row::device(42, &v3)),
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,1.1503,0.0610\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,1.1503,0.0610\n"
         );
         assert_eq!(fields(&line).len(), HEADER.split(',').count());
         let g = format_row(5, &Row::gap(10, 3));
         let f = fields(&g);
         assert_eq!(f[2], "gap");
-        assert_eq!(f[15], "3");
+        assert_eq!(f[16], "3");
     }
 
     /// One CSV line read back by the csv crate.
@@ -597,8 +630,8 @@ mod tests {
         let r = Row::note("note", "a, \"b\"\nc");
         let line = format_row(1, &r);
         let f = fields(&line);
-        assert_eq!(f[16], "a, \"b\"\nc");
-        assert_eq!(f.len(), 23);
+        assert_eq!(f[17], "a, \"b\"\nc");
+        assert_eq!(f.len(), 24);
     }
 
     #[test]
@@ -645,7 +678,7 @@ mod tests {
             log.close().unwrap();
         }
         let t = LogTable::read(&p).unwrap();
-        assert_eq!(t.columns.len(), 23);
+        assert_eq!(t.columns.len(), 24);
         let seqs: Vec<&str> = t.rows.iter().map(|r| r[3].as_str()).collect();
         assert_eq!(seqs, ["1", "2"]);
         let text = std::fs::read_to_string(&p).unwrap();
@@ -665,7 +698,7 @@ mod tests {
         let err = CsvLog::open(&older).err().map(|e| e.to_string());
         assert!(
             err.as_deref()
-                .is_some_and(|e| e.contains("choose another file")),
+                .is_some_and(|e| e.contains("log to another file")),
             "{err:?}"
         );
         assert_eq!(

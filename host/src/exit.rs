@@ -28,6 +28,19 @@ pub const TABLE: &str = "Exit codes: 0 success; 1 other failure (I/O, unreadable
 5 node speaks an incompatible protocol version; 6 node refused the command (Error reply); \
 7 KEY=VALUE refused on the host (unknown key, not a number, out of range).";
 
+/// The exit codes of the commands that work on files only (plot, compare,
+/// estimate, sim, bench-decode), for their `--help`.
+pub const OFFLINE_TABLE: &str = "Exit codes: 0 success; 1 failure (an input cannot be read or is \
+not the file expected, an output cannot be written, a figure cannot be drawn); 2 bad command line \
+(unknown flag, value out of range or negative where it must not be, figure format other than .png \
+or .svg).";
+
+/// The exit codes of `virtual-node` and `demo`, for their `--help`.
+pub const SERVE_TABLE: &str = "Exit codes: 0 success (a first Ctrl-C stops cleanly and exits 0); \
+1 failure (no pseudo-terminal, a bad scenario or --state file, a log that cannot be written); \
+2 bad command line; demo only: 3, 4, 5 as for `foisctl monitor` if its monitor cannot open or talk \
+to the node's pseudo-terminal; 130 a second Ctrl-C (stops at once).";
+
 /// An error with the exit code it maps to.
 #[derive(Debug)]
 pub struct Exit {
@@ -76,9 +89,52 @@ pub fn code_of(err: &anyhow::Error) -> i32 {
         .unwrap_or(FAILURE)
 }
 
+/// A hint for an error a user can fix, printed after it: a port held by
+/// another program (serialport's "Unable to acquire exclusive lock", or
+/// the kernel's "busy") names what usually holds it.
+pub fn hint(err: &anyhow::Error) -> Option<String> {
+    let port = err
+        .chain()
+        .find_map(|e| match e.downcast_ref::<LinkError>() {
+            Some(LinkError::Open { port, reason }) => Some((port.clone(), reason.to_lowercase())),
+            _ => None,
+        })?;
+    let (port, reason) = port;
+    (reason.contains("exclusive lock") || reason.contains("busy")).then(|| {
+        format!(
+            "{port} is held by another program, most likely a running `foisctl monitor` \
+             (or `foisctl demo`) or the fleet gateway (`fois-gateway`, systemd unit \
+             fois-gateway) that has it in its config. Stop that program (Ctrl-C in the \
+             monitor's terminal; `sudo systemctl stop fois-gateway`), run this command, \
+             then start it again; `fuser {port}` or `lsof {port}` shows the process."
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_held_port_gets_a_hint_naming_monitor_and_gateway() {
+        let held = anyhow::Error::from(LinkError::Open {
+            port: "/dev/ttyACM0".into(),
+            reason: "Unable to acquire exclusive lock on serial port".into(),
+        })
+        .context("calibrate-dark");
+        let h = hint(&held).unwrap();
+        assert!(
+            h.contains("foisctl monitor") && h.contains("fois-gateway"),
+            "{h}"
+        );
+        assert!(h.contains("/dev/ttyACM0"), "{h}");
+        let missing = anyhow::Error::from(LinkError::Open {
+            port: "/dev/ttyACM0".into(),
+            reason: "No such file or directory".into(),
+        });
+        assert_eq!(hint(&missing), None);
+        assert_eq!(hint(&anyhow::anyhow!("disk full")), None);
+    }
 
     #[test]
     fn link_errors_and_wrapped_exits_map_to_their_codes() {

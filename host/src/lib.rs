@@ -3,7 +3,9 @@
 //! ## Modules
 //!
 //! - [`cmd`]: one module per command, each owning its arguments and its `run`.
-//! - [`monitor`]: the live session behind `monitor` and `demo`; [`csvlog`] its durable CSV log.
+//! - [`monitor`]: the live session behind `monitor` and `demo`; [`csvlog`] its durable CSV log;
+//!   [`legend`] what its status lines mean; [`keys`] commands typed into it;
+//!   [`status`] its status lines.
 //! - [`estimate`]: a log or a simulated curve replayed through the node's ice estimator.
 //! - [`compare`]: a log against the simulator's band; [`plot`]: every figure.
 //! - [`exit`]: the exit codes; [`mod@bench`]: the decoder benchmark and the
@@ -19,7 +21,10 @@ pub mod compare;
 pub mod csvlog;
 pub mod estimate;
 pub mod exit;
+pub mod keys;
+pub mod legend;
 pub mod monitor;
 pub mod plot;
+pub mod status;
 
 pub use fois_link::text;

@@ -20,6 +20,9 @@ fn main() {
     fois_host::plot::register_fonts();
     if let Err(e) = cli.run() {
         eprintln!("foisctl: error: {e:#}");
+        if let Some(h) = exit::hint(&e) {
+            eprintln!("foisctl: hint: {h}");
+        }
         std::process::exit(exit::code_of(&e));
     }
 }

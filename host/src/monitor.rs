@@ -3,18 +3,18 @@
 
 use std::io::IsTerminal;
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use fois_protocol::{
-    Command, DetectorState, DeviceMsg, GainEstimate, IceEstimate, Measurement, flags,
-};
+use fois_protocol::{Command, DeviceMsg, GainEstimate, IceEstimate, Measurement};
 
 use crate::csvlog::{CsvLog, Row};
 use crate::exit;
-use fois_link::reading::{EventReading, celsius, ua};
-use fois_link::text::{ack_text, error_text, estimate_text, event_name, gain_text, hello_text};
+pub use crate::status::{fault_line, status_line, status_lines};
+use fois_link::reading::EventReading;
+use fois_link::text::{ack_text, error_text, event_name, hello_text};
 use fois_link::{Incoming, Link, LinkError, open_port};
 use fois_protocol::{SeqEvent, SeqTracker};
 
@@ -35,6 +35,24 @@ pub struct MonitorOptions {
     pub plain: bool,
     /// Print nothing but errors and the summary.
     pub quiet: bool,
+    /// Also print the protocol's chatter: the node's `Hello` in full (its
+    /// 24-hex-digit unique id, reset reason), every `Ack`.
+    pub verbose: bool,
+    /// Print the legend of the status lines before the first one.
+    pub legend: bool,
+    /// What is really on the face, as one status line (the demo knows it
+    /// from the virtual node's environment); `None` for a real node.
+    pub truth: Option<TruthFn>,
+}
+
+/// A source of the "truth" status line (the demo's virtual environment).
+#[derive(Clone)]
+pub struct TruthFn(pub Arc<dyn Fn() -> String + Send + Sync>);
+
+impl std::fmt::Debug for TruthFn {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("TruthFn")
+    }
 }
 
 impl MonitorOptions {
@@ -50,6 +68,9 @@ impl MonitorOptions {
             handshake_timeout: Duration::from_millis(fois_protocol::REPLY_TIMEOUT_MS),
             plain: false,
             quiet: false,
+            verbose: false,
+            legend: true,
+            truth: None,
         }
     }
 }
@@ -117,16 +138,16 @@ impl View {
         }
     }
 
-    fn status(&mut self, [a, b, c]: [String; 3]) {
+    fn status(&mut self, lines: &[String]) {
         if self.quiet {
             return;
         }
         match &self.bar {
-            Some(bar) => bar.set_message(format!("{a}\n  {b}\n  {c}")),
+            Some(bar) => bar.set_message(lines.join("\n  ")),
             None => {
                 if self.last_line.elapsed() >= Duration::from_secs(1) {
                     self.last_line = Instant::now();
-                    println!("{a}  | {b}  | {c}");
+                    println!("{}", lines.join("  | "));
                 }
             }
         }
@@ -139,72 +160,15 @@ impl View {
     }
 }
 
-/// The status from the last measurement and the counters: three lines of at
-/// most 80 columns (measurement; state, alarm and the node's ice estimate;
-/// counters and the optical gain). The estimate reads `est ICE rime 2.3 ±
-/// 0.3 mm (p 0.97)`, or `est —` when the node sends none (protocol v1, or no
-/// valid frame yet); the gain `gain 1.150 ± 0.060` (protocol v3 nodes).
-pub fn status_lines(m: Option<&Measurement>, s: &MonitorSummary) -> [String; 3] {
-    let mut counters = format!(
-        "frames {}  lost {}  rejected {}",
-        s.frames, s.lost, s.rejected
-    );
-    if let Some(g) = &s.last_gain {
-        counters.push_str("  ");
-        counters.push_str(&gain_text(g));
-        if m.is_some_and(|m| m.flags & flags::GAIN_OUT_OF_BAND != 0) {
-            counters.push_str(" OUT OF BAND");
-        }
-    }
-    let Some(m) = m else {
-        return [
-            "waiting for measurements".to_string(),
-            String::new(),
-            counters,
-        ];
-    };
-    let alarm = match (
-        m.flags & flags::ALARM != 0,
-        m.flags & flags::ALARM_ACKED != 0,
-    ) {
-        (true, true) => "ON (acked)",
-        (true, false) => "ON",
-        _ => "off",
-    };
-    let state = match m.state {
-        DetectorState::Dry => "Dry",
-        DetectorState::Wet => "Wet",
-        DetectorState::Ice => "ICE",
-    };
-    [
-        format!(
-            "I1 {:8.3} µA  I2 {:8.3} µA  ambient {:.2}/{:.2} µA  {:6.2} °C",
-            ua(m.i1_na.into()),
-            ua(m.i2_na.into()),
-            ua(m.ambient1_na.into()),
-            ua(m.ambient2_na.into()),
-            celsius(m.temperature_centi_c),
-        ),
-        format!(
-            "state {state:3}  alarm {alarm:10}  est {}{}",
-            s.last_estimate
-                .as_ref()
-                .map_or_else(|| "—".to_string(), estimate_text),
-            if m.is_valid() { "" } else { "  SATURATED" }
-        ),
-        counters,
-    ]
-}
-
-/// The status on one line (plain output).
-pub fn status_line(m: Option<&Measurement>, s: &MonitorSummary) -> String {
-    let [a, b, c] = status_lines(m, s);
-    format!("{a}  | {b}  | {c}")
-}
-
 struct Session<'a> {
     log: Option<CsvLog>,
     view: View,
+    verbose: bool,
+    truth: Option<TruthFn>,
+    /// Lines typed on the terminal ([`crate::keys`]).
+    keys: Option<std::sync::mpsc::Receiver<Result<crate::keys::Key, String>>>,
+    /// Ids of the commands sent from typed keys, awaiting their answer.
+    pending: Vec<u16>,
     sum: MonitorSummary,
     stop: &'a AtomicBool,
     /// Node uptime of the last measurement or event, ms.
@@ -285,8 +249,13 @@ impl Session<'_> {
                             self.sum.ice_onsets += 1;
                         }
                         let r = EventReading::new(e);
+                        let faults = if r.faults.is_empty() {
+                            String::new()
+                        } else {
+                            format!(" [{}]", r.faults.join(", "))
+                        };
                         self.view.say(&format!(
-                            "* event {} at uptime {:.1} s: I1 {:.3} µA, rise {:.3} µA, {:.2} °C",
+                            "* event {}{faults} at uptime {:.1} s: I1 {:.3} µA, rise {:.3} µA, {:.2} °C",
                             event_name(&e.kind),
                             e.uptime_ms as f64 / 1000.0,
                             r.i1_ua,
@@ -294,11 +263,46 @@ impl Session<'_> {
                             r.temperature_c
                         ));
                     }
-                    DeviceMsg::Ack(a) => self.view.say(&format!("  ack {}", ack_text(a))),
+                    DeviceMsg::Ack(a) => {
+                        let asked = self.pending.contains(&a.id);
+                        self.pending.retain(|&id| id != a.id);
+                        if self.verbose || asked {
+                            self.view.say(&format!("  ack {}", ack_text(a)));
+                        }
+                    }
                     DeviceMsg::Error(e) => self.view.say(&format!("! error {}", error_text(e))),
-                    DeviceMsg::Hello(h) => self.view.say(&format!("  hello {}", hello_text(h))),
+                    DeviceMsg::Hello(h) => {
+                        if self.verbose {
+                            self.view.say(&format!("  hello {}", hello_text(h)));
+                        }
+                    }
                 }
                 self.row(Row::device(f.seq, &f.msg))?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Send the commands typed since the last call.
+    fn typed(&mut self, link: &mut Link<Box<dyn serialport::SerialPort>>) -> anyhow::Result<()> {
+        let Some(rx) = &self.keys else { return Ok(()) };
+        let typed: Vec<_> = rx.try_iter().collect();
+        for k in typed {
+            match k {
+                Ok(key) => match key.command() {
+                    Some(cmd) => {
+                        let name = format!("{cmd:?}");
+                        let id = link.send(cmd)?;
+                        self.pending.push(id);
+                        self.view.say(&format!("> {name} sent"));
+                    }
+                    None => self.view.say(crate::legend::LEGEND),
+                },
+                Err(line) => self.view.say(&format!(
+                    "> `{}` is no key; {}",
+                    line.trim(),
+                    crate::keys::HELP
+                )),
             }
         }
         Ok(())
@@ -308,8 +312,15 @@ impl Session<'_> {
         if let Some(log) = &mut self.log {
             log.tick()?;
         }
-        let lines = status_lines(self.sum.last.as_ref(), &self.sum);
-        self.view.status(lines);
+        let mut lines = status_lines(self.sum.last.as_ref(), &self.sum).to_vec();
+        // The demo's truth right below the estimate it is to be compared with.
+        if let Some(t) = &self.truth {
+            lines.insert(2, (t.0)());
+        }
+        if let Some(f) = self.sum.last.as_ref().and_then(fault_line) {
+            lines.push(f);
+        }
+        self.view.status(&lines);
         Ok(())
     }
 }
@@ -321,9 +332,23 @@ pub fn run(opts: &MonitorOptions, stop: &AtomicBool) -> anyhow::Result<MonitorSu
         Some(p) => Some(CsvLog::open(p)?),
         None => None,
     };
+    if opts.legend && !opts.quiet {
+        println!("{}", crate::legend::LEGEND);
+    }
+    if !opts.quiet && std::io::stdin().is_terminal() {
+        println!("{}", crate::keys::HELP);
+    }
     let mut s = Session {
         log,
         view: View::new(opts.plain, opts.quiet),
+        verbose: opts.verbose,
+        truth: opts.truth.clone(),
+        keys: if opts.quiet {
+            None
+        } else {
+            crate::keys::spawn()
+        },
+        pending: Vec::new(),
         sum: MonitorSummary::default(),
         stop,
         last_uptime_ms: None,
@@ -382,8 +407,17 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
         };
         waiting_said = false;
         let text = hello_text(&hello);
+        let shown = if s.verbose {
+            text.clone()
+        } else {
+            format!(
+                "{}, protocol {}",
+                hello.board_name(),
+                hello.protocol_version
+            )
+        };
         s.view.say(&format!(
-            "{} {} ({text})",
+            "{} {} ({shown})",
             if connected_once {
                 "reconnected to"
             } else {
@@ -408,6 +442,7 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
                 }
                 Err(e) => break Some(e),
             }
+            s.typed(&mut link)?;
             s.tick()?;
         };
         tracker = link.seq.clone();
@@ -427,62 +462,4 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
 /// Map errors of `monitor` to exit codes (see [`exit`]).
 pub fn exit_code(err: &anyhow::Error) -> i32 {
     exit::code_of(err)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use fois_protocol::Medium;
-
-    fn meas() -> Measurement {
-        Measurement {
-            uptime_ms: 1000,
-            i1_na: 123_456,
-            i2_na: 45_678,
-            ambient1_na: 300_000,
-            ambient2_na: 150_000,
-            temperature_centi_c: -2_345,
-            vdda_mv: 3300,
-            flags: flags::ALARM | flags::ALARM_ACKED,
-            state: DetectorState::Ice,
-        }
-    }
-
-    #[test]
-    fn status_shows_the_estimate_or_a_dash_within_80_columns() {
-        let mut sum = MonitorSummary {
-            frames: 9_999_999,
-            lost: 99_999,
-            rejected: 99_999,
-            ..MonitorSummary::default()
-        };
-        let lines = status_lines(Some(&meas()), &sum);
-        assert!(lines[1].contains("est —"), "{lines:?}");
-        sum.last_estimate = Some(IceEstimate {
-            thickness_um: 12_345,
-            sigma_um: 1_456,
-            medium: Medium::Glazed,
-            probability_permille: 512,
-        });
-        sum.last_gain = Some(GainEstimate {
-            gain_ppm: 1_150_000,
-            sigma_ppm: 60_000,
-        });
-        let lines = status_lines(Some(&meas()), &sum);
-        assert_eq!(
-            lines[1],
-            "state ICE  alarm ON (acked)  est ICE glazed 12.3 ± 1.5 mm (p 0.51)"
-        );
-        assert_eq!(
-            lines[2],
-            "frames 9999999  lost 99999  rejected 99999  gain 1.150 ± 0.060"
-        );
-        for l in &lines {
-            assert!(
-                l.chars().count() <= 80,
-                "{} columns: {l}",
-                l.chars().count()
-            );
-        }
-    }
 }

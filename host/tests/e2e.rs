@@ -454,7 +454,7 @@ fn plot_and_compare_read_a_log() {
     for ch in ["I1", "I2"] {
         let line = out.lines().find(|l| l.starts_with(ch)).unwrap();
         let pct: f64 = line
-            .split("uA, ")
+            .split("µA, ")
             .nth(2)
             .unwrap()
             .split(' ')
@@ -464,6 +464,13 @@ fn plot_and_compare_read_a_log() {
             .unwrap();
         assert!((0.0..=100.0).contains(&pct), "{line}");
     }
+    assert!(!out.contains("uA"), "µA in every text: {out}");
+    let verdict = out.lines().find(|l| l.starts_with("verdict: ")).unwrap();
+    assert!(
+        verdict.starts_with("verdict: AGREES") || verdict.starts_with("verdict: DIFFERS"),
+        "{verdict}"
+    );
+    assert!(verdict.contains("% needed"), "{verdict}");
     assert_eq!(&std::fs::read(&cmp_png).unwrap()[..4], b"\x89PNG");
 
     // Clear errors: missing column, unreadable file.

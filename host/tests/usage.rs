@@ -95,6 +95,54 @@ fn usage_errors_exit_2() {
     }
 }
 
+/// A negative number where only a positive one makes sense is refused by
+/// name ("must be > 0, got -2"), not mistaken for an unknown flag.
+#[test]
+fn negative_numbers_are_refused_by_name() {
+    let base = ["compare", "--log", "x.csv", "--ice", "rime"];
+    for (extra, needs) in [
+        (&["--rate-mm-per-h", "-2"][..], "must be > 0, got -2"),
+        (
+            &["--rate-mm-per-h", "1", "--noise-ua", "-1"],
+            "must be >= 0",
+        ),
+        (&["--rate-mm-per-h", "1", "--start-s", "-1"], "must be >= 0"),
+    ] {
+        let args = cat(&base, extra);
+        let (code, err) = foisctl(&args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(err.contains(needs), "{args:?}: {err}");
+        assert!(!err.contains("unexpected argument"), "{args:?}: {err}");
+    }
+    for args in [
+        &["virtual-node", "--flicker", "-1"][..],
+        &["demo", "--duration", "-3"],
+        &["monitor", "--port", "/dev/null", "--duration", "-1"],
+    ] {
+        let (code, err) = foisctl(args);
+        assert_eq!(code, Some(2), "{args:?}: {err}");
+        assert!(!err.contains("unexpected argument"), "{args:?}: {err}");
+    }
+}
+
+/// A figure's format comes from its extension; PDF and others are refused
+/// in words (exit 2) before the log is read.
+#[test]
+fn a_figure_format_other_than_png_or_svg_is_refused_in_words() {
+    let (code, err) = foisctl(&["plot", "--log", "x.csv", "--out", "x.pdf"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("PDF is not supported") && err.contains(".svg"),
+        "{err}"
+    );
+    let (code, err) = foisctl(&["plot", "--log", "x.csv", "--out", "/no/such/dir/x.png"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("does not exist") && !err.contains("Os {"),
+        "{err}"
+    );
+}
+
 #[test]
 fn help_is_not_an_error() {
     for args in [

@@ -107,7 +107,7 @@ fn a_version_1_node_is_monitored_and_logged_with_empty_estimate_fields() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "{stderr}");
-    assert!(stdout.contains("protocol=1"), "{stdout}");
+    assert!(stdout.contains("protocol 1"), "{stdout}");
     // The status line: currents, state, and no estimate.
     let status = stdout.lines().find(|l| l.starts_with("I1")).unwrap();
     assert!(

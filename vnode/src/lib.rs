@@ -10,6 +10,7 @@
 //! - [`flash`]: the board's store flash in RAM, stalling the virtual clock.
 //! - [`node`]: the virtual node, its options and its storage.
 //! - [`scenario`]: the TOML scenario format.
+//! - [`overlay`]: a scenario's temporary changes laid over its segments.
 //! - `pty` (feature `pty`): a virtual node served on a pseudo-terminal.
 
 pub mod adc;
@@ -19,6 +20,7 @@ pub mod flash;
 pub mod frontend;
 pub mod node;
 pub mod optics;
+pub mod overlay;
 #[cfg(feature = "pty")]
 pub mod pty;
 pub mod scenario;

@@ -202,6 +202,10 @@ pub struct NodeOptions {
     /// node then starts with that gain as its prior instead of an unknown
     /// one. `None`: a new node, its gain unknown (the default).
     pub gain_calibration: Option<(f64, f64)>,
+    /// The config in the flash before the node's first boot (a scenario's
+    /// `[config]`), written with the gain calibration if the flash holds no
+    /// record; `None`: the defaults.
+    pub config: Option<fois_protocol::Config>,
 }
 
 /// A unique id no other virtual node has while this process runs (nor
@@ -227,6 +231,7 @@ impl Default for NodeOptions {
             estimator: EstimatorParams::default(),
             unique_id: None,
             gain_calibration: None,
+            config: None,
         }
     }
 }
@@ -324,8 +329,20 @@ impl VirtualNode {
             }),
             None => SharedStorage::new(opts.storage.clone()),
         };
-        if let Some((gain, rel_sd)) = opts.gain_calibration {
-            storage.write_if_empty(&factory_record(gain, rel_sd));
+        if opts.gain_calibration.is_some() || opts.config.is_some() {
+            let mut record = match opts.gain_calibration {
+                Some((gain, rel_sd)) => factory_record(gain, rel_sd),
+                None => fois_firmware::persist::Record {
+                    config: fois_protocol::Config::default(),
+                    baseline: None,
+                    gain: None,
+                    gain_calibration: None,
+                },
+            };
+            if let Some(c) = &opts.config {
+                record.config = c.clone();
+            }
+            storage.write_if_empty(&record);
         }
         storage.stall_on(&clock);
         let hw = Hardware {

@@ -32,11 +32,29 @@
 //! adc_noise_lsb = 1.0
 //! thickness_mm = 2.0          # set the thickness at the start (optional)
 //! ntc = "open"                # connected | open | short (default connected)
+//!
+//! [config]                    # the node's config in its flash at first boot
+//! frame_period_ms = 1000      # (names of `foisctl config set`)
+//!
+//! [[overlay]]                 # a temporary change over the segments
+//! start_s = 300
+//! duration_s = 60
+//! ambient_ua = [40.0, 40.0]
 //! ```
+//!
+//! The hardware-in-loop suite reads the same files (`hil/scenarios/*.toml`)
+//! and adds keys only its checker uses: `name`, `description`, `class`,
+//! `end_s`, `accuracy`, `[[command]]`, `[sweep]`, `[link]`, `[expect]`. They
+//! are accepted here and ignored ([`Scenario::ignored`] names the ones a
+//! file has); their meaning and checks are in `hil/README.md`.
 
 use serde::Deserialize;
 
+use std::collections::BTreeMap;
+
 use super::environment::{Cover, NtcWiring, Segment, Timeline};
+use super::overlay::{self, OverlaySpec};
+use fois_protocol::Config;
 use fois_sim::SensorKind;
 
 /// A parsed scenario.
@@ -52,7 +70,28 @@ pub struct Scenario {
     /// flash before it boots: (gain, relative sd); `None`: a new node, its
     /// gain unknown ([`crate::NodeOptions::gain_calibration`]).
     pub gain_calibration: Option<(f64, f64)>,
+    /// The node's config at first boot (the file's `[config]`); `None`:
+    /// the defaults.
+    pub config: Option<Config>,
+    /// The keys of the file that only the hardware-in-loop checker uses
+    /// (accepted, not acted on here), in file order of [`HIL_ONLY_KEYS`].
+    pub ignored: Vec<&'static str>,
 }
+
+/// Top-level keys of a scenario file that only the hardware-in-loop suite
+/// acts on (its checker's class and expectations, its commands, sweeps and
+/// lossy link); the virtual node accepts and ignores them.
+pub const HIL_ONLY_KEYS: [&str; 9] = [
+    "name",
+    "description",
+    "class",
+    "end_s",
+    "accuracy",
+    "command",
+    "sweep",
+    "link",
+    "expect",
+];
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -61,6 +100,46 @@ struct File {
     seed: Option<u64>,
     gain_calibration: Option<[f64; 2]>,
     segment: Vec<SegmentSpec>,
+    #[serde(default)]
+    config: BTreeMap<String, toml::Value>,
+    #[serde(default)]
+    overlay: Vec<OverlaySpec>,
+    // The hardware-in-loop suite's keys (HIL_ONLY_KEYS): checked there.
+    name: Option<toml::Value>,
+    description: Option<toml::Value>,
+    class: Option<toml::Value>,
+    end_s: Option<toml::Value>,
+    accuracy: Option<toml::Value>,
+    command: Option<toml::Value>,
+    sweep: Option<toml::Value>,
+    link: Option<toml::Value>,
+    expect: Option<toml::Value>,
+}
+
+/// A `[config]` table (keys as `foisctl config set` names them, integer or
+/// boolean values) as a node config, checked by the node's own rule;
+/// `None` for an empty table.
+pub fn config(table: &BTreeMap<String, toml::Value>) -> Result<Option<Config>, String> {
+    if table.is_empty() {
+        return Ok(None);
+    }
+    let mut cfg = Config::default();
+    for (key, value) in table {
+        let text = match value {
+            toml::Value::Integer(i) => i.to_string(),
+            toml::Value::Boolean(b) => b.to_string(),
+            other => {
+                return Err(format!(
+                    "[config] {key} = {other}: expected an integer or a boolean"
+                ));
+            }
+        };
+        cfg.set_from_str(key, &text)
+            .map_err(|e| format!("[config] {key} = {text}: {e}"))?;
+    }
+    cfg.validate()
+        .map_err(|e| format!("[config] is refused by the node's rule: {e}"))?;
+    Ok(Some(cfg))
 }
 
 /// A `gain_calibration = [gain, relative sd]` as a file gives it, checked:
@@ -225,11 +304,30 @@ pub fn timeline(specs: Vec<SegmentSpec>) -> Result<Timeline, String> {
 /// Parse a scenario from TOML text.
 pub fn parse(text: &str) -> Result<Scenario, String> {
     let f: File = toml::from_str(text).map_err(|e| e.to_string())?;
+    let present = [
+        f.name.is_some(),
+        f.description.is_some(),
+        f.class.is_some(),
+        f.end_s.is_some(),
+        f.accuracy.is_some(),
+        f.command.is_some(),
+        f.sweep.is_some(),
+        f.link.is_some(),
+        f.expect.is_some(),
+    ];
+    let ignored = HIL_ONLY_KEYS
+        .iter()
+        .zip(present)
+        .filter_map(|(k, p)| p.then_some(*k))
+        .collect();
+    let segments = timeline(f.segment)?.segments().to_vec();
     Ok(Scenario {
-        timeline: timeline(f.segment)?,
+        timeline: Timeline::new(overlay::apply(segments, &f.overlay)?),
         sensor: sensor_named(f.sensor.as_deref())?,
         seed: f.seed.unwrap_or(1),
         gain_calibration: f.gain_calibration.map(gain_calibration).transpose()?,
+        config: config(&f.config)?,
+        ignored,
     })
 }
 
@@ -261,7 +359,17 @@ mod tests {
             assert!(parse(&t).unwrap_err().contains("gain_calibration"), "{bad}");
         }
         let segs = s.timeline.segments();
-        assert_eq!(segs.len(), 2);
+        // The overlay cuts the water segment at 300 s and 360 s.
+        assert_eq!(segs.len(), 4);
+        assert_eq!(
+            segs.iter().map(|s| s.duration_s).collect::<Vec<_>>(),
+            [300.0, 60.0, 240.0, 1800.0]
+        );
+        assert_eq!(segs[1].ambient_ua, [40.0, 40.0]);
+        assert_eq!(segs[2].ambient_ua, [0.0, 0.0]);
+        assert_eq!(s.config.map(|c| c.frame_period_ms), Some(1000));
+        assert!(s.ignored.is_empty());
+        let segs = [&segs[0], &segs[3]];
         assert_eq!(segs[0].cover, Cover::Water);
         assert_eq!(segs[1].air_temp_end_c, Some(-5.0));
         assert_eq!(segs[1].led_factor_end, Some(0.7));
@@ -295,6 +403,8 @@ mod tests {
         let e = parse("[[segment]]\nduration_s = 1\ncover = \"dry\"\nface_transmission = 1.2\n")
             .unwrap_err();
         assert!(e.contains("face_transmission"), "{e}");
+        let e = parse("class = \"rime\"\nexpect = { alarm = true }\n[[segment]]\nduration_s = 1\ncover = \"dry\"\n[config]\nframe_period_ms = 1\n").unwrap_err();
+        assert!(e.contains("frame_period_ms"), "{e}");
         let e =
             parse("[[segment]]\nduration_s = 1\ncover = \"dry\"\nntc = \"loose\"\n").unwrap_err();
         assert!(e.contains("segment 1") && e.contains("loose"), "{e}");

@@ -27,11 +27,11 @@ pub struct CompareArgs {
     )]
     pub thickness_col: Option<String>,
     /// Constant accretion rate, mm/h (> 0): d = rate x (uptime - start).
-    #[arg(long, value_name = "MM_PER_H", value_parser = positive)]
+    #[arg(long, allow_negative_numbers = true, value_name = "MM_PER_H", value_parser = positive)]
     pub rate_mm_per_h: Option<f64>,
     /// With --rate-mm-per-h: node uptime at which accretion started, s
     /// (default: the first measurement in the log).
-    #[arg(long, value_name = "SECONDS", requires = "rate_mm_per_h", value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "SECONDS", requires = "rate_mm_per_h", value_parser = non_negative)]
     pub start_s: Option<f64>,
     /// Monte Carlo accretions (1..=100000).
     #[arg(long, default_value_t = 100, value_name = "N",
@@ -41,12 +41,12 @@ pub struct CompareArgs {
     #[arg(long, default_value_t = 1, value_name = "N")]
     pub seed: u64,
     /// Band half-width, in sigma (> 0).
-    #[arg(long, default_value_t = 1.0, value_name = "K", value_parser = positive)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 1.0, value_name = "K", value_parser = positive)]
     pub k_sigma: f64,
     /// Measurement noise of one logged sample, rms µA (>= 0), added in
     /// quadrature to the Monte Carlo spread (which models only the ice).
     /// The node's frame noise at the default config is about 0.035 µA.
-    #[arg(long, default_value_t = 0.035, value_name = "UA", value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.035, value_name = "UA", value_parser = non_negative)]
     pub noise_ua: f64,
     /// Sensor construction.
     #[arg(long, value_enum, default_value = "b")]

@@ -4,7 +4,7 @@
 use clap::{Args, Subcommand};
 use fois_protocol::{AckResult, Command, Config, ConfigError, ConfigV1, FIELDS};
 
-use super::request::{RequestArgs, expect_ack};
+use super::request::{RequestArgs, ack_result, expect_ack};
 use crate::exit::{self, Exit};
 use fois_link::Reply;
 
@@ -61,7 +61,7 @@ pub fn parse_assignments(args: &[String]) -> Result<Vec<Assignment>, Exit> {
             "config set needs at least one KEY=VALUE",
         ));
     }
-    let mut out = Vec::new();
+    let mut out: Vec<Assignment> = Vec::new();
     for a in args {
         let Some((k, v)) = a.split_once('=') else {
             return Err(Exit::new(
@@ -73,6 +73,15 @@ pub fn parse_assignments(args: &[String]) -> Result<Vec<Assignment>, Exit> {
         probe
             .set_from_str(k, v)
             .map_err(|e| refused(&format!("{k}={v}"), e))?;
+        if let Some(first) = out.iter().find(|o| o.key == k.trim()) {
+            return Err(Exit::new(
+                exit::INVALID_VALUE,
+                format!(
+                    "refused on the host, nothing sent: {} is given twice ({}={} and {a}): give each key once",
+                    first.key, first.key, first.value
+                ),
+            ));
+        }
         out.push(Assignment {
             key: k.trim().to_string(),
             value: v.trim().to_string(),
@@ -222,7 +231,17 @@ pub fn check_keys_for(node: &NodeConfig, sets: &[Assignment]) -> Result<(), Exit
     Ok(())
 }
 
-/// `config set`: check on the host, send, print what the node now uses.
+/// What a `config set` that changes nothing says: `onset_frames is already 20`.
+pub fn unchanged(sets: &[Assignment]) -> String {
+    let what: Vec<String> = sets
+        .iter()
+        .map(|a| format!("{} is already {}", a.key, a.value))
+        .collect();
+    format!("no change: {}", what.join(", "))
+}
+
+/// `config set`: check on the host, send (only if something changes),
+/// print what the node now uses (`key: old -> new unit`).
 pub fn config_set(t: &RequestArgs, args: &[String]) -> anyhow::Result<Config> {
     let sets = parse_assignments(args)?;
     let mut link = t.connect()?;
@@ -230,8 +249,12 @@ pub fn config_set(t: &RequestArgs, args: &[String]) -> anyhow::Result<Config> {
     check_keys_for(&node, &sets)?;
     let current = node.full();
     let wanted = apply(&current, &sets)?;
+    if wanted == current {
+        println!("{}; nothing sent, nothing written", unchanged(&sets));
+        return Ok(current);
+    }
     let reply = link.request(node.set_command(&wanted), t.timeout())?;
-    let result = expect_ack(reply)?;
+    let result = ack_result(reply)?;
     let Some(now) = NodeConfig::from_ack(&result) else {
         return Err(Exit::new(exit::FAILURE, "unexpected answer to SetConfig").into());
     };
@@ -274,6 +297,31 @@ mod tests {
         }
         let e = parse_assignments(&s(&["settle_us=1"])).unwrap_err();
         assert!(e.message.contains("20..=5000"), "{}", e.message);
+    }
+
+    #[test]
+    fn a_key_given_twice_is_refused_by_name() {
+        let e = parse_assignments(&s(&["onset_frames=20", "settle_us=100", "onset_frames=30"]))
+            .unwrap_err();
+        assert_eq!(e.code, exit::INVALID_VALUE);
+        assert!(
+            e.message.contains("onset_frames is given twice")
+                && e.message.contains("onset_frames=20 and onset_frames=30"),
+            "{}",
+            e.message
+        );
+    }
+
+    #[test]
+    fn a_set_that_changes_nothing_is_recognised() {
+        let c = Config::default();
+        let same = format!("onset_frames={}", c.onset_frames);
+        let sets = parse_assignments(&s(&[&same])).unwrap();
+        assert_eq!(apply(&c, &sets).unwrap(), c);
+        assert_eq!(
+            unchanged(&sets),
+            format!("no change: onset_frames is already {}", c.onset_frames)
+        );
     }
 
     #[test]

@@ -28,7 +28,7 @@ pub struct EstimateArgs {
     /// `sim curve` input: growth rate that turns the thickness steps into
     /// frame periods, mm/h (> 0). Rows 0.1 mm apart at 2 mm/h are frames
     /// 180 s apart; at 10 mm/h (the estimator's largest growth rate) 36 s.
-    #[arg(long, value_name = "MM_PER_H", default_value_t = 2.0, value_parser = positive)]
+    #[arg(long, allow_negative_numbers = true, value_name = "MM_PER_H", default_value_t = 2.0, value_parser = positive)]
     pub rate_mm_per_h: f64,
     /// `sim curve` input: air temperature, °C (-60..=80).
     #[arg(long, value_name = "CELSIUS", default_value_t = -5.0,

@@ -41,6 +41,7 @@ pub enum Cmd {
     #[command(after_help = exit::TABLE)]
     Monitor(monitor::MonitorArgs),
     /// Read or change the node's configuration.
+    #[command(after_help = exit::TABLE)]
     Config(config::ConfigArgs),
     /// Take the current readings of a dry, clean sensor face as the dark
     /// baseline (the node checks that the channels are steady).
@@ -64,28 +65,36 @@ pub enum Cmd {
     /// pseudo-terminal. Prints the pty path on the first line of stdout; talk
     /// to it with `foisctl monitor --port PATH` or any serial tool. Defaults:
     /// rime at 2 mm/h after 30 s dry, -5 °C, sensor b, real time.
+    #[command(after_help = exit::SERVE_TABLE)]
     VirtualNode(virtual_node::VirtualNodeArgs),
     /// A virtual node and the monitor in one process: watch rime accrete and
     /// trip the alarm. Defaults: 60 s dry, then rime at 3 mm/h, -5 °C, speed
     /// x20, ends after 40 s (the alarm trips after about 5 s).
+    #[command(after_help = exit::SERVE_TABLE)]
     Demo(demo::DemoArgs),
-    /// Put logged currents beside the simulator's Monte Carlo band mu(d) +/-
-    /// k*sigma(d); prints the RMS deviation and the fraction of samples
-    /// inside the band. The thickness of each sample comes from a log column
-    /// (--thickness-col) or a constant rate (--rate-mm-per-h).
+    /// Put logged currents beside the simulator's Monte Carlo band μ(d) ±
+    /// kσ(d); prints the RMS deviation, the fraction of samples inside the
+    /// band and a one-line verdict. The thickness of each sample comes from
+    /// a log column (--thickness-col) or a constant rate (--rate-mm-per-h).
+    #[command(after_help = exit::OFFLINE_TABLE)]
     Compare(compare::CompareArgs),
-    /// Draw I1 and I2 of a log over host time, alarm periods shaded, link
-    /// breaks marked (PNG).
+    /// Draw a log for a report (PNG or SVG by the --out extension): I1 and
+    /// I2 with alarm periods shaded, the node's state and estimated medium
+    /// as bands, the air temperature, the ice estimate with its ±2σ band,
+    /// over UTC time (or node uptime); lines stop at gaps and restarts.
+    #[command(after_help = exit::OFFLINE_TABLE)]
     Plot(plot::PlotArgs),
     /// Replay a monitor log or a `sim curve` CSV, row by row as consecutive
     /// frames, through the node's own ice estimator and write it with the
     /// estimate appended (thickness ± sigma in mm, medium, its probability).
-    #[command(after_help = exit::TABLE)]
+    #[command(after_help = exit::OFFLINE_TABLE)]
     Estimate(estimate::EstimateArgs),
     /// Decoder throughput: encode a stream of measurement frames and decode
     /// it, print frames/s and MB/s.
+    #[command(after_help = exit::OFFLINE_TABLE)]
     BenchDecode(bench_decode::BenchDecodeArgs),
     /// Ray-trace simulator of the sensor (thesis chapters 3 and 5).
+    #[command(after_help = exit::OFFLINE_TABLE)]
     Sim(sim::SimArgs),
 }
 
@@ -139,5 +148,31 @@ mod tests {
     #[test]
     fn the_command_line_is_consistent() {
         Cli::command().debug_assert();
+    }
+
+    /// Every command and subcommand states its exit codes in `--help`.
+    #[test]
+    fn every_subcommand_documents_its_exit_codes() {
+        fn walk(cmd: &mut clap::Command, path: &str, missing: &mut Vec<String>) {
+            let name = format!("{path} {}", cmd.get_name());
+            let help = cmd.render_long_help().to_string();
+            if !help.contains("Exit codes: 0") {
+                missing.push(name.clone());
+            }
+            for sub in cmd.get_subcommands_mut() {
+                if sub.get_name() != "help" {
+                    walk(sub, &name, missing);
+                }
+            }
+        }
+        let mut missing = Vec::new();
+        let mut cli = Cli::command();
+        cli.build();
+        for sub in cli.get_subcommands_mut() {
+            if sub.get_name() != "help" {
+                walk(sub, "foisctl", &mut missing);
+            }
+        }
+        assert!(missing.is_empty(), "no exit codes in --help: {missing:?}");
     }
 }

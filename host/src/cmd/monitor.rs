@@ -20,11 +20,18 @@ pub struct MonitorArgs {
     #[arg(long, value_name = "FILE")]
     pub log: Option<PathBuf>,
     /// Stop after this many seconds (default: run until Ctrl-C).
-    #[arg(long, value_name = "SECONDS", value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "SECONDS", value_parser = non_negative)]
     pub duration: Option<f64>,
     /// Print a plain status line each second instead of a redrawn one.
     #[arg(long)]
     pub plain: bool,
+    /// Also print the protocol's chatter: every answer (`ack ...`) and the
+    /// node's full hello (its 24-hex-digit unique id, reset reason).
+    #[arg(long)]
+    pub verbose: bool,
+    /// Do not print the legend of the status lines at the start.
+    #[arg(long)]
+    pub no_legend: bool,
 }
 
 /// Run `foisctl monitor` until `stop`, the duration, or an error that
@@ -34,6 +41,8 @@ pub fn run(args: MonitorArgs, stop: &AtomicBool) -> anyhow::Result<()> {
     opts.baud = args.port.baud;
     opts.log = args.log;
     opts.plain = args.plain;
+    opts.verbose = args.verbose;
+    opts.legend = !args.no_legend;
     opts.duration = args.duration.map(Duration::from_secs_f64);
     let sum = monitor::run(&opts, stop)?;
     println!(

@@ -44,11 +44,17 @@ impl RequestArgs {
 
 /// Print an `Ack` and give its result; an `Error` becomes exit code 6.
 pub fn expect_ack(reply: Reply) -> anyhow::Result<AckResult> {
+    if let Reply::Ack(a) = &reply {
+        println!("ack: {}", ack_text(a));
+    }
+    ack_result(reply)
+}
+
+/// The result of an `Ack`, or the node's refusal as exit code 6, printing
+/// nothing (the caller says what the answer means).
+pub fn ack_result(reply: Reply) -> anyhow::Result<AckResult> {
     match reply {
-        Reply::Ack(a) => {
-            println!("ack: {}", ack_text(&a));
-            Ok(a.result)
-        }
+        Reply::Ack(a) => Ok(a.result),
         Reply::Error(e) => Err(Exit::new(
             exit::REFUSED,
             format!(

@@ -36,7 +36,7 @@ pub struct SceneArgs {
     pub temp_c: Option<f64>,
     /// Virtual seconds of dry face before the film starts to form (the node
     /// dark-calibrates at 1 s) [default: 30 for virtual-node, 60 for demo].
-    #[arg(long, value_name = "SECONDS", value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "SECONDS", value_parser = non_negative)]
     pub dry_s: Option<f64>,
     /// Ambient (sun) DC photocurrent, µA: one value for both channels or
     /// `A1,A2` [default: 0].
@@ -44,7 +44,7 @@ pub struct SceneArgs {
     pub ambient: Option<[f64; 2]>,
     /// Amplitude of the 100 Hz mains flicker of the ambient light, µA, both
     /// channels [default: 0].
-    #[arg(long, value_name = "UA", value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "UA", value_parser = non_negative)]
     pub flicker: Option<f64>,
     /// LED output relative to nominal (0..=10), 0.7 = 30 % weaker [default: 1].
     #[arg(long, value_name = "FACTOR", value_parser = f64_in(0.0, 10.0))]
@@ -65,7 +65,7 @@ pub struct SceneArgs {
     pub speed: Option<f64>,
     /// Stop after this many real seconds [default: never for virtual-node
     /// (Ctrl-C), 40 for demo].
-    #[arg(long, value_name = "SECONDS", value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, value_name = "SECONDS", value_parser = non_negative)]
     pub duration: Option<f64>,
 }
 
@@ -133,6 +133,11 @@ pub struct Scene {
     /// The node's factory gain calibration (gain, relative sd), from a
     /// scenario file; `None`: its gain unknown.
     pub gain_calibration: Option<(f64, f64)>,
+    /// The node's config at first boot, from a scenario's `[config]`.
+    pub config: Option<fois_protocol::Config>,
+    /// Keys of the scenario file only the hardware-in-loop checker uses
+    /// (ignored here; said so when the node starts).
+    pub ignored: Vec<&'static str>,
 }
 
 impl SceneArgs {
@@ -150,6 +155,8 @@ impl SceneArgs {
                 speed,
                 duration,
                 gain_calibration: sc.gain_calibration,
+                config: sc.config,
+                ignored: sc.ignored,
             });
         }
         let ice = self.ice.map_or(d.ice, Cover::from);
@@ -178,12 +185,22 @@ impl SceneArgs {
             speed,
             duration,
             gain_calibration: None,
+            config: None,
+            ignored: Vec::new(),
         })
     }
 }
 
 /// One line saying what the scene is.
 pub fn describe(scene: &Scene) -> String {
+    let ignored = if scene.ignored.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " (the hardware-in-loop checker's keys {} are not used here)",
+            scene.ignored.join(", ")
+        )
+    };
     let segs = scene.timeline.segments();
     if segs.len() > 2 || (segs.len() == 2 && segs[0].cover != Cover::Dry) {
         let parts: Vec<String> = segs
@@ -191,7 +208,7 @@ pub fn describe(scene: &Scene) -> String {
             .map(|s| format!("{} {:.0} s", s.cover.name(), s.duration_s))
             .collect();
         return format!(
-            "scenario: {}; sensor {:?}, speed ×{}",
+            "scenario: {}; sensor {:?}, speed ×{}{ignored}",
             parts.join(" → "),
             scene.sensor,
             scene.speed
@@ -207,7 +224,7 @@ pub fn describe(scene: &Scene) -> String {
         String::new()
     };
     format!(
-        "{dry}{} at {} mm/h, air {} °C, sensor {:?}, speed ×{}",
+        "{dry}{} at {} mm/h, air {} °C, sensor {:?}, speed ×{}{ignored}",
         last.cover.name(),
         last.rate_mm_per_h,
         last.air_temp_c,
@@ -234,7 +251,64 @@ pub fn build_node_with_state(scene: &Scene, state: Option<PathBuf>) -> VirtualNo
             seed: scene.seed,
             state_file: state,
             gain_calibration: scene.gain_calibration,
+            config: scene.config.clone(),
             ..NodeOptions::default()
         },
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        scene: SceneArgs,
+    }
+
+    fn resolve(args: &[&str]) -> anyhow::Result<Scene> {
+        let cli = Cli::try_parse_from(std::iter::once("foisctl").chain(args.iter().copied()))?;
+        cli.scene.resolve(VIRTUAL_NODE_DEFAULTS)
+    }
+
+    /// `--scenario` loads every file of the hardware-in-loop suite (the
+    /// suite's own keys ignored, its overlays and config kept).
+    #[test]
+    fn every_hil_scenario_loads_through_the_scenario_flag() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../hil/scenarios");
+        let mut files: Vec<_> = std::fs::read_dir(&dir)
+            .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
+            .unwrap_or_default();
+        files.retain(|p| p.extension().is_some_and(|e| e == "toml"));
+        assert_eq!(files.len(), 44);
+        let mut with_config = 0;
+        for f in &files {
+            let scene = resolve(&["--scenario", &f.display().to_string()])
+                .unwrap_or_else(|e| panic!("{}: {e:#}", f.display()));
+            assert!(scene.ignored.contains(&"class"), "{}", f.display());
+            assert!(describe(&scene).contains("class"), "{}", f.display());
+            with_config += usize::from(scene.config.is_some());
+        }
+        assert!(with_config >= 10, "{with_config} files carry a [config]");
+        let sun = resolve(&[
+            "--scenario",
+            &dir.join("glazed-sun-step.toml").display().to_string(),
+        ])
+        .unwrap();
+        assert!(
+            sun.timeline.segments().len() > 2,
+            "the sun step's overlay splits the timeline"
+        );
+        let own = resolve(&[
+            "--scenario",
+            concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/scenarios/water-then-freeze.toml"
+            ),
+        ])
+        .unwrap();
+        assert!(own.ignored.is_empty());
+    }
 }

@@ -3,16 +3,39 @@
 
 use std::path::Path;
 
+use plotters::coord::Shift;
 use plotters::prelude::*;
+
+use super::output::{Format, format_of, write_error};
 
 use super::{WIDE, draw_err};
 use crate::compare::{Comparison, band_at};
 
 /// The figure of `foisctl compare`: per channel, the band μ ± kσ, μ, and
 /// the logged samples against thickness.
+/// PNG or SVG by the extension of `out`.
 pub fn plot_comparison(c: &Comparison, ice: &str, out: &Path) -> anyhow::Result<()> {
+    let format = format_of(out)?;
     super::register_fonts();
-    let root = BitMapBackend::new(out, WIDE).into_drawing_area();
+    match format {
+        Format::Png => {
+            let root = BitMapBackend::new(out, WIDE).into_drawing_area();
+            draw_comparison(&root, c, ice)?;
+            root.present().map_err(|e| write_error(out, &e))
+        }
+        Format::Svg => {
+            let root = SVGBackend::new(out, WIDE).into_drawing_area();
+            draw_comparison(&root, c, ice)?;
+            root.present().map_err(|e| write_error(out, &e))
+        }
+    }
+}
+
+fn draw_comparison<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    c: &Comparison,
+    ice: &str,
+) -> anyhow::Result<()> {
     root.fill(&WHITE).map_err(draw_err)?;
     let panels = root.split_evenly((1, 2));
     let d_max = c
@@ -117,6 +140,5 @@ pub fn plot_comparison(c: &Comparison, ice: &str, out: &Path) -> anyhow::Result<
             .legend(|(x, y)| Circle::new((x + 10, y), 3, BLUE.filled()));
         super::draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 14)?;
     }
-    root.present().map_err(draw_err)?;
     Ok(())
 }

@@ -1,102 +1,167 @@
-//! The figure of `foisctl plot`: a log's currents over time, alarm periods
-//! shaded, link breaks marked; below them the ice estimate (thickness with
-//! its ±2σ band) when the log has one (a v2 node's log, or `foisctl
-//! estimate`'s output).
+//! The figure of `foisctl plot`: a log over time in four panels sharing one
+//! time axis (UTC, or node uptime / virtual time): the currents with alarm
+//! periods shaded and link breaks marked; the node's state (dry / wet /
+//! ice) and its estimated medium as coloured bands; the air temperature;
+//! and, when the log has one (a v2 node's log, or `foisctl estimate`'s
+//! output), the estimated thickness with its ±2σ band. Every line, band and
+//! shading stops at a gap, a link loss, a restart or a time jump
+//! ([`super::runs`]): nothing is drawn where there is no data.
 
+use std::ops::Range;
 use std::path::Path;
 
 use anyhow::{Context, bail};
+use fois_link::timefmt::iso_utc;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use super::output::{Format, format_of, write_error};
+use super::runs::{max_step_s, runs, runs_where};
 use super::{WIDE, draw_err};
 use crate::csvlog::LogReader;
+
+/// The node's state as a measurement row gives it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum State {
+    /// `Dry`.
+    Dry,
+    /// `Wet`: a film above the freeze limit.
+    Wet,
+    /// `Ice`: the alarm rule's ice.
+    Ice,
+}
+
+impl State {
+    fn parse(s: &str) -> Option<State> {
+        match s.trim() {
+            "Dry" => Some(State::Dry),
+            "Wet" => Some(State::Wet),
+            "Ice" => Some(State::Ice),
+            _ => None,
+        }
+    }
+}
 
 /// One logged measurement for the time plot.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TimePoint {
-    /// Host time since the first row, s.
+    /// Time on the plot's axis, s (host: since the first row; node: uptime).
     pub t_s: f64,
+    /// The node's frame sequence number.
+    pub seq: Option<u32>,
     /// I1, I2, µA.
     pub i_ua: [f64; 2],
     /// Alarm output on.
     pub alarm: bool,
     /// The ice estimate: thickness and its σ, mm (empty for a v1 node).
     pub est_mm: Option<(f64, f64)>,
+    /// Air temperature, °C.
+    pub temp_c: Option<f64>,
+    /// The node's state.
+    pub state: Option<State>,
+    /// The estimate's most likely medium (`dry`, `water`, `glazed`, `rime`).
+    pub medium: Option<&'static str>,
 }
 
-/// What a log holds for the time plot: points, and the breaks (link lost,
-/// gaps, restarts) as times.
+/// What a log holds for the time plot.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct TimeSeries {
-    /// Valid measurements.
+    /// Valid measurements, in log order.
     pub points: Vec<TimePoint>,
-    /// Times of `gap`, `link_lost` and `node_restart` rows, s.
+    /// Times of `gap`, `link_lost` and `node_restart` rows, s, sorted.
     pub breaks_s: Vec<f64>,
+    /// Host time of the first row, Unix ms (the date in the title, the
+    /// origin of the UTC axis).
+    pub t0_unix_ms: Option<u64>,
+    /// The node's unique id (from a `hello` or `link_up` row).
+    pub node_id: Option<String>,
 }
 
 /// The time axis of `plot`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
 pub enum TimeAxis {
-    /// Host clock, from the first row (survives node restarts).
+    /// Host clock as UTC time of day (survives node restarts).
     #[default]
     Host,
-    /// Node uptime (virtual time of a virtual node; restarts start over).
+    /// Node uptime (the virtual time of a virtual node; restarts start over).
     Node,
 }
 
-impl TimeAxis {
-    /// The x-axis caption, with the time unit.
-    fn describe(self, unit: &str) -> String {
-        match self {
-            TimeAxis::Host => format!("host time since the first row ({unit})"),
-            TimeAxis::Node => format!("node uptime ({unit})"),
-        }
-    }
+fn medium_named(s: &str) -> Option<&'static str> {
+    ["dry", "water", "glazed", "rime"]
+        .into_iter()
+        .find(|m| *m == s.trim())
 }
 
-/// Extract the time series from a foisctl log, row by row.
+/// Extract the time series from a foisctl log, row by row (logs of any
+/// foisctl version: columns are found by name; temperature, state and the
+/// estimate are optional).
 pub fn time_series(path: &Path, axis: TimeAxis) -> anyhow::Result<TimeSeries> {
     let mut rd = LogReader::open(path)?;
     let need = |rd: &LogReader, name: &str| {
         rd.need(name)
             .with_context(|| format!("is {} a foisctl log?", path.display()))
     };
-    let (ms, kind, i1, i2, alarm) = (
-        need(
-            &rd,
-            match axis {
-                TimeAxis::Host => "host_unix_ms",
-                TimeAxis::Node => "uptime_ms",
-            },
-        )?,
+    let (host_ms, up_ms, kind, i1, i2, alarm) = (
+        need(&rd, "host_unix_ms")?,
+        need(&rd, "uptime_ms")?,
         need(&rd, "kind")?,
         need(&rd, "i1_ua")?,
         need(&rd, "i2_ua")?,
         need(&rd, "alarm")?,
     );
-    let valid = rd.col("valid");
-    let est = rd.col("est_thickness_mm").zip(rd.col("est_sigma_mm"));
+    let col = |name: &str| rd.col(name);
+    let (valid, seq_col, temp, state, detail, medium) = (
+        col("valid"),
+        col("seq"),
+        col("temperature_c"),
+        col("state"),
+        col("detail"),
+        col("est_kind"),
+    );
+    let est = col("est_thickness_mm").zip(col("est_sigma_mm"));
     let num = |s: &str| s.trim().parse::<f64>().ok().filter(|x| x.is_finite());
-    let mut t0: Option<f64> = None;
     let mut out = TimeSeries::default();
     let mut r = csv::StringRecord::new();
+    let mut last_uptime_s: Option<f64> = None;
     while rd.next_row(&mut r)? {
-        let Some(tm) = num(&r[ms]) else { continue };
+        let host = num(&r[host_ms]);
+        if out.t0_unix_ms.is_none() {
+            out.t0_unix_ms = host.map(|h| h as u64);
+        }
+        let t0 = out.t0_unix_ms.map_or(0.0, |t| t as f64);
         let t_s = match axis {
-            TimeAxis::Host => (tm - *t0.get_or_insert(tm)) / 1000.0,
-            TimeAxis::Node => tm / 1000.0,
+            TimeAxis::Host => host.map(|h| (h - t0) / 1000.0),
+            // Rows without an uptime (link changes) sit at the last one.
+            TimeAxis::Node => num(&r[up_ms]).map(|u| u / 1000.0).or(last_uptime_s),
         };
-        match &r[kind] {
+        let kind = &r[kind];
+        if matches!(kind, "hello" | "link_up")
+            && out.node_id.is_none()
+            && let Some(d) = detail
+        {
+            out.node_id = r[d]
+                .split_whitespace()
+                .find_map(|w| w.strip_prefix("id="))
+                .map(str::to_string);
+        }
+        let Some(t_s) = t_s else { continue };
+        match kind {
             "measurement" => {
+                last_uptime_s = Some(t_s).filter(|_| axis == TimeAxis::Node);
                 if valid.is_some_and(|v| r[v].trim() == "0") {
                     continue;
                 }
                 if let (Some(a), Some(b)) = (num(&r[i1]), num(&r[i2])) {
                     out.points.push(TimePoint {
                         t_s,
+                        seq: seq_col.and_then(|c| r[c].trim().parse().ok()),
                         i_ua: [a, b],
                         alarm: r[alarm].trim() == "1",
                         est_mm: est.and_then(|(d, s)| num(&r[d]).zip(num(&r[s]))),
+                        temp_c: temp.and_then(|c| num(&r[c])),
+                        state: state.and_then(|c| State::parse(&r[c])),
+                        medium: medium.and_then(|c| medium_named(&r[c])),
                     });
                 }
             }
@@ -104,98 +169,119 @@ pub fn time_series(path: &Path, axis: TimeAxis) -> anyhow::Result<TimeSeries> {
             _ => {}
         }
     }
+    out.breaks_s.sort_by(f64::total_cmp);
     Ok(out)
 }
 
-/// The estimate panel: posterior mean thickness and its ±2σ band (clipped
-/// at 0 mm), over the same time axis as the currents.
-fn draw_estimate<DB: DrawingBackend>(
-    area: &DrawingArea<DB, plotters::coord::Shift>,
-    points: &[TimePoint],
-    div: f64,
-    x_max: f64,
-    unit: &str,
-    axis: TimeAxis,
-) -> anyhow::Result<()> {
-    let est: Vec<(f64, f64, f64)> = points
-        .iter()
-        .filter_map(|p| p.est_mm.map(|(d, s)| (p.t_s / div, d, s)))
-        .collect();
-    // At most ~3000 points per line (a day at 10 Hz draws fast).
-    let stride = est.len().div_ceil(3000).max(1);
-    let est: Vec<(f64, f64, f64)> = est.into_iter().step_by(stride).collect();
-    let y_hi = est
-        .iter()
-        .map(|&(_, d, s)| d + 2.0 * s)
-        .fold(1.0f64, f64::max)
-        * 1.05;
-    let mut chart = ChartBuilder::on(area)
-        .margin(12)
-        .x_label_area_size(45)
-        .y_label_area_size(65)
-        .build_cartesian_2d(0.0..x_max.max(1e-6), 0.0..y_hi)
-        .map_err(draw_err)?;
-    chart
-        .configure_mesh()
-        .x_desc(axis.describe(unit))
-        .y_desc("ice estimate (mm)")
-        .label_style(("sans-serif", 15))
-        .draw()
-        .map_err(draw_err)?;
-    let band_color = RGBColor(255, 150, 0);
-    let mut band: Vec<(f64, f64)> = est
-        .iter()
-        .map(|&(t, d, s)| (t, (d + 2.0 * s).min(y_hi)))
-        .collect();
-    band.extend(
-        est.iter()
-            .rev()
-            .map(|&(t, d, s)| (t, (d - 2.0 * s).max(0.0))),
-    );
-    chart
-        .draw_series(std::iter::once(Polygon::new(
-            band,
-            band_color.mix(0.3).filled(),
-        )))
-        .map_err(draw_err)?
-        .label("±2σ")
-        .legend(move |(x, y)| {
-            Rectangle::new([(x, y - 6), (x + 20, y + 6)], band_color.mix(0.3).filled())
-        });
-    chart
-        .draw_series(LineSeries::new(
-            est.iter().map(|&(t, d, _)| (t, d)),
-            band_color.stroke_width(2),
-        ))
-        .map_err(draw_err)?
-        .label("estimated thickness")
-        .legend(move |(x, y)| {
-            PathElement::new(vec![(x, y), (x + 20, y)], band_color.stroke_width(3))
-        });
-    super::draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 15)?;
-    Ok(())
+/// A line of (t, y) points.
+pub type Line = Vec<(f64, f64)>;
+
+/// Everything the figure draws, in axis units (s), each piece within one
+/// run of consecutive measurements.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Drawn {
+    /// I1 and I2, one line per run (decimated to ~3000 points each).
+    pub currents: [Vec<Line>; 2],
+    /// The air temperature, one line per run.
+    pub temperature: Vec<Line>,
+    /// The estimate (t, thickness, σ), one piece per run of measurements
+    /// that have one: its line and its ±2σ band.
+    pub estimate: Vec<Vec<(f64, f64, f64)>>,
+    /// Alarm periods (start, end).
+    pub alarm: Vec<(f64, f64)>,
+    /// The node's state as spans (start, end, state).
+    pub states: Vec<(f64, f64, State)>,
+    /// The estimated medium as spans (start, end, medium).
+    pub media: Vec<(f64, f64, &'static str)>,
 }
 
-/// Alarm periods (start, end) in s: runs of measurements with the alarm on.
-pub fn alarm_periods(points: &[TimePoint]) -> Vec<(f64, f64)> {
+/// Spans of equal `value` within each run: from a measurement to the next
+/// one of the run (the last one's span ends at its own time).
+fn spans<T: Copy + PartialEq>(
+    pts: &[TimePoint],
+    runs: &[Range<usize>],
+    value: impl Fn(&TimePoint) -> Option<T>,
+) -> Vec<(f64, f64, T)> {
     let mut out = Vec::new();
-    let mut start: Option<f64> = None;
-    let mut last = 0.0;
-    for p in points {
-        match (p.alarm, start) {
-            (true, None) => start = Some(p.t_s),
-            (false, Some(s)) => {
-                out.push((s, p.t_s));
-                start = None;
+    for r in runs {
+        let mut open: Option<(f64, T)> = None;
+        for i in r.clone() {
+            let t = pts[i].t_s;
+            let v = value(&pts[i]);
+            match (open, v) {
+                (Some((_, a)), Some(b)) if a == b => {}
+                (Some((s, a)), _) => {
+                    out.push((s, t, a));
+                    open = v.map(|b| (t, b));
+                }
+                (None, Some(b)) => open = Some((t, b)),
+                (None, None) => {}
             }
-            _ => {}
         }
-        last = p.t_s;
-    }
-    if let Some(s) = start {
-        out.push((s, last));
+        if let Some((s, a)) = open {
+            let end = pts[r.end - 1].t_s;
+            if end > s {
+                out.push((s, end, a));
+            }
+        }
     }
     out
+}
+
+/// What to draw for `ts`: every line, band and span split at the breaks.
+pub fn layout(ts: &TimeSeries) -> Drawn {
+    let pts = &ts.points;
+    let t: Vec<f64> = pts.iter().map(|p| p.t_s).collect();
+    let seq: Vec<Option<u32>> = pts.iter().map(|p| p.seq).collect();
+    let runs = runs(&t, &seq, &ts.breaks_s, max_step_s(&t));
+    let line = |r: &Range<usize>, y: &dyn Fn(&TimePoint) -> f64| -> Line {
+        decimate(
+            &pts[r.clone()]
+                .iter()
+                .map(|p| (p.t_s, y(p)))
+                .collect::<Vec<_>>(),
+            3000,
+        )
+    };
+    let currents = [0, 1].map(|c| runs.iter().map(|r| line(r, &|p| p.i_ua[c])).collect());
+    let temperature = runs_where(&runs, |i| pts[i].temp_c.is_some())
+        .iter()
+        .map(|r| line(r, &|p| p.temp_c.unwrap_or(f64::NAN)))
+        .collect();
+    let est_runs = runs_where(&runs, |i| pts[i].est_mm.is_some());
+    let n_est: usize = est_runs.iter().map(|r| r.len()).sum();
+    let stride = n_est.div_ceil(3000).max(1);
+    let estimate = est_runs
+        .iter()
+        .map(|r| {
+            let mut v: Vec<(f64, f64, f64)> = pts[r.clone()]
+                .iter()
+                .step_by(stride)
+                .filter_map(|p| p.est_mm.map(|(d, s)| (p.t_s, d, s)))
+                .collect();
+            // Keep the run's last point so a piece ends where its data ends.
+            if let Some(last) = pts[r.end - 1]
+                .est_mm
+                .map(|(d, s)| (pts[r.end - 1].t_s, d, s))
+                && v.last() != Some(&last)
+            {
+                v.push(last);
+            }
+            v
+        })
+        .collect();
+    let alarm = spans(pts, &runs, |p| p.alarm.then_some(()))
+        .into_iter()
+        .map(|(a, b, ())| (a, b))
+        .collect();
+    Drawn {
+        currents,
+        temperature,
+        estimate,
+        alarm,
+        states: spans(pts, &runs, |p| p.state),
+        media: spans(pts, &runs, |p| p.medium),
+    }
 }
 
 /// At most `2 * buckets` points: the minimum and the maximum of each run of
@@ -227,22 +313,139 @@ pub fn decimate(points: &[(f64, f64)], buckets: usize) -> Vec<(f64, f64)> {
     out
 }
 
-/// `foisctl plot`: I1 and I2 over host time, alarm periods shaded, breaks
-/// in the link as grey lines.
+/// A label of the time axis at `x` s: UTC time of day for the host axis
+/// (the date in the title; with the day when the log spans midnight), or
+/// `h:mm:ss` of node uptime.
+fn time_label(axis: TimeAxis, t0_unix_ms: Option<u64>, multi_day: bool, x: f64) -> String {
+    match (axis, t0_unix_ms) {
+        (TimeAxis::Host, Some(t0)) => {
+            let iso = iso_utc(t0.saturating_add((x.max(0.0) * 1000.0) as u64));
+            if multi_day {
+                format!("{} {}", &iso[5..10], &iso[11..16])
+            } else {
+                iso[11..19].to_string()
+            }
+        }
+        _ => {
+            let s = x.max(0.0) as u64;
+            format!("{}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60)
+        }
+    }
+}
+
+const C_DRY: RGBColor = RGBColor(225, 225, 225);
+const C_WET: RGBColor = RGBColor(110, 170, 250);
+const C_ICE: RGBColor = RGBColor(140, 80, 200);
+const C_GLAZED: RGBColor = RGBColor(40, 160, 160);
+const C_RIME: RGBColor = RGBColor(190, 160, 240);
+const C_EST: RGBColor = RGBColor(255, 150, 0);
+const C_ALARM: RGBColor = RGBColor(255, 170, 170);
+
+fn state_color(s: State) -> RGBColor {
+    match s {
+        State::Dry => C_DRY,
+        State::Wet => C_WET,
+        State::Ice => C_ICE,
+    }
+}
+
+fn medium_color(m: &str) -> RGBColor {
+    match m {
+        "water" => C_WET,
+        "glazed" => C_GLAZED,
+        "rime" => C_RIME,
+        _ => C_DRY,
+    }
+}
+
+/// Heights of the panels, pixels: title, currents, bands, temperature,
+/// estimate (0 without one).
+fn heights(with_est: bool) -> [u32; 5] {
+    [40, 330, 120, 170, if with_est { 260 } else { 0 }]
+}
+
+/// `foisctl plot`: the figure of `log` to `out` (PNG or SVG by its
+/// extension). Returns the number of measurements drawn.
 pub fn plot_log(log: &Path, out: &Path, axis: TimeAxis) -> anyhow::Result<usize> {
+    let format = format_of(out)?;
     let ts = time_series(log, axis)?;
     if ts.points.is_empty() {
         bail!("log {} holds no valid measurement to plot", log.display());
     }
-    let span = ts.points.last().map_or(1.0, |p| p.t_s).max(1e-3);
-    let (unit, div) = if span > 7200.0 {
-        ("h", 3600.0)
-    } else if span > 300.0 {
-        ("min", 60.0)
-    } else {
-        ("s", 1.0)
+    let drawn = layout(&ts);
+    let with_est = !drawn.estimate.is_empty();
+    let size = (WIDE.0, heights(with_est).iter().sum());
+    let name = log
+        .file_name()
+        .map_or(String::new(), |n| n.to_string_lossy().into_owned());
+    super::register_fonts();
+    let r = match format {
+        Format::Png => {
+            let root = BitMapBackend::new(out, size).into_drawing_area();
+            draw_log(&root, &ts, &drawn, axis, &name)?;
+            root.present().map_err(|e| write_error(out, &e))
+        }
+        Format::Svg => {
+            let root = SVGBackend::new(out, size).into_drawing_area();
+            draw_log(&root, &ts, &drawn, axis, &name)?;
+            root.present().map_err(|e| write_error(out, &e))
+        }
     };
-    let x_max = span / div;
+    r?;
+    Ok(ts.points.len())
+}
+
+fn draw_log<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    ts: &TimeSeries,
+    d: &Drawn,
+    axis: TimeAxis,
+    name: &str,
+) -> anyhow::Result<()> {
+    root.fill(&WHITE).map_err(draw_err)?;
+    let h = heights(!d.estimate.is_empty());
+    let (title, rest) = root.split_vertically(h[0]);
+    let (cur, rest) = rest.split_vertically(h[1]);
+    let (bands, rest) = rest.split_vertically(h[2]);
+    let (temp, est) = rest.split_vertically(h[3]);
+
+    let t = |p: &TimePoint| p.t_s;
+    let x0 = ts.points.iter().map(t).fold(f64::INFINITY, f64::min);
+    let x1 = ts.points.iter().map(t).fold(f64::NEG_INFINITY, f64::max);
+    let x1 = if x1 > x0 { x1 } else { x0 + 1.0 };
+    let date = ts.t0_unix_ms.map(|t| iso_utc(t)[..10].to_string());
+    let multi_day = ts
+        .t0_unix_ms
+        .is_some_and(|t0| iso_utc(t0)[..10] != iso_utc(t0 + (x1 * 1000.0) as u64)[..10]);
+    let fmt_x = |x: &f64| time_label(axis, ts.t0_unix_ms, multi_day, *x);
+    let x_desc = match axis {
+        TimeAxis::Host => format!(
+            "UTC time{}",
+            date.as_ref()
+                .map(|d| format!(" on {d}"))
+                .unwrap_or_default()
+        ),
+        TimeAxis::Node => "node uptime h:mm:ss (a virtual node: virtual time)".to_string(),
+    };
+    let node = ts
+        .node_id
+        .as_ref()
+        .map_or("node (id not in the log)".to_string(), |id| {
+            format!("node {id}")
+        });
+    let title_text = format!(
+        "FOIS {node} — {} — {name}",
+        date.map_or("date unknown".to_string(), |d| format!("{d} (UTC)"))
+    );
+    title
+        .draw_text(
+            &title_text,
+            &("sans-serif", 22).into_font().color(&BLACK),
+            (70, 10),
+        )
+        .map_err(draw_err)?;
+
+    // Currents.
     let (mut y_min, mut y_max) = (0.0f64, 1.0f64);
     for p in &ts.points {
         for v in p.i_ua {
@@ -252,60 +455,36 @@ pub fn plot_log(log: &Path, out: &Path, axis: TimeAxis) -> anyhow::Result<usize>
     }
     let pad = 0.05 * (y_max - y_min);
     let (y_lo, y_hi) = (y_min - pad, y_max + pad);
-    super::register_fonts();
-    let with_est = ts.points.iter().any(|p| p.est_mm.is_some());
-    let size = if with_est {
-        (WIDE.0, WIDE.1 + 350)
-    } else {
-        WIDE
-    };
-    let root = BitMapBackend::new(out, size).into_drawing_area();
-    root.fill(&WHITE).map_err(draw_err)?;
-    let (top, bottom) = root.split_vertically(WIDE.1);
-    let mut chart = ChartBuilder::on(&top)
-        .caption(
-            format!(
-                "FOIS log {}",
-                log.file_name()
-                    .map_or(String::new(), |n| n.to_string_lossy().into_owned())
-            ),
-            ("sans-serif", 22),
-        )
-        .margin(12)
-        .x_label_area_size(45)
-        .y_label_area_size(65)
-        .build_cartesian_2d(0.0..x_max.max(1e-6), y_lo..y_hi)
+    let mut chart = ChartBuilder::on(&cur)
+        .margin(10)
+        .margin_right(40)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x0..x1, y_lo..y_hi)
         .map_err(draw_err)?;
     chart
         .configure_mesh()
-        .x_desc(axis.describe(unit))
+        .x_label_formatter(&fmt_x)
         .y_desc("net photocurrent (µA)")
-        .label_style(("sans-serif", 15))
+        .label_style(("sans-serif", 14))
+        .light_line_style(WHITE.mix(0.0))
         .draw()
         .map_err(draw_err)?;
-    let periods = alarm_periods(&ts.points);
-    chart
-        .draw_series(periods.iter().map(|&(a, b)| {
-            Rectangle::new(
-                [(a / div, y_lo), (b / div, y_hi)],
-                RGBColor(255, 170, 170).mix(0.5).filled(),
+    if !d.alarm.is_empty() {
+        chart
+            .draw_series(
+                d.alarm.iter().map(|&(a, b)| {
+                    Rectangle::new([(a, y_lo), (b, y_hi)], C_ALARM.mix(0.5).filled())
+                }),
             )
-        }))
-        .map_err(draw_err)?
-        .label("alarm on")
-        .legend(|(x, y)| {
-            Rectangle::new(
-                [(x, y - 6), (x + 20, y + 6)],
-                RGBColor(255, 170, 170).filled(),
-            )
-        });
+            .map_err(draw_err)?
+            .label("alarm on")
+            .legend(|(x, y)| Rectangle::new([(x, y - 6), (x + 20, y + 6)], C_ALARM.filled()));
+    }
     if !ts.breaks_s.is_empty() {
         chart
             .draw_series(ts.breaks_s.iter().map(|&t| {
-                PathElement::new(
-                    vec![(t / div, y_lo), (t / div, y_hi)],
-                    BLACK.mix(0.35).stroke_width(1),
-                )
+                PathElement::new(vec![(t, y_lo), (t, y_hi)], BLACK.mix(0.35).stroke_width(1))
             }))
             .map_err(draw_err)?
             .label("gap / link lost / restart")
@@ -314,22 +493,9 @@ pub fn plot_log(log: &Path, out: &Path, axis: TimeAxis) -> anyhow::Result<usize>
     let colors = [BLUE, RGBColor(0, 140, 0)];
     for (c, name) in ["I1", "I2"].iter().enumerate() {
         let color = colors[c];
-        // Break the line at gaps longer than 5 s so lost time is visible.
-        let mut segs: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
-        let mut prev: Option<f64> = None;
-        for p in &ts.points {
-            if prev.is_some_and(|q| p.t_s - q > 5.0) {
-                segs.push(Vec::new());
-            }
-            prev = Some(p.t_s);
-            if let Some(s) = segs.last_mut() {
-                s.push((p.t_s / div, p.i_ua[c]));
-            }
-        }
-        for (k, s) in segs.into_iter().enumerate() {
-            let s = decimate(&s, 3000);
+        for (k, line) in d.currents[c].iter().enumerate() {
             let a = chart
-                .draw_series(LineSeries::new(s, color.stroke_width(2)))
+                .draw_series(LineSeries::new(line.iter().copied(), color.stroke_width(2)))
                 .map_err(draw_err)?;
             if k == 0 {
                 a.label(*name).legend(move |(x, y)| {
@@ -338,12 +504,177 @@ pub fn plot_log(log: &Path, out: &Path, axis: TimeAxis) -> anyhow::Result<usize>
             }
         }
     }
-    super::draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 15)?;
-    if with_est {
-        draw_estimate(&bottom, &ts.points, div, x_max, unit, axis)?;
+    super::draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 14)?;
+
+    // State and medium bands, with their key above.
+    let (key, strip) = bands.split_vertically(26);
+    let mut x = 80;
+    let font = ("sans-serif", 14).into_font().color(&BLACK);
+    let entries: [(&str, RGBColor); 7] = [
+        ("node state: dry", C_DRY),
+        ("wet", C_WET),
+        ("ice", C_ICE),
+        ("   estimated medium: water", C_WET),
+        ("glazed", C_GLAZED),
+        ("rime", C_RIME),
+        ("dry", C_DRY),
+    ];
+    for (label, color) in entries {
+        let w = key.estimate_text_size(label, &font).map_err(draw_err)?.0 as i32;
+        key.draw_text(label, &font, (x, 6)).map_err(draw_err)?;
+        x += w + 4;
+        key.draw(&Rectangle::new([(x, 6), (x + 18, 20)], color.filled()))
+            .map_err(draw_err)?;
+        x += 28;
     }
-    root.present().map_err(draw_err)?;
-    Ok(ts.points.len())
+    let row_label = |y: &f64| {
+        if (y - 1.5).abs() < 1e-6 {
+            "state".to_string()
+        } else if (y - 0.5).abs() < 1e-6 {
+            "medium".to_string()
+        } else {
+            String::new()
+        }
+    };
+    let mut chart = ChartBuilder::on(&strip)
+        .margin(10)
+        .margin_right(40)
+        .x_label_area_size(30)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x0..x1, 0.0..2.0)
+        .map_err(draw_err)?;
+    chart
+        .configure_mesh()
+        .disable_y_mesh()
+        .disable_x_mesh()
+        .y_labels(5)
+        .y_label_formatter(&row_label)
+        .x_label_formatter(&fmt_x)
+        .label_style(("sans-serif", 14))
+        .light_line_style(WHITE.mix(0.0))
+        .draw()
+        .map_err(draw_err)?;
+    chart
+        .draw_series(
+            d.states
+                .iter()
+                .map(|&(a, b, s)| Rectangle::new([(a, 1.05), (b, 1.95)], state_color(s).filled())),
+        )
+        .map_err(draw_err)?;
+    chart
+        .draw_series(
+            d.media
+                .iter()
+                .map(|&(a, b, m)| Rectangle::new([(a, 0.05), (b, 0.95)], medium_color(m).filled())),
+        )
+        .map_err(draw_err)?;
+
+    // Temperature.
+    let temps = d.temperature.iter().flatten().map(|p| p.1);
+    let (t_min, t_max) = temps.fold((0.0f64, 0.0f64), |(a, b), v| (a.min(v), b.max(v)));
+    let t_pad = (0.1 * (t_max - t_min)).max(1.0);
+    let mut chart = ChartBuilder::on(&temp)
+        .margin(10)
+        .margin_right(40)
+        .x_label_area_size(if d.estimate.is_empty() { 45 } else { 30 })
+        .y_label_area_size(70)
+        .build_cartesian_2d(x0..x1, (t_min - t_pad)..(t_max + t_pad))
+        .map_err(draw_err)?;
+    let mut mesh = chart.configure_mesh();
+    mesh.x_label_formatter(&fmt_x)
+        .light_line_style(WHITE.mix(0.0))
+        .y_desc("air (°C)")
+        .label_style(("sans-serif", 14));
+    if d.estimate.is_empty() {
+        mesh.x_desc(x_desc.clone());
+    }
+    mesh.draw().map_err(draw_err)?;
+    chart
+        .draw_series(std::iter::once(PathElement::new(
+            vec![(x0, 0.0), (x1, 0.0)],
+            BLACK.mix(0.3).stroke_width(1),
+        )))
+        .map_err(draw_err)?;
+    let red = RGBColor(200, 40, 40);
+    for line in &d.temperature {
+        chart
+            .draw_series(LineSeries::new(line.iter().copied(), red.stroke_width(2)))
+            .map_err(draw_err)?;
+    }
+
+    if !d.estimate.is_empty() {
+        draw_estimate(&est, d, x0, x1, &fmt_x, &x_desc)?;
+    }
+    Ok(())
+}
+
+/// The estimate panel: posterior mean thickness and its ±2σ band (clipped
+/// at 0 mm), one piece per run of data.
+fn draw_estimate<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    d: &Drawn,
+    x0: f64,
+    x1: f64,
+    fmt_x: &dyn Fn(&f64) -> String,
+    x_desc: &str,
+) -> anyhow::Result<()> {
+    let y_hi = d
+        .estimate
+        .iter()
+        .flatten()
+        .map(|&(_, m, s)| m + 2.0 * s)
+        .fold(1.0f64, f64::max)
+        * 1.05;
+    let mut chart = ChartBuilder::on(area)
+        .margin(10)
+        .margin_right(40)
+        .x_label_area_size(45)
+        .y_label_area_size(70)
+        .build_cartesian_2d(x0..x1, 0.0..y_hi)
+        .map_err(draw_err)?;
+    chart
+        .configure_mesh()
+        .x_label_formatter(&fmt_x)
+        .x_desc(x_desc)
+        .y_desc("ice estimate (mm)")
+        .label_style(("sans-serif", 14))
+        .light_line_style(WHITE.mix(0.0))
+        .draw()
+        .map_err(draw_err)?;
+    for (k, piece) in d.estimate.iter().enumerate() {
+        let mut band: Vec<(f64, f64)> = piece
+            .iter()
+            .map(|&(t, m, s)| (t, (m + 2.0 * s).min(y_hi)))
+            .collect();
+        band.extend(
+            piece
+                .iter()
+                .rev()
+                .map(|&(t, m, s)| (t, (m - 2.0 * s).max(0.0))),
+        );
+        let a = chart
+            .draw_series(std::iter::once(Polygon::new(band, C_EST.mix(0.3).filled())))
+            .map_err(draw_err)?;
+        if k == 0 {
+            a.label("±2σ (95 % of the truth inside)")
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 6), (x + 20, y + 6)], C_EST.mix(0.3).filled())
+                });
+        }
+        let a = chart
+            .draw_series(LineSeries::new(
+                piece.iter().map(|&(t, m, _)| (t, m)),
+                C_EST.stroke_width(2),
+            ))
+            .map_err(draw_err)?;
+        if k == 0 {
+            a.label("estimated thickness").legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], C_EST.stroke_width(3))
+            });
+        }
+    }
+    super::draw_legend(&mut chart, SeriesLabelPosition::UpperLeft, 14)?;
+    Ok(())
 }
 
 #[cfg(test)]
@@ -367,23 +698,106 @@ mod tests {
         assert_eq!(decimate(&pts[..50], 100).len(), 50);
     }
 
-    #[test]
-    fn alarm_periods_are_runs_of_alarm_rows() {
-        let p = |t: f64, a: bool| TimePoint {
-            t_s: t,
-            i_ua: [0.0; 2],
-            alarm: a,
-            est_mm: None,
+    fn point(t_s: f64, seq: u32, alarm: bool, est: Option<f64>) -> TimePoint {
+        TimePoint {
+            t_s,
+            seq: Some(seq),
+            i_ua: [1.0, 0.5],
+            alarm,
+            est_mm: est.map(|d| (d, 0.3)),
+            temp_c: Some(-5.0),
+            state: Some(if alarm { State::Ice } else { State::Dry }),
+            medium: est.map(|_| "rime"),
+        }
+    }
+
+    /// Nothing drawn has points on both sides of (a, b).
+    fn assert_nothing_spans(d: &Drawn, a: f64, b: f64) {
+        let across = |lo: f64, hi: f64| lo < a + 1e-9 && hi > b - 1e-9;
+        let line = |l: &[(f64, f64)]| {
+            let (lo, hi) = l
+                .iter()
+                .fold((f64::MAX, f64::MIN), |(x, y), p| (x.min(p.0), y.max(p.0)));
+            across(lo, hi)
         };
-        let pts = [
-            p(0.0, false),
-            p(1.0, true),
-            p(2.0, true),
-            p(3.0, false),
-            p(4.0, true),
-            p(5.0, true),
-        ];
-        assert_eq!(alarm_periods(&pts), vec![(1.0, 3.0), (4.0, 5.0)]);
+        for l in d.currents.iter().flatten().chain(&d.temperature) {
+            assert!(!line(l), "a line spans the gap {a}..{b}");
+        }
+        for piece in &d.estimate {
+            let pts: Vec<(f64, f64)> = piece.iter().map(|p| (p.0, p.1)).collect();
+            assert!(
+                !line(&pts),
+                "the estimate (and its ±2σ band) spans the gap {a}..{b}"
+            );
+        }
+        assert!(
+            d.alarm.iter().all(|&(x, y)| !across(x, y)),
+            "alarm shading spans the gap"
+        );
+        assert!(
+            d.states.iter().all(|&(x, y, _)| !across(x, y)),
+            "a state band spans the gap"
+        );
+        assert!(
+            d.media.iter().all(|&(x, y, _)| !across(x, y)),
+            "a medium band spans the gap"
+        );
+    }
+
+    #[test]
+    fn nothing_is_drawn_across_a_link_loss_a_time_jump_or_a_restart() {
+        // 10 Hz, iced with an estimate: 0–20 s, a link loss at 20.05 s, back
+        // at 20.2 s until 40 s, a 200 s hole, 240–260 s, then the node
+        // restarts (seq from 0) with no time jump, 260–280 s.
+        let mut pts = Vec::new();
+        let mut seq = 0;
+        for (from, to) in [(0.0, 20.0), (20.2, 40.0), (240.0, 260.0)] {
+            let mut t: f64 = from;
+            while t < to - 1e-9 {
+                pts.push(point(t, seq, t > 5.0, Some(1.0 + t / 100.0)));
+                seq += 1;
+                t += 0.1;
+            }
+        }
+        for k in 0..200u32 {
+            pts.push(point(260.0 + 0.1 * f64::from(k), k, true, Some(4.7)));
+        }
+        let ts = TimeSeries {
+            points: pts,
+            breaks_s: vec![20.05],
+            ..TimeSeries::default()
+        };
+        let d = layout(&ts);
+        assert_eq!(d.currents[0].len(), 4, "one line per run");
+        assert_eq!(d.estimate.len(), 4);
+        assert_nothing_spans(&d, 19.95, 20.2);
+        assert_nothing_spans(&d, 39.95, 240.0);
+        assert_nothing_spans(&d, 259.95, 260.0);
+        // The bands cover the data: ice from 5 s to the gap, and after it.
+        assert!(
+            d.states
+                .iter()
+                .any(|&(a, b, s)| s == State::Ice && a > 5.0 && a < 5.2 && b > 19.8)
+        );
+
+        // Measurements without an estimate (a v1 stretch) have no band.
+        let mut ts2 = ts.clone();
+        for p in ts2
+            .points
+            .iter_mut()
+            .filter(|p| p.t_s > 10.0 && p.t_s < 15.0)
+        {
+            p.est_mm = None;
+        }
+        let d2 = layout(&ts2);
+        assert_eq!(d2.estimate.len(), 5);
+        assert!(
+            d2.estimate
+                .iter()
+                .all(|p| p.iter().all(|q| q.0 <= 10.0 || q.0 >= 15.0)
+                    && !(p[0].0 <= 10.0 && p[p.len() - 1].0 >= 15.0)),
+            "no band where the estimate is missing"
+        );
     }
 
     /// PNG height from the IHDR chunk.
@@ -437,13 +851,39 @@ mod tests {
         assert_eq!(est, [None, Some((2.1, 0.3)), Some((2.2, 0.3))]);
         let png = dir.path().join("v2.png");
         plot_log(&v2, &png, TimeAxis::Node).unwrap();
-        assert_eq!(png_height(&png), WIDE.1 + 350);
+        assert_eq!(png_height(&png), heights(true).iter().sum::<u32>());
+
+        let svg = dir.path().join("v2.svg");
+        plot_log(&v2, &svg, TimeAxis::Host).unwrap();
+        let text = std::fs::read_to_string(&svg).unwrap();
+        assert!(
+            text.starts_with("<svg") && text.contains("ice estimate (mm)"),
+            "SVG"
+        );
+        let e = plot_log(&v2, &dir.path().join("no/such/dir.png"), TimeAxis::Host).unwrap_err();
+        assert!(format!("{e:#}").contains("does not exist"), "{e:#}");
+
+        // A log of a foisctl before the `faults` column reads the same.
+        let old = dir.path().join("old.csv");
+        let text = std::fs::read_to_string(&v2).unwrap();
+        let drop_faults = |line: &str| {
+            let mut f: Vec<&str> = line.split(',').collect();
+            f.remove(15);
+            f.join(",")
+        };
+        assert_eq!(crate::csvlog::HEADER.split(',').nth(15), Some("faults"));
+        let old_text: Vec<String> = text.lines().map(drop_faults).collect();
+        std::fs::write(&old, old_text.join("\n") + "\n").unwrap();
+        assert_eq!(
+            time_series(&old, TimeAxis::Node).unwrap(),
+            time_series(&v2, TimeAxis::Node).unwrap()
+        );
 
         let v1 = write("v1.csv", false);
         let ts = time_series(&v1, TimeAxis::Node).unwrap();
         assert!(ts.points.iter().all(|p| p.est_mm.is_none()));
         let png = dir.path().join("v1.png");
         plot_log(&v1, &png, TimeAxis::Node).unwrap();
-        assert_eq!(png_height(&png), WIDE.1);
+        assert_eq!(png_height(&png), heights(false).iter().sum::<u32>());
     }
 }

@@ -1,11 +1,15 @@
-//! The figures `foisctl` draws (PNG, plotters' bitmap backend):
+//! The figures `foisctl` draws (PNG or SVG by the `--out` extension,
+//! plotters' bitmap and SVG backends; [`output`] checks the path):
 //!
-//! - [`log`]: a monitor log's currents over time (`foisctl plot`);
+//! - [`log`]: a monitor log over time (`foisctl plot`), its lines broken at
+//!   gaps by [`runs`];
 //! - [`comparison`]: logged currents against the simulator's band (`foisctl compare --plot`);
 //! - [`series`]: curves over ice thickness in the thesis's layout (`foisctl sim ... --plot`).
 
 pub mod comparison;
 pub mod log;
+pub mod output;
+pub mod runs;
 pub mod series;
 
 use std::sync::Once;

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use plotters::prelude::*;
 
 /// Plot size, pixels (kept small for the gallery).
@@ -71,18 +71,31 @@ pub fn plot(
     series: &[Series],
     bars: &[ErrBar],
 ) -> Result<()> {
-    draw(path, title, y_desc, series, bars)
-        .map_err(|e| anyhow::anyhow!("{e}"))
-        .with_context(|| format!("cannot draw plot {}", path.display()))
+    let format = super::output::format_of(path)?;
+    super::register_fonts();
+    let drawn = match format {
+        super::output::Format::Png => {
+            let root = BitMapBackend::new(path, SIZE).into_drawing_area();
+            draw(&root, title, y_desc, series, bars).and_then(|()| Ok(root.present()?))
+        }
+        super::output::Format::Svg => {
+            let root = SVGBackend::new(path, SIZE).into_drawing_area();
+            draw(&root, title, y_desc, series, bars).and_then(|()| Ok(root.present()?))
+        }
+    };
+    drawn.map_err(|e| super::output::write_error(path, &e))
 }
 
-fn draw(
-    path: &Path,
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, plotters::coord::Shift>,
     title: &str,
     y_desc: &str,
     series: &[Series],
     bars: &[ErrBar],
-) -> Result<(), Box<dyn std::error::Error>> {
+) -> Result<(), Box<dyn std::error::Error>>
+where
+    DB::ErrorType: 'static,
+{
     let mut x_max = f64::MIN;
     let mut x_min = f64::MAX;
     let mut y_max = 0.0f64;
@@ -113,10 +126,8 @@ fn draw(
         y_max = y_min + 1.0;
     }
     let y_top = y_max + 0.08 * (y_max - y_min);
-    super::register_fonts();
-    let root = BitMapBackend::new(path, SIZE).into_drawing_area();
     root.fill(&WHITE)?;
-    let mut chart = ChartBuilder::on(&root)
+    let mut chart = ChartBuilder::on(root)
         .caption(title, ("sans-serif", 20))
         .margin(12)
         .x_label_area_size(45)
@@ -177,6 +188,5 @@ fn draw(
     if any_label {
         super::draw_legend(&mut chart, SeriesLabelPosition::UpperRight, 15)?;
     }
-    root.present()?;
     Ok(())
 }

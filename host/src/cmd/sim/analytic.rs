@@ -36,7 +36,7 @@ pub struct AnalyticArgs {
     #[arg(long, default_value_t = 15.0, value_parser = max_mm)]
     pub max_mm: f64,
     /// Thickness step, mm (> 0).
-    #[arg(long, default_value_t = 0.1, value_parser = positive)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.1, value_parser = positive)]
     pub step_mm: f64,
     /// Output CSV file.
     #[arg(long)]
@@ -61,6 +61,7 @@ pub fn run(args: AnalyticArgs) -> Result<()> {
     write_analytic(out, &a)?;
     if let Some(p) = &args.plot {
         plot_analytic(p, &cfg)?;
+        println!("wrote the figure {}", p.display());
     }
     Ok(())
 }

@@ -85,7 +85,7 @@ pub struct ModelOpts {
     #[arg(long, default_value_t = 15.0, value_parser = max_mm)]
     pub max_mm: f64,
     /// Thickness step of the output, mm (> 0).
-    #[arg(long, default_value_t = 0.1, value_parser = positive)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = 0.1, value_parser = positive)]
     pub step_mm: f64,
     /// Coupling model: thesis (Fresnel only, the default) or acceptance (guided cone too).
     #[arg(long, value_enum, default_value = "thesis")]

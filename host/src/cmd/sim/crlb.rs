@@ -24,12 +24,12 @@ pub struct CrlbArgs {
     #[command(flatten)]
     pub mc: McArgs,
     /// Half-width of the local fits of μ(d) and Σ(d), mm (> 0).
-    #[arg(long, default_value_t = DEFAULT_FIT_HALF_WIDTH_MM, value_parser = positive)]
+    #[arg(long, allow_negative_numbers = true, default_value_t = DEFAULT_FIT_HALF_WIDTH_MM, value_parser = positive)]
     pub fit_half_width_mm: f64,
     /// Also the bound with the gain unknown: S, the prior standard deviation of ln g (the
     /// gain g multiplies both currents; 0.1 ≈ a gain known to 10 %; 0 = known). Adds the
     /// columns crlb_gain_std_mm,crlb_gain_no_dsigma_std_mm (one frame).
-    #[arg(long, value_parser = non_negative)]
+    #[arg(long, allow_negative_numbers = true, value_parser = non_negative)]
     pub gain_sd: Option<f64>,
     /// Output CSV file.
     #[arg(long)]
@@ -61,9 +61,14 @@ pub fn run(args: CrlbArgs) -> Result<()> {
     write_crlb(out, &bound, with_gain.as_ref().map(|(_, g)| g.as_slice()))?;
     report_fit(&q, dt.as_secs_f64(), runs);
     if let Some(p) = &args.plot {
-        let title = format!("CRLB: {} ice, {} accretions", cfg.ice.name(), runs);
+        let title = format!(
+            "How well thickness can be known (Cramér–Rao bound): {} ice, {} accretions",
+            cfg.ice.name(),
+            runs
+        );
         let gain = with_gain.as_ref().map(|(s, g)| (*s, g.as_slice()));
         plot_crlb(p, &title, &bound, gain)?;
+        println!("wrote the figure {}", p.display());
     }
     Ok(())
 }

@@ -47,6 +47,7 @@ pub fn run(args: CurveArgs) -> Result<()> {
             args.runs
         );
         plot_curves(p, &title, &curves, args.runs == 1)?;
+        println!("wrote the figure {}", p.display());
     }
     Ok(())
 }

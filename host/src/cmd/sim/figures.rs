@@ -170,7 +170,7 @@ pub fn plot_crlb(
 ) -> Result<()> {
     let mut s = vec![
         Series::new(
-            Some("CRLB std (with dΣ/dd)"),
+            Some("best possible σ of the thickness (Cramér–Rao bound)"),
             C_I1,
             Kind::Line(2),
             bound
@@ -179,7 +179,7 @@ pub fn plot_crlb(
                 .collect(),
         ),
         Series::new(
-            Some("CRLB std (mean term only)"),
+            Some("… from the mean currents alone (their spread unused)"),
             C_I2,
             Kind::Dashed,
             bound
@@ -197,19 +197,28 @@ pub fn plot_crlb(
                 .collect::<Vec<_>>()
         };
         s.push(Series::new(
-            Some(&format!("gain unknown, S = {sd} (with dΣ/dd)")),
+            Some(&format!(
+                "… optical gain uncalibrated (±{:.0} %)",
+                100.0 * sd
+            )),
             C_GREEN,
             Kind::Line(2),
             xy(|v| v.0),
         ));
         s.push(Series::new(
-            Some(&format!("gain unknown, S = {sd} (mean term only)")),
+            Some("… gain uncalibrated, mean currents alone"),
             C_MAGENTA,
             Kind::Dashed,
             xy(|v| v.1),
         ));
     }
-    plot::plot(path, title, "std of thickness estimate (mm)", &s, &[])
+    plot::plot(
+        path,
+        title,
+        "smallest possible σ of a thickness estimate (mm)",
+        &s,
+        &[],
+    )
 }
 
 /// Reflection and scattering parts of one accretion (thesis Figs. 3.21, 3.23).

@@ -38,6 +38,7 @@ pub fn run(args: MontecarloArgs) -> Result<()> {
     if let Some(p) = &args.plot {
         let title = format!("Monte Carlo: {} ice, {} accretions", cfg.ice.name(), runs);
         plot_mc(p, &title, &mc)?;
+        println!("wrote the figure {}", p.display());
     }
     Ok(())
 }

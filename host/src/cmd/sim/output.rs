@@ -46,6 +46,8 @@ pub const CRLB_GAIN_HEADER: [&str; 5] = [
 pub struct CsvOut {
     path: std::path::PathBuf,
     w: csv::Writer<File>,
+    /// Rows written, the header included.
+    rows: u64,
 }
 
 impl CsvOut {
@@ -56,6 +58,7 @@ impl CsvOut {
         let mut out = CsvOut {
             path: path.to_path_buf(),
             w,
+            rows: 0,
         };
         out.row(header)?;
         Ok(out)
@@ -66,16 +69,23 @@ impl CsvOut {
         I: IntoIterator<Item = T>,
         T: AsRef<[u8]>,
     {
+        self.rows += 1;
         self.w
             .write_record(fields)
             .with_context(|| format!("cannot write {}", self.path.display()))
     }
 
-    /// Flush to the file.
+    /// Flush to the file and say what was written (path, data rows).
     pub fn finish(mut self) -> Result<()> {
         self.w
             .flush()
-            .with_context(|| format!("cannot write {}", self.path.display()))
+            .with_context(|| format!("cannot write {}", self.path.display()))?;
+        println!(
+            "wrote {} ({} data rows and a header)",
+            self.path.display(),
+            self.rows.saturating_sub(1)
+        );
+        Ok(())
     }
 }
 
@@ -151,6 +161,7 @@ pub fn write_crlb(out: CsvOut, bound: &[CrlbPoint], gain: Option<&[(f64, f64)]>)
 /// at its end).
 pub fn check_writable(path: Option<&Path>) -> Result<()> {
     if let Some(p) = path {
+        crate::plot::output::format_of(p)?;
         File::create(p).with_context(|| format!("cannot write {}", p.display()))?;
     }
     Ok(())
