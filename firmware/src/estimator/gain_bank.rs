@@ -1,4 +1,4 @@
-//! The bank of gain hypotheses ([`GainBank`]): the estimator runs [`GAINS`]
+//! The bank of gain hypotheses (`GainBank`): the estimator runs [`GAINS`]
 //! grid filters, one per hypothesis of the sensor's relative optical gain (spaced in ln g
 //! around a prior: a calibration, a kept learned gain, or unknown), weighted
 //! by the forgetful mean of how well each foresaw the currents; the bank
