@@ -1,9 +1,11 @@
 //! The bank of gain hypotheses (`GainBank`): the estimator runs [`GAINS`]
-//! grid filters, one per hypothesis of the sensor's relative optical gain (spaced in ln g
-//! around a prior: a calibration, a kept learned gain, or unknown), weighted
-//! by the forgetful mean of how well each foresaw the currents; the bank
-//! follows the gain out of its range, and the temperature model of the gain
-//! (thesis §5.2.3) scales every hypothesis by the optics' temperature.
+//! grid filters, one per hypothesis of the sensor's relative optical gain
+//! (spaced in ln g around a prior: a calibration, a kept learned gain, or
+//! unknown), weighted by the forgetful mean of how well each foresaw the
+//! currents; the bank follows the gain out of its range, and the
+//! temperature model of the gain (thesis §5.2.3) scales every hypothesis by
+//! the optics' temperature. It reads nothing of the estimator but its
+//! settings and `fast_math`.
 
 use super::fast_math;
 use super::params::{EstimatorParams, within};
