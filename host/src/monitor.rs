@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use fois_protocol::{Command, DeviceMsg, GainEstimate, IceEstimate, Measurement};
+use fois_protocol::{Command, DeviceMsg};
 
 use crate::csvlog::{CsvLog, Row};
 use crate::exit;
@@ -75,32 +75,7 @@ impl MonitorOptions {
     }
 }
 
-/// Totals at the end of a monitor run.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct MonitorSummary {
-    /// Frames decoded.
-    pub frames: u64,
-    /// Measurements received.
-    pub measurements: u64,
-    /// Frames missing from the sequence.
-    pub lost: u64,
-    /// Frames the decoder rejected.
-    pub rejected: u64,
-    /// Times the link was lost.
-    pub disconnects: u64,
-    /// Rows written to the log.
-    pub log_rows: u64,
-    /// The last measurement.
-    pub last: Option<Measurement>,
-    /// The ice estimate of the last measurement (`None` for a protocol v1
-    /// node, which sends none, and until a v2 node has one).
-    pub last_estimate: Option<IceEstimate>,
-    /// The optical gain estimate of the last measurement (protocol v3
-    /// nodes).
-    pub last_gain: Option<GainEstimate>,
-    /// Ice onsets seen.
-    pub ice_onsets: u64,
-}
+pub use crate::status::MonitorSummary;
 
 /// The live view: a redrawn status line on a terminal, periodic lines
 /// otherwise; events as lines above it.

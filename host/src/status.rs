@@ -5,9 +5,34 @@
 
 use fois_link::reading::{celsius, ua};
 use fois_link::text::{estimate_text, gain_text};
-use fois_protocol::{DetectorState, Measurement, flags};
+use fois_protocol::{DetectorState, GainEstimate, IceEstimate, Measurement, flags};
 
-use crate::monitor::MonitorSummary;
+/// Totals at the end of a monitor run.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct MonitorSummary {
+    /// Frames decoded.
+    pub frames: u64,
+    /// Measurements received.
+    pub measurements: u64,
+    /// Frames missing from the sequence.
+    pub lost: u64,
+    /// Frames the decoder rejected.
+    pub rejected: u64,
+    /// Times the link was lost.
+    pub disconnects: u64,
+    /// Rows written to the log.
+    pub log_rows: u64,
+    /// The last measurement.
+    pub last: Option<Measurement>,
+    /// The ice estimate of the last measurement (`None` for a protocol v1
+    /// node, which sends none, and until a v2 node has one).
+    pub last_estimate: Option<IceEstimate>,
+    /// The optical gain estimate of the last measurement (protocol v3
+    /// nodes).
+    pub last_gain: Option<GainEstimate>,
+    /// Ice onsets seen.
+    pub ice_onsets: u64,
+}
 
 /// The status from the last measurement and the counters: three lines of at
 /// most 80 columns (measurement; state, alarm and the node's ice estimate;

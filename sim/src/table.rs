@@ -303,8 +303,9 @@ pub fn build_table(
 
 /// The table as the Rust source of `firmware/src/estimator/table.rs`: a header stating the
 /// version, seeds, runs and simulation parameters, then one `static` array per medium of
-/// `super::TableEntry` (fields `mu_na`, `sd_na`, `rho_q15`). `regenerate` is the command line
-/// that rewrites the file (quoted in the header).
+/// `super::table_entry::TableEntry` (fields `mu_na`, `sd_na`, `rho_q15`; the table reads only
+/// that file of the estimator). `regenerate` is the command line that rewrites the file (quoted
+/// in the header).
 pub fn to_rust_source(table: &ResponseTable, regenerate: &str) -> Result<String, SimError> {
     let spec = &table.spec;
     let rows = table.media.first().map_or(0, |m| m.rows.len());
@@ -391,7 +392,7 @@ pub fn to_rust_source(table: &ResponseTable, regenerate: &str) -> Result<String,
         "//! thickness (i + 1) · STEP_UM µm (thickness 0, the dry face, is modelled by the estimator)."
     );
     let _ = writeln!(w);
-    let _ = writeln!(w, "use super::TableEntry as E;");
+    let _ = writeln!(w, "use super::table_entry::TableEntry as E;");
     let _ = writeln!(w);
     let _ = writeln!(w, "/// Table version (content and format).");
     let _ = writeln!(w, "pub const VERSION: u16 = {};", spec.version);

@@ -1,15 +1,19 @@
-//! The filter's driver: one [`Estimator::step`] per frame gathers the
-//! frames, and once per `update_period_s` predicts every hypothesis' grid
-//! over the elapsed time and updates it with the frames' robust mean (the
-//! first valid frame sets them at once); then the bank learns the gain and
-//! the output posterior is the weighted mixture of the grids'.
+//! The estimator ([`Estimator`]) and its driver, the top of the estimator's
+//! files (it reads the others, none reads it): one [`Estimator::step`] per
+//! frame gathers the frames, and once per `update_period_s` predicts every
+//! hypothesis' grid over the elapsed time and updates it with the frames'
+//! robust mean (the first valid frame sets them at once); then the bank
+//! learns the gain and the output posterior is the weighted mixture of the
+//! grids'.
 
 use fois_protocol::IceEstimate;
 
-use super::gain_bank::{GAIN_STEP_MAX, GAINS, UNKNOWN_GAIN_SD};
+use super::fast_math;
+use super::gain_bank::{GAINS, Gain, GainBank, UNKNOWN_GAIN_SD};
 use super::grid::{self, Grid, Moments, Shared};
 use super::params::{EstimatorParams, within};
-use super::{Estimator, Posterior, ROWS, STEP_MM, Update, fast_math, row_mm};
+use super::posterior::{Posterior, Update};
+use super::response::{ROWS, STEP_MM, row_mm};
 
 /// Prior probability of the dry face; the three media share the rest.
 const PRIOR_DRY: f32 = 0.25;
@@ -33,6 +37,35 @@ fn softplus(x: f32) -> f32 {
     }
 }
 
+/// The estimator: a bank of [`GAINS`] grid filters, one per hypothesis of
+/// the optical gain, weighted by how well each foresaw the currents.
+#[derive(Debug, Clone)]
+pub struct Estimator {
+    params: EstimatorParams,
+    grids: [Grid; GAINS],
+    /// The gain hypotheses, their weights and the temperature model.
+    bank: GainBank,
+    /// ln of the normalising sum of the water prior exp(−d/scale).
+    water_log_norm: f32,
+    /// Air temperature of the last frame, °C (`None`: no NTC).
+    air_temp_c: Option<f32>,
+    /// Frames waiting for the next update (currents in nA).
+    pending: [[f32; 2]; MAX_PENDING],
+    pending_n: usize,
+    /// Frames since the last update that read far below zero.
+    pending_negative: usize,
+    /// Time since the last update, s.
+    pending_dt_s: f32,
+    update: Update,
+    posterior: Option<Posterior>,
+}
+
+impl Default for Estimator {
+    fn default() -> Self {
+        Self::new(EstimatorParams::default())
+    }
+}
+
 impl Estimator {
     /// A filter with these settings (sanitised), waiting for its first
     /// frame, its gain unknown (1 ± [`UNKNOWN_GAIN_SD`]).
@@ -43,17 +76,10 @@ impl Estimator {
         for i in 0..ROWS {
             sum += fast_math::exp(-row_mm(i) / params.water_scale_mm);
         }
-        let mut est = Estimator {
+        Estimator {
             params,
             grids: [const { Grid::new() }; GAINS],
-            ln_gains: [0.0; GAINS],
-            gain_step: GAIN_STEP_MAX,
-            prior: (0.0, UNKNOWN_GAIN_SD),
-            evidence: [0.0; GAINS],
-            evidence_started: false,
-            tempco_per_k: 0.0,
-            tempco_sd_per_k: 0.0,
-            optics_temp_c: None,
+            bank: GainBank::new(),
             water_log_norm: fast_math::ln(if sum > 0.0 { sum } else { 1.0 }),
             air_temp_c: None,
             pending: [[0.0; 2]; MAX_PENDING],
@@ -62,10 +88,7 @@ impl Estimator {
             pending_dt_s: 0.0,
             update: Update::Waiting,
             posterior: None,
-            weights: [0.0; GAINS],
-        };
-        est.set_gain_prior(1.0, UNKNOWN_GAIN_SD);
-        est
+        }
     }
 
     /// The settings in force.
@@ -79,13 +102,11 @@ impl Estimator {
         for g in self.grids.iter_mut() {
             g.reset();
         }
-        self.evidence = [0.0; GAINS];
-        self.evidence_started = false;
+        self.bank.forget_evidence();
         self.air_temp_c = None;
         self.clear_pending();
         self.update = Update::Waiting;
         self.posterior = None;
-        self.weights = self.prior_weights();
     }
 
     /// The face is known to be clean and dry (a dark calibration has just
@@ -133,9 +154,10 @@ impl Estimator {
     /// hypothesis, unnormalised, before the prior and the temperature:
     /// `(dry, [medium][row])` (tests, plots).
     pub fn cells(&self) -> (f32, &[[f32; ROWS]; 3]) {
+        let weights = self.bank.weights();
         let mut best = 0;
-        for (j, w) in self.weights.iter().enumerate() {
-            if *w > self.weights.get(best).copied().unwrap_or(0.0) {
+        for (j, w) in weights.iter().enumerate() {
+            if *w > weights.get(best).copied().unwrap_or(0.0) {
                 best = j;
             }
         }
@@ -255,7 +277,7 @@ impl Estimator {
         // thickness for ice, ∝ exp(−d / scale) for water.
         let medium = (1.0 - PRIOR_DRY) / 3.0;
         let ice_row = medium / ROWS as f32;
-        let within = self.within_gain_sd();
+        let within = self.bank.within_sd(&self.params);
         Shared {
             r_na2: [
                 (p.noise_ua[0] * 1000.0) * (p.noise_ua[0] * 1000.0),
@@ -277,7 +299,7 @@ impl Estimator {
     #[inline(never)]
     fn initialise(&mut self, x: [f32; 2]) -> Option<IceEstimate> {
         let shared = self.shared();
-        let gains = self.gains_now();
+        let gains = self.bank.gains_now();
         let mut ln_z = [f32::NEG_INFINITY; GAINS];
         let mut any = false;
         for ((g, gain), z) in self.grids.iter_mut().zip(gains).zip(ln_z.iter_mut()) {
@@ -306,7 +328,7 @@ impl Estimator {
         let negative = x.is_none() && self.pending_negative > 0;
         self.clear_pending();
         let shared = self.shared();
-        let gains = self.gains_now();
+        let gains = self.bank.gains_now();
         if negative {
             for g in self.grids.iter_mut() {
                 g.forget(dt_s, &self.params);
@@ -340,9 +362,10 @@ impl Estimator {
             }
         }
         // What the bank did: measured if the likely hypotheses measured.
+        let weights = self.bank.weights();
         let mut best = 0;
-        for (j, w) in self.weights.iter().enumerate() {
-            if *w > self.weights.get(best).copied().unwrap_or(0.0) {
+        for (j, w) in weights.iter().enumerate() {
+            if *w > weights.get(best).copied().unwrap_or(0.0) {
                 best = j;
             }
         }
@@ -356,8 +379,17 @@ impl Estimator {
         self.summarise();
     }
 
+    /// The bank learns the gain from each hypothesis' ln predictive
+    /// likelihood; when it followed the gain out of its range, the posterior
+    /// is mixed anew with the new weights.
+    fn learn_gain(&mut self, dt_s: f32, ln_z: &[f32; GAINS]) {
+        if self.bank.learn(dt_s, ln_z, self.params.gain_memory_s) && self.posterior.is_some() {
+            self.summarise();
+        }
+    }
+
     /// The output posterior: the weighted mixture of the grids'.
-    pub(super) fn summarise(&mut self) {
+    fn summarise(&mut self) {
         let shared = self.shared();
         let mut parts = [None; GAINS];
         for (p, g) in parts.iter_mut().zip(self.grids.iter()) {
@@ -366,7 +398,7 @@ impl Estimator {
         let post = Moments::mixture(
             parts
                 .iter()
-                .zip(self.weights)
+                .zip(*self.bank.weights())
                 .filter_map(|(m, w)| m.map(|m| (w, m))),
         );
         if post.is_none() {
@@ -377,5 +409,74 @@ impl Estimator {
             self.update = update;
         }
         self.posterior = post;
+    }
+
+    /// Set the gain's prior: `gain` relative to the table (at
+    /// [`GAIN_REF_TEMP_C`](super::gain_bank::GAIN_REF_TEMP_C)) with relative standard
+    /// deviation `sd` (0.02 for a calibrated gain, [`UNKNOWN_GAIN_SD`] for
+    /// none). The hypotheses are centred on it, spaced by its standard
+    /// deviation (within 0.01 … 0.153 in ln g); what the frames had taught
+    /// about the gain is forgotten. Values out of range (gain outside
+    /// 0.1 … 10, NaN) leave the prior unknown.
+    pub fn set_gain_prior(&mut self, gain: f32, sd: f32) {
+        self.bank.set_prior(gain, sd);
+        if self.posterior.is_some() {
+            self.summarise();
+        }
+    }
+
+    /// Forget the gain: back to the unknown prior 1 ± [`UNKNOWN_GAIN_SD`].
+    pub fn reset_gain(&mut self) {
+        self.set_gain_prior(1.0, UNKNOWN_GAIN_SD);
+    }
+
+    /// The gain's prior (gain at [`GAIN_REF_TEMP_C`](super::gain_bank::GAIN_REF_TEMP_C),
+    /// relative sd).
+    pub fn gain_prior(&self) -> (f32, f32) {
+        self.bank.prior()
+    }
+
+    /// The temperature model of the gain: g(T) = g₂₅ · exp(κ (T − 25 °C))
+    /// with κ = `tempco_ppm_per_k` · 10⁻⁶ (clamped to ±5 %/K) applied to
+    /// the currents, and its uncertainty (documentation of the residual the
+    /// gain state absorbs).
+    pub fn set_temperature_model(&mut self, tempco_ppm_per_k: i32, sd_ppm_per_k: u32) {
+        self.bank
+            .set_temperature_model(tempco_ppm_per_k, sd_ppm_per_k);
+    }
+
+    /// The temperature of the optoelectronics (LED, phototransistors: the
+    /// MCU's die sensor beside them), °C; `None` keeps the last one.
+    pub fn set_optics_temp_c(&mut self, t_c: Option<f32>) {
+        self.bank.set_optics_temp_c(t_c);
+    }
+
+    /// The gain factor the temperature model applies now: exp(κ (T − 25 °C))
+    /// (1 without a temperature).
+    pub fn compensation(&self) -> f32 {
+        self.bank.compensation()
+    }
+
+    /// The gain estimate (the mixture of the hypotheses, at the
+    /// temperature now); `None` before the first valid frame.
+    pub fn gain(&self) -> Option<Gain> {
+        self.posterior?;
+        Some(self.bank.gain())
+    }
+
+    /// The weight of each gain hypothesis (sums to 1).
+    pub fn gain_weights(&self) -> &[f32; GAINS] {
+        self.bank.weights()
+    }
+
+    /// The gain hypotheses (at [`GAIN_REF_TEMP_C`](super::gain_bank::GAIN_REF_TEMP_C)).
+    pub fn gain_hypotheses(&self) -> [f32; GAINS] {
+        self.bank.hypotheses()
+    }
+
+    /// Weight of the two outermost hypotheses: near 1, the gain may lie
+    /// beyond the range the bank covers.
+    pub fn gain_outside(&self) -> f32 {
+        self.bank.outside()
     }
 }

@@ -1,12 +1,16 @@
 //! One grid Bayes filter over thickness × medium plus a dry state, for one
 //! hypothesis of the sensor's optical gain g: the response table's means and
 //! spreads scaled by g (thesis §5.4: every current is proportional to the
-//! LED's flux and the phototransistors' responsivity). The bank in
-//! `estimator.rs` runs several of these side by side; the tempered update,
-//! the transitions and the pruning are described there.
+//! LED's flux and the phototransistors' responsivity). The estimator
+//! (`filter.rs`) runs several of these side by side; the tempered update,
+//! the transitions and the pruning are described in the module
+//! documentation (`mod.rs`).
 
 use super::fast_math;
-use super::{EstimatorParams, MEDIA, Posterior, ROWS, STEP_MM, TableEntry, Update, table_of};
+use super::params::EstimatorParams;
+use super::posterior::{Posterior, Update};
+use super::response::{MEDIA, ROWS, STEP_MM, table_of};
+use super::table_entry::TableEntry;
 
 /// A state whose probability falls below this (relative to the most likely
 /// one, e^−27.6) is ruled out: set to exactly zero, it returns only through

@@ -15,7 +15,7 @@
 //! Packing: μ and σ of I1, I2 in nA (u16), correlation ρ · 32767 (i16); row i is the
 //! thickness (i + 1) · STEP_UM µm (thickness 0, the dry face, is modelled by the estimator).
 
-use super::TableEntry as E;
+use super::table_entry::TableEntry as E;
 
 /// Table version (content and format).
 pub const VERSION: u16 = 2;
