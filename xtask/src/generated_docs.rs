@@ -108,7 +108,7 @@ pub fn thousands(n: u64) -> String {
     let digits = n.to_string();
     let mut out = String::new();
     for (i, c) in digits.chars().enumerate() {
-        if i > 0 && (digits.len() - i) % 3 == 0 {
+        if i > 0 && (digits.len() - i).is_multiple_of(3) {
             out.push(' ');
         }
         out.push(c);
@@ -183,7 +183,11 @@ mod tests {
         assert_eq!(std::fs::read_to_string(&path).unwrap(), DOC);
         sync(&path, "size", "size table", stale, Mode::Write).unwrap();
         sync(&path, "size", "size table", stale, Mode::Check).unwrap();
-        assert!(std::fs::read_to_string(&path).unwrap().contains("| 1 | 3 |"));
+        assert!(
+            std::fs::read_to_string(&path)
+                .unwrap()
+                .contains("| 1 | 3 |")
+        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

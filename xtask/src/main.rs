@@ -7,7 +7,8 @@
 //!   ([`crates`]), the module rule: no import circles between a crate's
 //!   files ([`modules`]), clippy (host crates, and the firmware on its thumb
 //!   target), the whole test suite, the firmware's release cross-build with
-//!   its size budget, the firmware logic on an emulated Cortex-M4F, the
+//!   its size budget, the firmware logic on an emulated Cortex-M4F (both
+//!   with firmware/README.md's tables of their figures checked), the
 //!   fuzz crates' build, the gateway's Debian package ([`package`]), and
 //!   the Home Assistant check when its inputs changed since its recorded
 //!   pass ([`ha_check`]).
@@ -110,8 +111,9 @@ fn main() -> Result<()> {
                 "usage: cargo xtask <task>\n\n\
                  tasks:\n  \
                  ci     system tools, format, crate rules, module rule, clippy (host + thumb), tests, firmware size\n         \
-                 budget, QEMU run, fuzz crates build, the gateway's Debian package, the Home\n         \
-                 Assistant check when its inputs changed since its recorded pass\n  \
+                 budget and QEMU run (each with its firmware/README.md table checked), fuzz crates build,\n         \
+                 the gateway's Debian package, the Home Assistant check when its inputs changed since its\n         \
+                 recorded pass\n  \
                  tools  install the system tools the tests need (mosquitto, qemu-system-arm, systemd, python3)\n         and the gateway Modbus tests' pymodbus virtualenv (target/pymodbus-venv)\n  \
                  crates check the crate rules of ARCHITECTURE.md on the dependency graph\n  \
                  modules [--graph]  check that no two files of a crate import each other (directly or around\n         \
@@ -193,7 +195,9 @@ fn ci() -> Result<()> {
         sizes = firmware_variants()?;
         measured::sync_sizes(&sizes, BUDGET, Mode::Check)
     })?;
-    step("firmware on emulated Cortex-M4F", &mut || qemu(true, Mode::Check))?;
+    step("firmware on emulated Cortex-M4F", &mut || {
+        qemu(true, Mode::Check)
+    })?;
     step("fuzz targets build", &mut || {
         // The fuzz crates are their own workspaces (cargo-fuzz runs them on
         // nightly); libfuzzer-sys builds on the pinned toolchain, so CI
