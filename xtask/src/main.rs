@@ -7,7 +7,8 @@
 //!   ([`crates`]), the module rule: no import circles between a crate's
 //!   files ([`modules`]), clippy (host crates, and the firmware on its thumb
 //!   target), the whole test suite, the firmware's release cross-build with
-//!   its size budget, the firmware logic on an emulated Cortex-M4F, the
+//!   its size budget, the firmware logic on an emulated Cortex-M4F (both
+//!   with firmware/README.md's tables of their figures checked), the
 //!   fuzz crates' build, the gateway's Debian package ([`package`]), and
 //!   the Home Assistant check when its inputs changed since its recorded
 //!   pass ([`ha_check`]).
@@ -22,10 +23,14 @@
 //!   discovery checked by real Home Assistant releases (installed into
 //!   cached virtualenvs); `--if-changed`: only when its inputs changed since
 //!   the recorded pass (what `ci` runs).
-//! - `cargo xtask size` — cross-build the firmware's two link variants (the
-//!   ST-LINK's virtual COM port; `field-link`: RS-485 on USART6), lint the
-//!   field one on thumb, and check both against the size budget.
-//! - `cargo xtask qemu` — run the firmware logic under qemu-system-arm.
+//! - `cargo xtask size [--write]` — cross-build the firmware's two link
+//!   variants (the ST-LINK's virtual COM port; `field-link`: RS-485 on
+//!   USART6), lint the field one on thumb, check both against the size
+//!   budget and firmware/README.md's size table against them (stale: fails;
+//!   `--write`: rewrites it; [`generated_docs`]).
+//! - `cargo xtask qemu [--write]` — run the firmware logic under
+//!   qemu-system-arm, and check (or with `--write` rewrite)
+//!   firmware/README.md's table of its instruction counts.
 //! - `cargo xtask fuzz [--runs N] [--target NAME]` — every cargo-fuzz target
 //!   (or one) for N executions (default 10⁷), installing the nightly
 //!   toolchain and cargo-fuzz if missing.
@@ -37,18 +42,26 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 
 mod crates;
+mod generated_docs;
 mod ha_check;
+mod measured;
 mod modules;
 mod package;
 mod shell;
 mod tools;
 
+use generated_docs::Mode;
 use shell::{have, run};
 
 /// Flash budget of the firmware image (the project's goal for a small MCU).
 const FLASH_BUDGET_BYTES: u64 = 128 * 1024;
 /// Static RAM budget (.data + .bss; the stack comes on top, flip-link places it below).
 const RAM_BUDGET_BYTES: u64 = 32 * 1024;
+/// Both, for the size table.
+const BUDGET: measured::Budget = measured::Budget {
+    flash_bytes: FLASH_BUDGET_BYTES,
+    ram_bytes: RAM_BUDGET_BYTES,
+};
 const THUMB: &str = "thumbv7em-none-eabihf";
 /// The cargo-fuzz crates (each its own workspace) and their targets.
 const FUZZ_TARGETS: [(&str, &str); 3] = [
@@ -83,16 +96,24 @@ fn main() -> Result<()> {
             Some("--if-changed") => ha_check::if_changed(&root),
             Some(other) => bail!("usage: cargo xtask ha-check [--if-changed] (not `{other}`)"),
         },
-        "size" => firmware_variants().map(|_| ()),
-        "qemu" => qemu(true),
+        "size" => {
+            let mode = Mode::from_args("size", &std::env::args().skip(2).collect::<Vec<_>>())?;
+            let sizes = firmware_variants()?;
+            measured::sync_sizes(&sizes, BUDGET, mode)
+        }
+        "qemu" => qemu(
+            true,
+            Mode::from_args("qemu", &std::env::args().skip(2).collect::<Vec<_>>())?,
+        ),
         "fuzz" => fuzz(&std::env::args().skip(2).collect::<Vec<_>>()),
         _ => {
             eprintln!(
                 "usage: cargo xtask <task>\n\n\
                  tasks:\n  \
                  ci     system tools, format, crate rules, module rule, clippy (host + thumb), tests, firmware size\n         \
-                 budget, QEMU run, fuzz crates build, the gateway's Debian package, the Home\n         \
-                 Assistant check when its inputs changed since its recorded pass\n  \
+                 budget and QEMU run (each with its firmware/README.md table checked), fuzz crates build,\n         \
+                 the gateway's Debian package, the Home Assistant check when its inputs changed since its\n         \
+                 recorded pass\n  \
                  tools  install the system tools the tests need (mosquitto, qemu-system-arm, systemd, python3)\n         and the gateway Modbus tests' pymodbus virtualenv (target/pymodbus-venv)\n  \
                  crates check the crate rules of ARCHITECTURE.md on the dependency graph\n  \
                  modules [--graph]  check that no two files of a crate import each other (directly or around\n         \
@@ -101,8 +122,10 @@ fn main() -> Result<()> {
                  ha-check [--if-changed]  the gateway's Home Assistant discovery checked by Home Assistant\n         \
                  2024.1.6 and 2024.3.3 (installed into virtualenvs under ~/.cache/fois/home-assistant);\n         \
                  records a pass; --if-changed: only when its inputs changed since the recorded pass\n  \
-                 size   cross-build both firmware link variants (release) and check flash <= 128 KiB, RAM <= 32 KiB\n  \
-                 qemu   run the firmware logic tests on qemu-system-arm (mps2-an386)\n  \
+                 size [--write]  cross-build both firmware link variants (release), check flash <= 128 KiB,\n         \
+                 RAM <= 32 KiB and firmware/README.md's size table; --write: rewrite the table\n  \
+                 qemu [--write]  run the firmware logic tests on qemu-system-arm (mps2-an386), check\n         \
+                 firmware/README.md's instruction-count table; --write: rewrite the table\n  \
                  fuzz   [--runs N] [--target NAME] run every fuzz target (or one) N times (default 10^7; installs nightly + cargo-fuzz)"
             );
             if task == "help" || task == "--help" {
@@ -170,9 +193,11 @@ fn ci() -> Result<()> {
     let mut sizes = Vec::new();
     step("firmware size (both link variants)", &mut || {
         sizes = firmware_variants()?;
-        Ok(())
+        measured::sync_sizes(&sizes, BUDGET, Mode::Check)
     })?;
-    step("firmware on emulated Cortex-M4F", &mut || qemu(true))?;
+    step("firmware on emulated Cortex-M4F", &mut || {
+        qemu(true, Mode::Check)
+    })?;
     step("fuzz targets build", &mut || {
         // The fuzz crates are their own workspaces (cargo-fuzz runs them on
         // nightly); libfuzzer-sys builds on the pinned toolchain, so CI
@@ -415,9 +440,11 @@ fn fuzz(args: &[String]) -> Result<()> {
     Ok(())
 }
 
-/// Run the firmware's hardware-free logic on qemu-system-arm (mps2-an386).
-/// `cargo xtask ci` installs QEMU first ([`tools`]); without it this fails.
-fn qemu(required: bool) -> Result<()> {
+/// Run the firmware's hardware-free logic on qemu-system-arm (mps2-an386),
+/// then check (or rewrite) firmware/README.md's instruction counts with
+/// what it printed. `cargo xtask ci` installs QEMU first ([`tools`]);
+/// without it this fails.
+fn qemu(required: bool, mode: Mode) -> Result<()> {
     let script = Path::new("firmware/qemu-test/run.sh");
     if !script.exists() {
         eprintln!("skipped: {} does not exist yet", script.display());
@@ -430,7 +457,35 @@ fn qemu(required: bool) -> Result<()> {
         eprintln!("skipped: qemu-system-arm is not installed (apt-get install qemu-system-arm)");
         return Ok(());
     }
-    run("bash", &[&script.to_string_lossy()])
+    let output = run_echoed("bash", &[&script.to_string_lossy()])?;
+    measured::sync_qemu(&output, mode)
+}
+
+/// Run a command, its standard output shown as it comes and returned;
+/// failing on a non-zero exit.
+fn run_echoed(program: &str, args: &[&str]) -> Result<String> {
+    use std::io::{BufRead, BufReader, Write};
+    eprintln!("\n$ {program} {}", args.join(" "));
+    let mut child = Command::new(program)
+        .args(args)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .with_context(|| format!("could not start `{program}`"))?;
+    let mut text = String::new();
+    if let Some(out) = child.stdout.take() {
+        let mut stdout = std::io::stdout();
+        for line in BufReader::new(out).lines() {
+            let line = line?;
+            writeln!(stdout, "{line}")?;
+            text.push_str(&line);
+            text.push('\n');
+        }
+    }
+    let status = child.wait()?;
+    if !status.success() {
+        bail!("`{program} {}` failed ({status})", args.join(" "));
+    }
+    Ok(text)
 }
 
 #[cfg(test)]

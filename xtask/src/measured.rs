@@ -1,0 +1,228 @@
+//! The firmware's two deterministic figures, as firmware/README.md shows
+//! them: the image sizes (`cargo xtask size`) and the instruction counts on
+//! the emulated Cortex-M4F (`cargo xtask qemu`). Both follow from the
+//! pinned toolchain and `Cargo.lock` (QEMU runs with `-icount shift=0`), so
+//! the README's tables are checked against each run ([`crate::generated_docs`]).
+
+use std::path::Path;
+
+use anyhow::{Context, Result, bail};
+
+use crate::generated_docs::{Mode, sync, thousands};
+
+/// The file that holds both tables.
+pub const FIRMWARE_README: &str = "firmware/README.md";
+
+/// Flash and static-RAM budgets, bytes (the task's own, passed in).
+#[derive(Debug, Clone, Copy)]
+pub struct Budget {
+    pub flash_bytes: u64,
+    pub ram_bytes: u64,
+}
+
+/// The size table: one row per link variant (name, flash bytes, static RAM
+/// bytes), in the order measured.
+pub fn size_table(sizes: &[(&str, u64, u64)], budget: Budget) -> String {
+    let kib = |b: u64| format!("{:.1} KiB", b as f64 / 1024.0);
+    let mut out = String::from(
+        "| variant | flash | static RAM |\n\
+         | --- | ---: | ---: |\n",
+    );
+    for (variant, flash, ram) in sizes {
+        let name = match *variant {
+            "bench link" => "bench link (default)".to_string(),
+            other => format!("`{other}`"),
+        };
+        out.push_str(&format!(
+            "| {name} | {} B ({} of {} KiB) | {} B ({} of {} KiB) |\n",
+            thousands(*flash),
+            kib(*flash),
+            budget.flash_bytes / 1024,
+            thousands(*ram),
+            kib(*ram),
+            budget.ram_bytes / 1024,
+        ));
+    }
+    out
+}
+
+/// Check (or rewrite) the README's size table against `sizes`.
+pub fn sync_sizes(sizes: &[(&str, u64, u64)], budget: Budget, mode: Mode) -> Result<()> {
+    sync(
+        Path::new(FIRMWARE_README),
+        "size",
+        "size table",
+        &size_table(sizes, budget),
+        mode,
+    )
+}
+
+/// What the QEMU image prints about its cost.
+#[derive(Debug, Clone, PartialEq)]
+pub struct QemuFigures {
+    pub tests_passed: u64,
+    pub calibration_instructions: u64,
+    pub calibration_ticks: u64,
+    pub per_frame: u64,
+    pub estimator_per_frame: u64,
+    pub estimator_per_s: u64,
+    pub estimator_budget_per_s: u64,
+    pub estimator_worst_per_s: u64,
+    /// "226 of 226 states alive in the likeliest of 7 gain hypotheses".
+    pub worst_case_states: String,
+}
+
+/// The whole number that follows `marker` in `text` (spaces skipped).
+fn number_after(text: &str, marker: &str) -> Result<u64> {
+    let at = text
+        .find(marker)
+        .with_context(|| format!("the QEMU run printed no `{marker}`"))?;
+    let digits: String = text[at + marker.len()..]
+        .trim_start()
+        .chars()
+        .take_while(char::is_ascii_digit)
+        .collect();
+    digits
+        .parse()
+        .with_context(|| format!("no number after `{marker}` in the QEMU run's output"))
+}
+
+/// Read the figures from the QEMU run's standard output.
+pub fn parse_qemu(out: &str) -> Result<QemuFigures> {
+    let worst_line = out
+        .lines()
+        .find(|l| l.starts_with("estimator worst case:"))
+        .context("the QEMU run printed no `estimator worst case:` line")?;
+    let worst_case_states = worst_line
+        .split_once('(')
+        .and_then(|(_, rest)| rest.split(';').next())
+        .map(str::to_string)
+        .context("the worst-case line names no states")?;
+    let failed = number_after(out, "passed;")?;
+    if failed != 0 {
+        bail!("{failed} tests failed on the emulated M4F");
+    }
+    Ok(QemuFigures {
+        tests_passed: number_after(out, "test result: ok.")?,
+        calibration_instructions: number_after(out, "SysTick calibration:")?,
+        calibration_ticks: number_after(out, "instructions in")?,
+        per_frame: number_after(out, "instructions per frame:")?,
+        estimator_per_frame: number_after(out, "estimator instructions per step:")?,
+        estimator_per_s: number_after(out, "one update a second:")?,
+        estimator_budget_per_s: number_after(out, "per second of operation, budget")?,
+        estimator_worst_per_s: number_after(out, "estimator worst case:")?,
+        worst_case_states,
+    })
+}
+
+/// The instruction-count table.
+pub fn qemu_table(f: &QemuFigures) -> String {
+    let budget = thousands(f.estimator_budget_per_s);
+    format!(
+        "| figure | instructions |\n\
+         | --- | ---: |\n\
+         | one output frame (default config: K = 8, streaming, the `MeasurementV3` frame encoded, the ice estimator included) | {} |\n\
+         | the ice estimator, per 10 Hz frame on average (nine frames gathered, one update of the gain hypotheses a second; rime at 5 mm) | {} |\n\
+         | the ice estimator, per second of 10 Hz operation (budget {budget}) | {} |\n\
+         | the ice estimator, worst second ({}; budget {budget}) | {} |\n\
+         | SysTick calibration: a loop of known length, instructions in ticks | {} in {} |\n\
+         \n\
+         The run's tests: {} passed on the emulated M4F.\n",
+        thousands(f.per_frame),
+        thousands(f.estimator_per_frame),
+        thousands(f.estimator_per_s),
+        f.worst_case_states,
+        thousands(f.estimator_worst_per_s),
+        thousands(f.calibration_instructions),
+        thousands(f.calibration_ticks),
+        f.tests_passed,
+    )
+}
+
+/// Check (or rewrite) the README's instruction-count table against the
+/// QEMU run's output.
+pub fn sync_qemu(output: &str, mode: Mode) -> Result<()> {
+    let figures = parse_qemu(output)?;
+    sync(
+        Path::new(FIRMWARE_README),
+        "qemu",
+        "instruction-count table",
+        &qemu_table(&figures),
+        mode,
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The QEMU image's output, as `bash firmware/qemu-test/run.sh` prints it.
+    const RUN: &str = "running 8 tests on the emulated Cortex-M4F\n\
+        test ntc_and_vref ... ok\n\
+        test result: ok. 8 passed; 0 failed\n\
+        SysTick calibration: 4000000 instructions in 99999 ticks = 40.0004 instructions per tick\n\
+        measurement loop: K = 8 cycles/frame, 200 and 400 frames, 26131 bytes sent\n\
+        instructions per frame: 37770\n\
+        \x20 (about 2360 us of CPU per frame at 16 MHz)\n\
+        estimator instructions per step: 46911 (mean over 10 Hz frames, one update a second: 469110 per second of operation, budget 600000)\n\
+        estimator worst case: 560805 instructions per second of 10 Hz frames (226 of 226 states alive in the likeliest of 7 gain hypotheses; ±1 tick = ±40)\n";
+
+    #[test]
+    fn the_qemu_figures_are_read_from_its_output() {
+        let f = parse_qemu(RUN).unwrap();
+        assert_eq!(
+            f,
+            QemuFigures {
+                tests_passed: 8,
+                calibration_instructions: 4_000_000,
+                calibration_ticks: 99_999,
+                per_frame: 37_770,
+                estimator_per_frame: 46_911,
+                estimator_per_s: 469_110,
+                estimator_budget_per_s: 600_000,
+                estimator_worst_per_s: 560_805,
+                worst_case_states: "226 of 226 states alive in the likeliest of 7 gain hypotheses"
+                    .into(),
+            }
+        );
+        let table = qemu_table(&f);
+        assert!(table.contains("| 37 770 |"), "{table}");
+        assert!(table.contains("budget 600 000) | 560 805 |"), "{table}");
+        assert!(table.contains("| 4 000 000 in 99 999 |"), "{table}");
+    }
+
+    #[test]
+    fn a_run_without_a_figure_or_with_a_failed_test_is_refused() {
+        let no_frame = RUN.replace("instructions per frame: 37770", "");
+        assert!(
+            parse_qemu(&no_frame)
+                .unwrap_err()
+                .to_string()
+                .contains("instructions per frame:")
+        );
+        let failed = RUN.replace("ok. 8 passed; 0 failed", "FAILED. 7 passed; 1 failed");
+        assert!(parse_qemu(&failed).is_err());
+    }
+
+    #[test]
+    fn the_size_table_has_one_row_per_variant() {
+        let budget = Budget {
+            flash_bytes: 128 * 1024,
+            ram_bytes: 32 * 1024,
+        };
+        let table = size_table(
+            &[
+                ("field-link", 91_264, 18_384),
+                ("bench link", 91_244, 18_388),
+            ],
+            budget,
+        );
+        assert_eq!(
+            table,
+            "| variant | flash | static RAM |\n\
+             | --- | ---: | ---: |\n\
+             | `field-link` | 91 264 B (89.1 KiB of 128 KiB) | 18 384 B (18.0 KiB of 32 KiB) |\n\
+             | bench link (default) | 91 244 B (89.1 KiB of 128 KiB) | 18 388 B (18.0 KiB of 32 KiB) |\n"
+        );
+    }
+}
