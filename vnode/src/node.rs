@@ -332,7 +332,7 @@ impl VirtualNode {
         if opts.gain_calibration.is_some() || opts.config.is_some() {
             let mut record = match opts.gain_calibration {
                 Some((gain, rel_sd)) => factory_record(gain, rel_sd),
-                None => fois_firmware::persist::Record {
+                None => fois_firmware::storage::record::Record {
                     config: fois_protocol::Config::default(),
                     baseline: None,
                     gain: None,
