@@ -797,5 +797,11 @@ fn a_gain_calibration_without_a_target_says_to_put_one_on() {
         "9.56",
     ]);
     assert_eq!(code, 6, "{err}");
-    assert!(err.contains("what to do:"), "{err}");
+    // The node sees the currents jump about a zero mean (`Step`): the
+    // advice for a gain calibration is to put the target on.
+    assert!(err.contains("CalibrationRefused(Step)"), "{err}");
+    assert!(
+        err.contains("what to do: no target on the face? Put the reference target on"),
+        "{err}"
+    );
 }
