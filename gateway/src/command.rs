@@ -4,6 +4,7 @@
 //! ([`command_word`]), and [`FrontEndCommand`], a command from a front end
 //! other than MQTT (Modbus) on its way to the state machine.
 
+use fois_link::versioned;
 use fois_protocol::Command;
 
 /// The longest command message read, bytes: anything longer is skipped
@@ -39,11 +40,16 @@ impl NodeCommand {
         }
     }
 
-    /// The protocol command the reader sends.
-    pub fn wire_command(self) -> Command {
+    /// The protocol command the reader sends to a node of protocol
+    /// `node_version`: the guarded, unforced dark calibration and the
+    /// acknowledgement that answers `NoAlarm` from version 4, the older
+    /// commands before (a forced calibration is for `foisctl` at the node).
+    pub fn wire_command(self, node_version: u16) -> Command {
         match self {
-            NodeCommand::AckAlarm => Command::AckAlarm,
-            NodeCommand::CalibrateDark => Command::CalibrateDark,
+            NodeCommand::AckAlarm => versioned::ack_command(node_version),
+            NodeCommand::CalibrateDark => {
+                versioned::dark_command(node_version, false).unwrap_or(Command::CalibrateDark)
+            }
         }
     }
 }
@@ -87,5 +93,19 @@ mod tests {
         assert_eq!(command_word(r#"{"command": "ack"}"#), "ack");
         assert_eq!(command_word(" calibrate-dark\n"), " calibrate-dark\n");
         assert_eq!(command_word(r#"{"cmd": "ack"}"#), r#"{"cmd": "ack"}"#);
+    }
+
+    #[test]
+    fn an_older_node_gets_the_commands_it_knows() {
+        assert_eq!(NodeCommand::AckAlarm.wire_command(3), Command::AckAlarm);
+        assert_eq!(NodeCommand::AckAlarm.wire_command(4), Command::AckAlarmV4);
+        assert_eq!(
+            NodeCommand::CalibrateDark.wire_command(2),
+            Command::CalibrateDark
+        );
+        assert_eq!(
+            NodeCommand::CalibrateDark.wire_command(4),
+            Command::CalibrateDarkV4 { force: false }
+        );
     }
 }

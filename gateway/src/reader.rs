@@ -178,10 +178,11 @@ pub fn run_reader<P, O, S>(
             }
         };
         unreachable_said = false;
+        let node_version = hello.protocol_version;
         if !rep.send(NodeUpdate::Up(hello)) {
             return;
         }
-        let end = stream(&mut link, &mut rep, commands, timings, stop);
+        let end = stream(&mut link, &mut rep, commands, node_version, timings, stop);
         tracker = link.seq.clone();
         match end {
             StreamEnd::SinkGone => return,
@@ -206,11 +207,13 @@ enum StreamEnd {
     SinkGone,
 }
 
-/// Stream until the link is lost, `stop`, or the sink is gone.
+/// Stream until the link is lost, `stop`, or the sink is gone. Commands
+/// take the shape of the node's protocol `node_version`.
 fn stream<P: Read + Write, S: Sink>(
     link: &mut Link<P>,
     rep: &mut Reporter<'_, S>,
     commands: &Receiver<NodeCommand>,
+    node_version: u16,
     timings: ReaderTimings,
     stop: &AtomicBool,
 ) -> StreamEnd {
@@ -228,7 +231,7 @@ fn stream<P: Read + Write, S: Sink>(
             return StreamEnd::Stopped;
         }
         match commands.try_recv() {
-            Ok(cmd) => match link.send(cmd.wire_command()) {
+            Ok(cmd) => match link.send(cmd.wire_command(node_version)) {
                 Ok(id) => pending.push((id, cmd, Instant::now())),
                 Err(e) => {
                     let detail = format!("not sent: {e}");
@@ -410,6 +413,7 @@ mod tests {
                 let reply = match c.cmd {
                     Command::GetInfo => Some(AckResult::Info(hello())),
                     Command::AckAlarm => Some(AckResult::AlarmAcknowledged),
+                    Command::AckAlarmV4 => Some(AckResult::NoAlarm),
                     Command::StartStream { .. } => Some(AckResult::Streaming {
                         frame_period_ms: 100,
                     }),
@@ -472,7 +476,8 @@ mod tests {
         };
         assert_eq!(result.0, NodeCommand::AckAlarm);
         assert!(result.1);
-        assert!(result.2.contains("AlarmAcknowledged"), "{}", result.2);
+        // A version-4 node without an alarm says there is none.
+        assert!(result.2.contains("NoAlarm"), "{}", result.2);
         // Silence: declared down within the timeout, then reconnected.
         let down = loop {
             if let NodeUpdate::Down(r) = next().update {
@@ -497,7 +502,7 @@ mod tests {
         stop.store(true, Ordering::Relaxed);
         t.join().unwrap();
         let got = fake.inner.lock().unwrap().got.clone();
-        assert!(got.contains(&Command::AckAlarm));
+        assert!(got.contains(&Command::AckAlarmV4));
         assert!(got.contains(&Command::StartStream {
             frame_period_ms: None
         }));

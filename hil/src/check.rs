@@ -188,7 +188,7 @@ fn check_replies(sc: &Scenario, o: &Outcome, fail: &mut Vec<String>) {
                 if got != want {
                     fail.push(format!("{what}: got {:?}, expected {want:?}", r.result));
                 } else if let (Some(refusal), Err(code)) = (refusal, &r.result)
-                    && refusal.code() != *code
+                    && !refusal.matches(code)
                 {
                     fail.push(format!(
                         "{what}: refused with {code:?}, expected {refusal:?}"

@@ -226,7 +226,10 @@ pub fn run(sc: &Scenario) -> anyhow::Result<Outcome> {
                 continue;
             }
             Send::CalibrateDark => Command::CalibrateDark,
+            Send::CalibrateDarkV4 => Command::CalibrateDarkV4 { force: false },
+            Send::CalibrateDarkForced => Command::CalibrateDarkV4 { force: true },
             Send::AckAlarm => Command::AckAlarm,
+            Send::AckAlarmV4 => Command::AckAlarmV4,
             Send::GetInfo => Command::GetInfo,
             Send::GetConfig => Command::GetConfig,
             Send::StartStream => Command::StartStream {

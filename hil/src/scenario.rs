@@ -138,10 +138,17 @@ fn one() -> u64 {
 pub enum Send {
     /// The user button B1 (dark calibration when not iced, else alarm ack).
     Button,
-    /// `CalibrateDark`.
+    /// `CalibrateDark` (the version-1 command an older host sends: guarded
+    /// like the version-4 one, refused with the codes it knows).
     CalibrateDark,
+    /// `CalibrateDarkV4 { force: false }`: the guarded calibration.
+    CalibrateDarkV4,
+    /// `CalibrateDarkV4 { force: true }`: the forced calibration.
+    CalibrateDarkForced,
     /// `AckAlarm`.
     AckAlarm,
+    /// `AckAlarmV4` (answered `NoAlarm` when no alarm is on).
+    AckAlarmV4,
     /// `GetInfo`.
     GetInfo,
     /// `GetConfig`.
@@ -187,8 +194,14 @@ pub struct CommandSpec {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Refusal {
-    /// The face is iced or wet (`ErrorCode::NotDry`).
+    /// The face is iced or wet, or the baseline would move too far, as an
+    /// older host hears it (`ErrorCode::NotDry`).
     NotDry,
+    /// Version 4: the face is iced or wet (`ErrorCode::FaceNotDry`).
+    FaceNotDry,
+    /// Version 4: the baseline would move further than the noise allows
+    /// (`ErrorCode::BaselineShift`).
+    BaselineShift,
     /// A step in the currents (`CalibrationRefusal::Step`).
     Step,
     /// A trend (`CalibrationRefusal::Trend`).
@@ -200,16 +213,20 @@ pub enum Refusal {
 }
 
 impl Refusal {
-    /// The error code the node sends for it.
-    pub fn code(self) -> fois_protocol::ErrorCode {
-        use fois_protocol::{CalibrationRefusal as R, ErrorCode};
-        match self {
-            Refusal::NotDry => ErrorCode::NotDry,
-            Refusal::Step => ErrorCode::CalibrationRefused(R::Step),
-            Refusal::Trend => ErrorCode::CalibrationRefused(R::Trend),
-            Refusal::Noisy => ErrorCode::CalibrationRefused(R::Noisy),
-            Refusal::Saturated => ErrorCode::CalibrationRefused(R::Saturated),
-        }
+    /// True when the node's error `code` is this refusal (whatever numbers
+    /// a version-4 refusal carries).
+    pub fn matches(self, code: &fois_protocol::ErrorCode) -> bool {
+        use fois_protocol::{CalibrationRefusal as R, ErrorCode as E};
+        matches!(
+            (self, code),
+            (Refusal::NotDry, E::NotDry)
+                | (Refusal::FaceNotDry, E::FaceNotDry(_))
+                | (Refusal::BaselineShift, E::BaselineShift(_))
+                | (Refusal::Step, E::CalibrationRefused(R::Step))
+                | (Refusal::Trend, E::CalibrationRefused(R::Trend))
+                | (Refusal::Noisy, E::CalibrationRefused(R::Noisy))
+                | (Refusal::Saturated, E::CalibrationRefused(R::Saturated))
+        )
     }
 }
 

@@ -21,12 +21,30 @@ pub const INCOMPATIBLE: i32 = 5;
 pub const REFUSED: i32 = 6;
 /// A `KEY=VALUE` was refused on the host (unknown key, not a number, out of range).
 pub const INVALID_VALUE: i32 = 7;
+/// `foisctl ack`: the node has no alarm to acknowledge (nothing changed).
+pub const NO_ALARM: i32 = 8;
 
 /// The exit-code table, for `--help`.
 pub const TABLE: &str = "Exit codes: 0 success; 1 other failure (I/O, unreadable file); \
 2 bad command line; 3 serial port cannot be opened; 4 no answer from the node in time; \
 5 node speaks an incompatible protocol version; 6 node refused the command (Error reply); \
 7 KEY=VALUE refused on the host (unknown key, not a number, out of range).";
+
+/// The exit codes of `calibrate-dark`, for its `--help`.
+pub const CALIBRATE_DARK_TABLE: &str = "Exit codes: 0 calibrated (the new baseline is printed); \
+1 other failure; 2 bad command line, or --force asked of a node older than protocol version 4; \
+3 serial port cannot be opened; 4 no answer from the node in time; 5 node speaks an \
+incompatible protocol version; 6 the node refused the calibration: the face is not dry \
+(FaceNotDry/NotDry), the baseline would move further than the noise allows (BaselineShift: \
+old → new, use --force only if the change is real), or the reading was not steady \
+(CalibrationRefused: step, trend, noise, saturation); what to do is printed.";
+
+/// The exit codes of `ack`, for its `--help`.
+pub const ACK_TABLE: &str = "Exit codes: 0 the alarm was acknowledged; 1 other failure; \
+2 bad command line; 3 serial port cannot be opened; 4 no answer from the node in time; \
+5 node speaks an incompatible protocol version; 6 node refused the command; 8 there was no \
+alarm to acknowledge (NoAlarm, nothing changed; a node older than protocol version 4 cannot \
+tell and answers AlarmAcknowledged).";
 
 /// The exit codes of the commands that work on files only (plot, compare,
 /// estimate, sim, bench-decode), for their `--help`.

@@ -7,14 +7,15 @@
 use std::io::{BufRead, IsTerminal};
 use std::sync::mpsc::{Receiver, channel};
 
+use fois_link::versioned;
 use fois_protocol::Command;
 
 /// What a typed line asks for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Key {
-    /// `a`: `AckAlarm`.
+    /// `a`: `AckAlarmV4` (`AckAlarm` to an older node).
     Ack,
-    /// `d`: `CalibrateDark`.
+    /// `d`: `CalibrateDarkV4` unforced (`CalibrateDark` to an older node).
     CalibrateDark,
     /// `l`: print the legend.
     Legend,
@@ -35,11 +36,13 @@ impl Key {
         }
     }
 
-    /// The command it sends (`None` for the legend).
-    pub fn command(self) -> Option<Command> {
+    /// The command it sends to a node of protocol `node_version` (`None`
+    /// for the legend). The dark calibration is never forced from a key:
+    /// that takes `foisctl calibrate-dark --force`.
+    pub fn command(self, node_version: u16) -> Option<Command> {
         match self {
-            Key::Ack => Some(Command::AckAlarm),
-            Key::CalibrateDark => Some(Command::CalibrateDark),
+            Key::Ack => Some(versioned::ack_command(node_version)),
+            Key::CalibrateDark => versioned::dark_command(node_version, false).ok(),
             Key::Legend => None,
         }
     }
@@ -77,8 +80,13 @@ mod tests {
         assert_eq!(Key::parse("D"), Some(Key::CalibrateDark));
         assert_eq!(Key::parse("l"), Some(Key::Legend));
         assert_eq!(Key::parse("x"), None);
-        assert_eq!(Key::Ack.command(), Some(Command::AckAlarm));
-        assert_eq!(Key::CalibrateDark.command(), Some(Command::CalibrateDark));
-        assert_eq!(Key::Legend.command(), None);
+        assert_eq!(Key::Ack.command(4), Some(Command::AckAlarmV4));
+        assert_eq!(
+            Key::CalibrateDark.command(4),
+            Some(Command::CalibrateDarkV4 { force: false })
+        );
+        assert_eq!(Key::Ack.command(3), Some(Command::AckAlarm));
+        assert_eq!(Key::CalibrateDark.command(3), Some(Command::CalibrateDark));
+        assert_eq!(Key::Legend.command(4), None);
     }
 }

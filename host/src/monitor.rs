@@ -13,6 +13,7 @@ use fois_protocol::{Command, DeviceMsg};
 use crate::csvlog::{CsvLog, Row};
 use crate::exit;
 pub use crate::status::{fault_line, status_line, status_lines};
+use fois_link::advice::{Calibration, calibration_advice};
 use fois_link::reading::EventReading;
 use fois_link::text::{ack_text, error_text, event_name, hello_text};
 use fois_link::{Incoming, Link, LinkError, open_port};
@@ -144,6 +145,9 @@ struct Session<'a> {
     keys: Option<std::sync::mpsc::Receiver<Result<crate::keys::Key, String>>>,
     /// Ids of the commands sent from typed keys, awaiting their answer.
     pending: Vec<u16>,
+    /// The protocol version of the node connected (the keys' commands take
+    /// its shape).
+    node_version: u16,
     sum: MonitorSummary,
     stop: &'a AtomicBool,
     /// Node uptime of the last measurement or event, ms.
@@ -245,7 +249,20 @@ impl Session<'_> {
                             self.view.say(&format!("  ack {}", ack_text(a)));
                         }
                     }
-                    DeviceMsg::Error(e) => self.view.say(&format!("! error {}", error_text(e))),
+                    DeviceMsg::Error(e) => {
+                        self.view.say(&format!("! error {}", error_text(e)));
+                        // A refusal of a typed `d`: what to do next.
+                        let asked = e.id.is_some_and(|id| self.pending.contains(&id));
+                        if let Some(id) = e.id {
+                            self.pending.retain(|&p| p != id);
+                        }
+                        if let Some(advice) = asked
+                            .then(|| calibration_advice(Calibration::Dark, &e.code))
+                            .flatten()
+                        {
+                            self.view.say(&format!("  {advice}"));
+                        }
+                    }
                     DeviceMsg::Hello(h) => {
                         if self.verbose {
                             self.view.say(&format!("  hello {}", hello_text(h)));
@@ -264,7 +281,7 @@ impl Session<'_> {
         let typed: Vec<_> = rx.try_iter().collect();
         for k in typed {
             match k {
-                Ok(key) => match key.command() {
+                Ok(key) => match key.command(self.node_version) {
                     Some(cmd) => {
                         let name = format!("{cmd:?}");
                         let id = link.send(cmd)?;
@@ -324,6 +341,7 @@ pub fn run(opts: &MonitorOptions, stop: &AtomicBool) -> anyhow::Result<MonitorSu
             crate::keys::spawn()
         },
         pending: Vec::new(),
+        node_version: fois_protocol::PROTOCOL_VERSION,
         sum: MonitorSummary::default(),
         stop,
         last_uptime_ms: None,
@@ -381,6 +399,7 @@ fn run_session(opts: &MonitorOptions, s: &mut Session) -> anyhow::Result<()> {
             }
         };
         waiting_said = false;
+        s.node_version = hello.protocol_version;
         let text = hello_text(&hello);
         let shown = if s.verbose {
             text.clone()

@@ -105,9 +105,15 @@ fn commands_round_trip_and_monitor_logs_measurements() {
     let (code, out, err) = foisctl(&["calibrate-dark", "--port", p]);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("DarkCalibrated"), "{out}");
-    let (code, out, err) = foisctl(&["ack", "--port", p]);
+    let (code, out, err) = foisctl(&["calibrate-dark", "--force", "--port", p]);
     assert_eq!(code, 0, "{err}");
-    assert!(out.contains("AlarmAcknowledged"), "{out}");
+    assert!(out.contains("DarkCalibrated"), "{out}");
+    // No alarm on a dry face: said so, exit 8 (it answered
+    // `AlarmAcknowledged` and exit 0 before).
+    let (code, out, err) = foisctl(&["ack", "--port", p]);
+    assert_eq!(code, 8, "{out} {err}");
+    assert!(out.contains("NoAlarm"), "{out}");
+    assert!(err.contains("no alarm to acknowledge"), "{err}");
 
     let dir = tempfile::tempdir().unwrap();
     let log = dir.path().join("log.csv");
@@ -716,5 +722,86 @@ fn calibrate_gain_and_reset_gain_as_a_user_runs_them() {
     assert!(
         (mean_of(&t, "est_gain") - 1.0).abs() < 0.1,
         "the face's own gain"
+    );
+}
+
+#[test]
+fn the_gain_calibration_is_practised_with_a_target_on_the_virtual_face() {
+    // A target of 25.2 / 9.56 µA at gain 1 on a face whose LED gives 0.8 of
+    // its nominal output: the node must find gain 0.8 (the brief's practice
+    // in host/README.md).
+    let node = NodeProc::start(&[
+        "--speed",
+        "20",
+        "--dry-s",
+        "3",
+        "--target",
+        "25.2,9.56",
+        "--led-factor",
+        "0.8",
+        "--seed",
+        "5",
+    ]);
+    let p = node.path.as_str();
+    // Wait until the target is on (virtual 3 s = 0.15 s real, with room).
+    std::thread::sleep(Duration::from_millis(800));
+    let (code, out, err) = foisctl(&[
+        "calibrate-gain",
+        "--port",
+        p,
+        "--i1-ua",
+        "25.2",
+        "--i2-ua",
+        "9.56",
+    ]);
+    assert_eq!(code, 0, "{err}");
+    let g: f64 = out
+        .split("gain ")
+        .nth(1)
+        .and_then(|t| t.split_whitespace().next())
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert!((g - 0.8).abs() < 0.02, "{out}");
+    // The wrong target values (channel 2 four times too large): refused,
+    // with what to do.
+    let (code, _, err) = foisctl(&[
+        "calibrate-gain",
+        "--port",
+        p,
+        "--i1-ua",
+        "25.2",
+        "--i2-ua",
+        "38.24",
+    ]);
+    assert_eq!(code, 6, "{err}");
+    assert!(
+        err.contains("what to do:") && err.contains("--i1-ua/--i2-ua"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_gain_calibration_without_a_target_says_to_put_one_on() {
+    // A dry face, no target: the currents are those of the dark baseline.
+    let node = NodeProc::start(&["--speed", "20", "--dry-s", "1000", "--seed", "6"]);
+    let p = node.path.as_str();
+    std::thread::sleep(Duration::from_millis(300));
+    let (code, _, err) = foisctl(&[
+        "calibrate-gain",
+        "--port",
+        p,
+        "--i1-ua",
+        "25.2",
+        "--i2-ua",
+        "9.56",
+    ]);
+    assert_eq!(code, 6, "{err}");
+    // The node sees the currents jump about a zero mean (`Step`): the
+    // advice for a gain calibration is to put the target on.
+    assert!(err.contains("CalibrationRefused(Step)"), "{err}");
+    assert!(
+        err.contains("what to do: no target on the face? Put the reference target on"),
+        "{err}"
     );
 }

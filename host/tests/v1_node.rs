@@ -13,8 +13,8 @@ use std::time::Duration;
 
 use fois_host::csvlog::LogTable;
 use fois_protocol::{
-    Ack, AckResult, Command as HostCmd, DetectorState, DeviceFrame, DeviceMsg, FrameDecoder, Hello,
-    HostFrame, Measurement, ResetReason, encode_to_vec,
+    Ack, AckResult, Baseline, Command as HostCmd, DetectorState, DeviceFrame, DeviceMsg,
+    FrameDecoder, Hello, HostFrame, Measurement, ResetReason, encode_to_vec,
 };
 use serialport::SerialPort;
 
@@ -57,6 +57,13 @@ fn v1_node(mut master: serialport::TTYPort, stop: Arc<AtomicBool>) {
                         frame_period_ms: 100,
                     }
                 }
+                // The version-1 commands; a newer variant is not answered
+                // (a real version-1 node could not decode it).
+                HostCmd::AckAlarm => AckResult::AlarmAcknowledged,
+                HostCmd::CalibrateDark => AckResult::DarkCalibrated(Baseline {
+                    i1_na: 600,
+                    i2_na: 200,
+                }),
                 _ => continue,
             };
             send(
@@ -148,4 +155,43 @@ fn a_version_1_node_is_monitored_and_logged_with_empty_estimate_fields() {
         .filter(|r| r[kind] == "measurement" && !r[k].is_empty())
         .count();
     assert_eq!(n, meas.len());
+}
+
+#[test]
+fn a_version_1_node_gets_the_old_dark_calibration_and_acknowledgement() {
+    let (mut master, slave) = serialport::TTYPort::pair().unwrap();
+    master.set_timeout(Duration::from_millis(5)).unwrap();
+    let path = slave.name().unwrap();
+    let stop = Arc::new(AtomicBool::new(false));
+    let s2 = stop.clone();
+    let node = std::thread::spawn(move || v1_node(master, s2));
+    let run = |args: &[&str]| {
+        let out = Command::new(BIN)
+            .args(args)
+            .args(["--port", &path, "--timeout-ms", "1500"])
+            .output()
+            .unwrap();
+        (
+            out.status.code().unwrap_or(-1),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    // Answered only because the old commands were sent.
+    let (code, out, err) = run(&["ack"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("AlarmAcknowledged"), "{out}");
+    let (code, out, err) = run(&["calibrate-dark"]);
+    assert_eq!(code, 0, "{err}");
+    assert!(out.contains("DarkCalibrated i1_ua=0.600"), "{out}");
+    // A forced calibration needs version 4: refused on the host.
+    let (code, _, err) = run(&["calibrate-dark", "--force"]);
+    assert_eq!(code, 2, "{err}");
+    assert!(
+        err.contains("protocol version 1") && err.contains("version 4"),
+        "{err}"
+    );
+    stop.store(true, Ordering::Relaxed);
+    node.join().unwrap();
+    drop(slave);
 }

@@ -6,11 +6,15 @@
 //!   sequence events).
 //! - [`reading`]: a measurement or event in µA, °C, mm, with fault names.
 //! - [`text`]: one-line texts of protocol messages.
+//! - [`advice`]: what to do after a calibration was refused.
+//! - [`versioned`]: the dark-calibration and acknowledgement commands in the
+//!   shape of the node's protocol version.
 //! - [`timefmt`]: host timestamps (Unix ms, ISO 8601 UTC).
 //! - [`numbers`]: finite-number parsers for command lines.
 //! - `fixtures` (feature `fixtures`): test data, one iced node's measurement, estimate and
 //!   gain.
 
+pub mod advice;
 #[cfg(any(test, feature = "fixtures"))]
 pub mod fixtures;
 pub mod link;
@@ -18,6 +22,7 @@ pub mod numbers;
 pub mod reading;
 pub mod text;
 pub mod timefmt;
+pub mod versioned;
 
 pub use link::{Incoming, Link, LinkError, Reply, open_port};
 pub use reading::{EstimateReading, EventReading, GainReading, Reading};

@@ -59,6 +59,7 @@ pub fn ack_text(a: &Ack) -> String {
         AckResult::ConfigV3(c) => format!("ConfigV3 {c:?}"),
         AckResult::GainCalibrated(g) => format!("GainCalibrated {}", gain_text(g)),
         AckResult::GainReset => "GainReset".into(),
+        AckResult::NoAlarm => "NoAlarm (no alarm to acknowledge)".into(),
     };
     format!("id={} {what}", a.id)
 }
@@ -71,6 +72,21 @@ pub fn error_text(e: &ErrorReply) -> String {
         fois_protocol::ErrorCode::CalibrationRefused(r) => {
             format!("CalibrationRefused({r:?}): {}", r.describe())
         }
+        fois_protocol::ErrorCode::BaselineShift(s) => format!(
+            "BaselineShift: the baseline would move from I1 {:.3} µA, I2 {:.3} µA \
+             to I1 {:.3} µA, I2 {:.3} µA ({:.3} µA, more than the {:.3} µA allowed)",
+            ua(s.old.i1_na.into()),
+            ua(s.old.i2_na.into()),
+            ua(s.new.i1_na.into()),
+            ua(s.new.i2_na.into()),
+            ua(s.shift_na().into()),
+            ua(s.allowed_na.into())
+        ),
+        fois_protocol::ErrorCode::FaceNotDry(f) => format!(
+            "FaceNotDry: the node reads {}, I1 rise {:.3} µA",
+            f.state.name(),
+            ua(f.rise1_na.into())
+        ),
         other => format!("{other:?}"),
     };
     format!("id={id} {why}")

@@ -475,6 +475,9 @@ pub enum AckResult {
     /// Version 3: the learned gain was forgotten; the estimator starts again
     /// from its wide prior.
     GainReset,
+    /// Version 4: answer to [`Command::AckAlarmV4`] when no alarm is on:
+    /// there was nothing to acknowledge and nothing changed.
+    NoAlarm,
 }
 
 /// Dark (dry-face) baseline of both channels, subtracted by the ice rule.
@@ -521,6 +524,47 @@ pub enum ErrorCode {
     /// Version 3: a dark or gain calibration was refused, and why. (A
     /// version-3 node sends this instead of `CalibrationFailed`.)
     CalibrationRefused(CalibrationRefusal),
+    /// Version 4: an unforced [`Command::CalibrateDarkV4`] was refused
+    /// because the new baseline is further from the stored one than the
+    /// noise allows (something on the face, or the optics changed). The
+    /// old `CalibrateDark` is answered `NotDry` for the same refusal.
+    BaselineShift(BaselineShift),
+    /// Version 4: [`Command::CalibrateDarkV4`] refused because the detector
+    /// is not `Dry`, with what it sees (the old command gets `NotDry`).
+    FaceNotDry(FaceReading),
+}
+
+/// Version 4: a dark calibration that would move the baseline too far.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct BaselineShift {
+    /// The baseline in force (the stored one).
+    pub old: Baseline,
+    /// The baseline this calibration measured (not applied).
+    pub new: Baseline,
+    /// The largest shift of either channel accepted without `force`, nA.
+    pub allowed_na: u32,
+}
+
+impl BaselineShift {
+    /// The larger of the two channels' shifts, nA.
+    pub fn shift_na(&self) -> u32 {
+        let d = |a: i32, b: i32| (i64::from(b) - i64::from(a)).unsigned_abs();
+        d(self.old.i1_na, self.new.i1_na)
+            .max(d(self.old.i2_na, self.new.i2_na))
+            .min(u64::from(u32::MAX)) as u32
+    }
+}
+
+/// Version 4: what the detector sees when a dark calibration finds the
+/// face not dry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct FaceReading {
+    /// The ice rule's state (`Wet` or `Ice`).
+    pub state: DetectorState,
+    /// Channel 1 rise over the baseline of the last valid frame, nA.
+    pub rise1_na: i32,
 }
 
 /// Version 3: why a calibration was refused.
@@ -603,6 +647,19 @@ pub enum Command {
     CalibrateGain(GainTarget),
     /// Version 3: forget the learned optical gain (back to the wide prior).
     ResetGain,
+    /// Version 4: a dark calibration guarded against moving the baseline
+    /// further than the noise allows from the stored one; `force` takes the
+    /// reading anyway (the user asserts the face is clean and dry: a new
+    /// LED, a cleaned window). Refusals: `FaceNotDry`, `BaselineShift`,
+    /// `CalibrationRefused`.
+    CalibrateDarkV4 {
+        /// Skip the dry-state and baseline-shift guards (never the checks
+        /// of the reading itself: step, trend, noise, saturation).
+        force: bool,
+    },
+    /// Version 4: acknowledge the ice alarm; answered `NoAlarm` when none
+    /// is on.
+    AckAlarmV4,
 }
 
 #[cfg(test)]

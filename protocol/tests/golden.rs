@@ -403,6 +403,55 @@ fn cases() -> Vec<(&'static str, Vec<u8>)> {
             ),
         ),
         ("cmd_reset_gain", host(11, Command::ResetGain)),
+        // Version 4 additions.
+        (
+            "ack_no_alarm",
+            device(
+                24,
+                DeviceMsg::Ack(Ack {
+                    id: 25,
+                    result: AckResult::NoAlarm,
+                }),
+            ),
+        ),
+        (
+            "error_baseline_shift",
+            device(
+                25,
+                DeviceMsg::Error(ErrorReply {
+                    id: Some(26),
+                    code: ErrorCode::BaselineShift(BaselineShift {
+                        old: Baseline {
+                            i1_na: 120,
+                            i2_na: -40,
+                        },
+                        new: Baseline {
+                            i1_na: 474,
+                            i2_na: 95,
+                        },
+                        allowed_na: 250,
+                    }),
+                }),
+            ),
+        ),
+        (
+            "error_face_not_dry",
+            device(
+                26,
+                DeviceMsg::Error(ErrorReply {
+                    id: Some(27),
+                    code: ErrorCode::FaceNotDry(FaceReading {
+                        state: DetectorState::Wet,
+                        rise1_na: 1_830,
+                    }),
+                }),
+            ),
+        ),
+        (
+            "cmd_calibrate_dark_v4",
+            host(12, Command::CalibrateDarkV4 { force: true }),
+        ),
+        ("cmd_ack_alarm_v4", host(13, Command::AckAlarmV4)),
     ]
 }
 
@@ -496,6 +545,18 @@ const GOLDEN: &[(&str, &str)] = &[
         "0c 0a 09 f0 c4 01 d8 4a 5a 75 22 71 00",
     ),
     ("cmd_reset_gain", "07 0b 0a 2a 22 f8 42 00"),
+    // Version 4 additions.
+    ("ack_no_alarm", "09 18 03 19 0a 33 5e 7a cd 00"),
+    (
+        "error_baseline_shift",
+        "13 19 04 01 1a 09 f0 01 4f b4 07 be 01 fa 01 4f 0a 50 4c 00",
+    ),
+    (
+        "error_face_not_dry",
+        "0d 1a 04 01 1b 0a 01 cc 1c f1 ed 4b bd 00",
+    ),
+    ("cmd_calibrate_dark_v4", "08 0c 0b 01 2b c9 a8 62 00"),
+    ("cmd_ack_alarm_v4", "07 0d 0c 99 20 c1 fd 00"),
 ];
 
 fn hex(bytes: &[u8]) -> String {
@@ -524,11 +585,11 @@ fn wire_format_matches_golden_bytes() {
 
 #[test]
 fn protocol_version_is_frozen_with_these_bytes() {
-    // The snapshots above belong to version 3: the 21 of version 1 and the 3
+    // The snapshots above belong to version 4: the 21 of version 1 and the 3
     // of version 2 (unchanged: each version only added variants at the ends
     // of its enums and froze the old config shape as `ConfigV1`, so older
-    // streams decode with these types) and the version-3 additions. A new
-    // version gets new snapshots.
-    assert_eq!(PROTOCOL_VERSION, 3);
+    // streams decode with these types), the version-3 and the version-4
+    // additions. A new version gets new snapshots.
+    assert_eq!(PROTOCOL_VERSION, 4);
     assert_eq!(OLDEST_READABLE_VERSION, 1);
 }

@@ -138,6 +138,12 @@ pub struct Segment {
     pub adc_noise_lsb: f64,
     /// The NTC's wiring (fault injection: unplugged or shorted).
     pub ntc: NtcWiring,
+    /// A reference target on the face for a gain calibration: its net
+    /// currents per channel at gain 1, µA (`None`: no target). While it is
+    /// on, the face reads the dry face's currents plus these, both times
+    /// the optical gain, whatever the cover: its rise over the dark
+    /// baseline is the target's currents times the gain.
+    pub target_ua: Option<[f64; 2]>,
 }
 
 impl Segment {
@@ -162,7 +168,13 @@ impl Segment {
             face_transmission_end: None,
             adc_noise_lsb: 1.0,
             ntc: NtcWiring::Connected,
+            target_ua: None,
         }
+    }
+    /// A reference target on the face, µA at gain 1 per channel.
+    pub fn target(mut self, ua: [f64; 2]) -> Self {
+        self.target_ua = Some(ua);
+        self
     }
     /// The NTC unplugged, shorted or connected.
     pub fn ntc(mut self, wiring: NtcWiring) -> Self {
@@ -436,9 +448,10 @@ impl Environment {
             Cover::Dry => 0.0,
             _ => clamp_mm(tl.start_mm[i] + seg.rate_mm_per_h * into / 3600.0),
         };
-        let optical = match (seg.cover, self.curves.get(&seg.cover)) {
-            (Cover::Dry, _) | (_, None) => self.dry_ua,
-            (_, Some(c)) => {
+        let optical = match (seg.target_ua, seg.cover, self.curves.get(&seg.cover)) {
+            (Some(t), _, _) => [self.dry_ua[0] + t[0], self.dry_ua[1] + t[1]],
+            (None, Cover::Dry, _) | (None, _, None) => self.dry_ua,
+            (None, _, Some(c)) => {
                 let (a, b) = c.currents_at(thickness_mm);
                 [a, b]
             }

@@ -32,6 +32,8 @@
 //! adc_noise_lsb = 1.0
 //! thickness_mm = 2.0          # set the thickness at the start (optional)
 //! ntc = "open"                # connected | open | short (default connected)
+//! target_ua = [25.2, 9.56]    # a reference target on the face, µA at gain 1
+//!                             # (gain calibration practice; default none)
 //!
 //! [config]                    # the node's config in its flash at first boot
 //! frame_period_ms = 1000      # (names of `foisctl config set`)
@@ -203,6 +205,9 @@ pub struct SegmentSpec {
     pub thickness_mm: Option<f64>,
     /// The NTC's wiring: connected | open | short (default connected).
     pub ntc: Option<String>,
+    /// A reference target on the face (gain calibration practice), µA at
+    /// gain 1 per channel.
+    pub target_ua: Option<[f64; 2]>,
 }
 
 /// A segment's length: seconds, or `"inf"`.
@@ -292,6 +297,7 @@ pub fn timeline(specs: Vec<SegmentSpec>) -> Result<Timeline, String> {
             finite(s.face_transmission_end, "face_transmission_end", 0.0, 1.0)?;
         seg.adc_noise_lsb = finite(s.adc_noise_lsb, "adc_noise_lsb", 0.0, 500.0)?.unwrap_or(1.0);
         seg.start_thickness_mm = finite(s.thickness_mm, "thickness_mm", 0.0, 15.0)?;
+        seg.target_ua = pair(s.target_ua, "target_ua")?;
         if let Some(w) = &s.ntc {
             seg.ntc = NtcWiring::parse(w)
                 .ok_or_else(|| at(&format!("ntc = \"{w}\": expected connected, open or short")))?;

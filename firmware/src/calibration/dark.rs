@@ -39,10 +39,29 @@
 //! (any level) never reads as drift, and a drift too small to matter never
 //! refuses. The time bound keeps the worst answer of a command inside the
 //! host's timeout (`platform::reply_time`).
+//!
+//! A steady reading can still be the wrong one: a water film starting on
+//! the face (the rule still reads dry below the onset) is steady enough.
+//! [`check_shift`] compares the new baseline with the stored one: a move
+//! of either channel by more than onset / [`SHIFT_FRACTION_OF_ONSET`]
+//! (250 nA at the default 1 µA onset) is refused unless forced. Why that
+//! much: each baseline's standard error is at most onset / 20 (the stop
+//! rule above), so the difference of two baselines of the same dry face
+//! has a standard error of at most onset·√2 / 20 and onset / 4 is 3.5 of
+//! those at the worst (a false refusal well under 1 in 1 000 per channel,
+//! far fewer when the noise allows a smaller error); and a baseline moved
+//! by more than a quarter of the onset delays the next alarm (and offsets
+//! every thickness) by that quarter. Slow real changes between two
+//! calibrations — a dirty or cleaned face, an ageing or new LED — pass it
+//! too and need the `force` flag. With no stored baseline the zero the
+//! rule uses is a placeholder, not a measurement of this face (crosstalk
+//! and the window's reflection give a dry face a net current of its own):
+//! the first calibration is held only by the rule's dry state (I1 under
+//! the onset over zero) and the checks of the reading.
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
-use fois_protocol::{Baseline, CalibrationRefusal, Config};
+use fois_protocol::{Baseline, BaselineShift, CalibrationRefusal, Config};
 
 use crate::hal::{FactoryCal, PhotoAdc};
 use crate::measure::photocurrent;
@@ -78,6 +97,9 @@ pub const TREND_SIGMAS: f32 = 5.0;
 /// The best split's level difference must be this many standard errors
 /// from zero (higher than for the line: it is the best of n − 1 splits).
 pub const STEP_SIGMAS: f32 = 5.5;
+/// An unforced calibration may move either channel's baseline by at most
+/// onset / this ([`check_shift`]; the module doc says why).
+pub const SHIFT_FRACTION_OF_ONSET: u32 = 4;
 /// A spike matters from onset / this.
 const SPIKE_FRACTION_OF_ONSET: u32 = 4;
 /// A step or a trend matters from onset / this.
@@ -370,6 +392,36 @@ fn drift(x: &[i32], spike_min: f32, drift_min: f32) -> Option<CalibrationRefusal
     }
 }
 
+/// The largest baseline shift of either channel an unforced calibration
+/// may make, nA: onset / [`SHIFT_FRACTION_OF_ONSET`] (at least 1).
+pub fn allowed_shift_na(config: &Config) -> u32 {
+    (config.onset_rise_na / SHIFT_FRACTION_OF_ONSET).max(1)
+}
+
+/// The baseline-shift guard: `new` against the `stored` baseline. `Err`
+/// with both and the allowance when either channel moved by more than
+/// [`allowed_shift_na`]; always `Ok` with nothing stored (the first
+/// calibration, see the module doc).
+pub fn check_shift(
+    stored: Option<Baseline>,
+    new: Baseline,
+    config: &Config,
+) -> Result<(), BaselineShift> {
+    let Some(old) = stored else {
+        return Ok(());
+    };
+    let shift = BaselineShift {
+        old,
+        new,
+        allowed_na: allowed_shift_na(config),
+    };
+    if shift.shift_na() > shift.allowed_na {
+        Err(shift)
+    } else {
+        Ok(())
+    }
+}
+
 /// Run a dark calibration on the hardware: V_DDA once, then blocks until
 /// the plan says stop; a saturated block refuses at once (`Saturated`).
 /// The LED is left off.
@@ -596,6 +648,60 @@ mod tests {
             let r = b.analyse(&cfg(), &plan);
             assert!(r.is_ok(), "seed {seed}: {r:?} after {} blocks", b.len());
         }
+    }
+
+    #[test]
+    fn the_shift_guard_allows_a_quarter_of_the_onset() {
+        let c = cfg();
+        assert_eq!(allowed_shift_na(&c), 250);
+        let old = Baseline {
+            i1_na: 120,
+            i2_na: -40,
+        };
+        // The same dry face within the noise: accepted.
+        let same = Baseline {
+            i1_na: 370,
+            i2_na: 200,
+        };
+        assert_eq!(check_shift(Some(old), same, &c), Ok(()));
+        // A film starting: +354 nA on I1.
+        let film = Baseline {
+            i1_na: 474,
+            i2_na: -40,
+        };
+        let e = check_shift(Some(old), film, &c).unwrap_err();
+        assert_eq!(
+            (e.old, e.new, e.allowed_na, e.shift_na()),
+            (old, film, 250, 354)
+        );
+        // Channel 2 alone, downwards (an LED that lost output).
+        let dim = Baseline {
+            i1_na: 120,
+            i2_na: -300,
+        };
+        assert_eq!(check_shift(Some(old), dim, &c).unwrap_err().shift_na(), 260);
+        // Nothing stored: the first calibration is not compared with zero.
+        assert_eq!(check_shift(None, film, &c), Ok(()));
+        // The extremes neither overflow nor panic.
+        let far = Baseline {
+            i1_na: i32::MIN,
+            i2_na: i32::MAX,
+        };
+        let e = check_shift(
+            Some(far),
+            Baseline {
+                i1_na: i32::MAX,
+                i2_na: i32::MIN,
+            },
+            &c,
+        );
+        assert_eq!(e.unwrap_err().shift_na(), u32::MAX);
+        // The smallest onset still allows something.
+        let tight = Config {
+            onset_rise_na: 50,
+            ..cfg()
+        };
+        assert_eq!(allowed_shift_na(&tight), 12);
     }
 
     #[test]

@@ -8,7 +8,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use fois_protocol::{
     Ack, AckResult, Command, Config, ConfigV1, DetectorState, DeviceMsg, ErrorCode, ErrorReply,
-    FrameError, GainTarget, HostFrame, flags,
+    FaceReading, FrameError, GainTarget, HostFrame, flags,
 };
 
 use super::Node;
@@ -28,6 +28,17 @@ pub fn frame_error_reply(err: FrameError) -> ErrorReply {
         FrameError::Malformed => ErrorCode::UnknownCommand,
     };
     ErrorReply { id: None, code }
+}
+
+/// The answer to the version-1 `CalibrateDark` for a refusal of the guarded
+/// calibration: an older host cannot decode the version-4 codes, so "the
+/// face is not dry" and "the baseline would move too far" (something on the
+/// face) both become the `NotDry` it knows.
+pub fn old_dark_code(code: ErrorCode) -> ErrorCode {
+    match code {
+        ErrorCode::FaceNotDry(_) | ErrorCode::BaselineShift(_) => ErrorCode::NotDry,
+        other => other,
+    }
 }
 
 /// The frame period a `StartStream` asks for, checked by the config rule: the
@@ -130,11 +141,20 @@ where
                 self.stream_period_ms = None;
                 Ok(AckResult::Stopped)
             }
-            Command::CalibrateDark => self.calibrate_dark(now_ms),
+            // The version-1 command is guarded as the version-4 one, answered
+            // with the codes an older host knows.
+            Command::CalibrateDark => self.calibrate_dark(now_ms, false).map_err(old_dark_code),
+            Command::CalibrateDarkV4 { force } => self.calibrate_dark(now_ms, force),
+            // An older host keeps its answer, alarm or not.
             Command::AckAlarm => {
                 self.rule.acknowledge();
                 Ok(AckResult::AlarmAcknowledged)
             }
+            Command::AckAlarmV4 => Ok(if self.rule.acknowledge() {
+                AckResult::AlarmAcknowledged
+            } else {
+                AckResult::NoAlarm
+            }),
             Command::Reset => {
                 // Whatever waits to be saved is saved before the reset.
                 if self.pending_save.is_some() {
@@ -165,11 +185,16 @@ where
         Ok(())
     }
 
-    fn calibrate_dark(&mut self, now_ms: u64) -> Result<AckResult, ErrorCode> {
-        if self.rule.state() != DetectorState::Dry {
+    /// A dark calibration; unless `force`d, refused when the rule is not
+    /// dry (`FaceNotDry`) or the new baseline moved too far from the stored
+    /// one (`BaselineShift`, `calibration::dark::check_shift`).
+    fn calibrate_dark(&mut self, now_ms: u64, force: bool) -> Result<AckResult, ErrorCode> {
+        let state = self.rule.state();
+        if !force && state != DetectorState::Dry {
             // An iced or wet face is not a dark reference (water would
             // become the baseline and hide the next film).
-            return Err(ErrorCode::NotDry);
+            let rise1_na = self.last.as_ref().map_or(0, |m| self.rise1_na(m.i1_na));
+            return Err(ErrorCode::FaceNotDry(FaceReading { state, rise1_na }));
         }
         // Average as long as the noise needs, within the time bound; refuse
         // a trend, a step, too much noise or saturation (`calibration::dark`).
@@ -182,6 +207,10 @@ where
         )
         .map_err(ErrorCode::CalibrationRefused)?
         .baseline;
+        if !force {
+            dark::check_shift(self.baseline, baseline, &self.config)
+                .map_err(ErrorCode::BaselineShift)?;
+        }
         self.baseline = Some(baseline);
         // A clean, dry face: the estimator starts from "dry", and the
         // learned gain (which may hold the dirt just cleaned off) returns to
@@ -237,6 +266,27 @@ mod tests {
             Err(ErrorCode::InvalidRate)
         );
         assert_eq!(stream_period(&c, Some(0)), Err(ErrorCode::InvalidRate));
+    }
+
+    #[test]
+    fn an_older_host_gets_codes_it_knows() {
+        use fois_protocol::{Baseline, BaselineShift, CalibrationRefusal};
+        let shift = ErrorCode::BaselineShift(BaselineShift {
+            old: Baseline::default(),
+            new: Baseline {
+                i1_na: 400,
+                i2_na: 0,
+            },
+            allowed_na: 250,
+        });
+        let wet = ErrorCode::FaceNotDry(FaceReading {
+            state: DetectorState::Wet,
+            rise1_na: 1_500,
+        });
+        assert_eq!(old_dark_code(shift), ErrorCode::NotDry);
+        assert_eq!(old_dark_code(wet), ErrorCode::NotDry);
+        let step = ErrorCode::CalibrationRefused(CalibrationRefusal::Step);
+        assert_eq!(old_dark_code(step), step);
     }
 
     #[test]

@@ -124,7 +124,7 @@ where
 
     /// The rise of I1 over its dark baseline, nA (the rule's input; the
     /// estimator takes both channels' rises).
-    fn rise1_na(&self, i1_na: i32) -> i32 {
+    pub(super) fn rise1_na(&self, i1_na: i32) -> i32 {
         let base1_na = self.baseline.map_or(0, |b| b.i1_na);
         i1_na.saturating_sub(base1_na)
     }

@@ -44,9 +44,11 @@ pub enum Cmd {
     #[command(after_help = exit::TABLE)]
     Config(config::ConfigArgs),
     /// Take the current readings of a dry, clean sensor face as the dark
-    /// baseline (the node checks that the channels are steady).
-    #[command(after_help = exit::TABLE)]
-    CalibrateDark(request::RequestArgs),
+    /// baseline. The node checks that the channels are steady, that the face
+    /// reads dry and (protocol-4 nodes) that the baseline moves by no more
+    /// than the noise allows (a quarter of the onset rise) from the stored one.
+    #[command(after_help = exit::CALIBRATE_DARK_TABLE)]
+    CalibrateDark(request::CalibrateDarkArgs),
     /// With a reference target of known response on the clean face, measure
     /// the sensor's optical gain (LED, fibres, phototransistors) against the
     /// target's expected currents; the node keeps it as its gain prior.
@@ -58,7 +60,8 @@ pub enum Cmd {
     #[command(after_help = exit::TABLE)]
     ResetGain(request::RequestArgs),
     /// Acknowledge the ice alarm (the output stays on while ice remains).
-    #[command(after_help = exit::TABLE)]
+    /// Says so, with its own exit code, when there is no alarm.
+    #[command(after_help = exit::ACK_TABLE)]
     Ack(request::RequestArgs),
     /// Run the firmware's own logic on simulated hardware (ray-traced ice
     /// accretion, analog front end, ambient light) and serve it on a

@@ -1,11 +1,14 @@
 //! Commands that send one request and wait for the node's `Ack` or `Error`:
-//! `calibrate-dark`, `calibrate-gain`, `reset-gain` and `ack` here, and the
+//! `calibrate-dark` (with `--force`), `calibrate-gain`, `reset-gain` and
+//! `ack` here (refusals of a calibration say what to do next), and the
 //! connection and reply handling that `config get|set` shares.
 
 use std::time::Duration;
 
 use clap::Args;
-use fois_protocol::{AckResult, Command, GainTarget};
+use fois_link::advice::{Calibration, calibration_advice};
+use fois_link::versioned;
+use fois_protocol::{AckResult, Command, GainTarget, Hello};
 
 use super::args::PortArgs;
 use crate::exit::{self, Exit};
@@ -34,11 +37,17 @@ impl RequestArgs {
 
     /// Open the port and handshake (refuses another protocol version).
     pub fn connect(&self) -> anyhow::Result<Link<Box<dyn serialport::SerialPort>>> {
+        self.connect_hello().map(|(link, _)| link)
+    }
+
+    /// [`RequestArgs::connect`], with the node's hello (its protocol
+    /// version picks the shape of a command).
+    pub fn connect_hello(&self) -> anyhow::Result<(Link<Box<dyn serialport::SerialPort>>, Hello)> {
         let port = open_port(&self.port.port, self.port.baud)?;
         let mut link = Link::new(port, self.port.port.clone());
         let _ = link.port_mut().clear(serialport::ClearBuffer::Input);
-        link.handshake(self.timeout())?;
-        Ok(link)
+        let hello = link.handshake(self.timeout())?;
+        Ok((link, hello))
     }
 }
 
@@ -73,14 +82,63 @@ pub fn request(args: &RequestArgs, cmd: Command) -> anyhow::Result<AckResult> {
     expect_ack(r)
 }
 
-/// `foisctl calibrate-dark`.
-pub fn calibrate_dark(args: &RequestArgs) -> anyhow::Result<()> {
-    request(args, Command::CalibrateDark).map(|_| ())
+/// Send `cmd` for calibration `cal`, print the answer; a refusal (exit
+/// code 6) says what to do next.
+fn calibration_request(
+    link: &mut Link<Box<dyn serialport::SerialPort>>,
+    args: &RequestArgs,
+    cal: Calibration,
+    cmd: Command,
+) -> anyhow::Result<AckResult> {
+    let reply = link.request(cmd, args.timeout())?;
+    if let Reply::Error(e) = &reply
+        && let Some(advice) = calibration_advice(cal, &e.code)
+    {
+        return Err(Exit::new(
+            exit::REFUSED,
+            format!(
+                "the node refused the calibration: {}\nwhat to do: {advice}",
+                fois_link::text::error_text(e)
+            ),
+        )
+        .into());
+    }
+    expect_ack(reply)
 }
 
-/// `foisctl ack`: acknowledge the alarm.
+/// `foisctl calibrate-dark`: the port, the answer timeout and `--force`.
+#[derive(Debug, Clone, Args)]
+pub struct CalibrateDarkArgs {
+    /// The port and the answer timeout.
+    #[command(flatten)]
+    pub request: RequestArgs,
+    /// Take the reading even if the face does not read dry or the baseline
+    /// moves further than the noise allows from the stored one: only when
+    /// the face is clean and dry and the change is real (a new LED, a
+    /// cleaned window). The checks of the reading itself (steady, not
+    /// saturated) still apply. Protocol-4 nodes.
+    #[arg(long)]
+    pub force: bool,
+}
+
+/// `foisctl calibrate-dark [--force]`.
+pub fn calibrate_dark(args: &CalibrateDarkArgs) -> anyhow::Result<()> {
+    let (mut link, hello) = args.request.connect_hello()?;
+    let cmd = versioned::dark_command(hello.protocol_version, args.force)
+        .map_err(|why| Exit::new(exit::USAGE, why))?;
+    calibration_request(&mut link, &args.request, Calibration::Dark, cmd).map(|_| ())
+}
+
+/// `foisctl ack`: acknowledge the alarm; exit code 8 when there is none.
 pub fn ack(args: &RequestArgs) -> anyhow::Result<()> {
-    request(args, Command::AckAlarm).map(|_| ())
+    let (mut link, hello) = args.connect_hello()?;
+    let cmd = versioned::ack_command(hello.protocol_version);
+    match expect_ack(link.request(cmd, args.timeout())?)? {
+        AckResult::NoAlarm => {
+            Err(Exit::new(exit::NO_ALARM, "no alarm to acknowledge: nothing changed").into())
+        }
+        _ => Ok(()),
+    }
 }
 
 /// `foisctl calibrate-gain`: the reference target and the node.
@@ -126,7 +184,9 @@ impl CalibrateGainArgs {
 /// `foisctl calibrate-gain`: with the reference target on the face, the
 /// node measures its optical gain against the target's expected currents.
 pub fn calibrate_gain(args: &CalibrateGainArgs) -> anyhow::Result<()> {
-    request(&args.request, Command::CalibrateGain(args.target())).map(|_| ())
+    let mut link = args.request.connect()?;
+    let cmd = Command::CalibrateGain(args.target());
+    calibration_request(&mut link, &args.request, Calibration::Gain, cmd).map(|_| ())
 }
 
 /// `foisctl reset-gain`: the node forgets its learned optical gain.

@@ -18,8 +18,15 @@ pub struct SceneArgs {
     /// A scenario file (TOML timeline of segments: cover, rate, temperature,
     /// light, LED drift, noise; format in host/README.md). Replaces the
     /// scene flags below; --sensor and --seed override the file's.
-    #[arg(long, value_name = "FILE.toml", conflicts_with_all = ["ice", "rate_mm_per_h", "temp_c", "dry_s", "ambient", "flicker", "led_factor", "noise_lsb"])]
+    #[arg(long, value_name = "FILE.toml", conflicts_with_all = ["ice", "rate_mm_per_h", "temp_c", "dry_s", "ambient", "flicker", "led_factor", "noise_lsb", "target"])]
     pub scenario: Option<PathBuf>,
+    /// Put a reference target on the face after the dry start (instead of
+    /// a film), to practise `foisctl calibrate-gain`: its net currents at
+    /// gain 1, µA, `I1,I2` (the target's data sheet values). The face then
+    /// reads them times the node's optical gain (--led-factor) over its dark
+    /// baseline. The node's rule sees the target as a cover (wet or ice).
+    #[arg(long, value_name = "I1,I2", value_parser = ua_pair, conflicts_with_all = ["ice", "rate_mm_per_h"])]
+    pub target: Option<[f64; 2]>,
     /// What forms on the face after the dry start: dry, flat, glazed, rime,
     /// water [default: rime].
     #[arg(long, value_name = "KIND", value_enum)]
@@ -177,7 +184,10 @@ impl SceneArgs {
         if dry_s > 0.0 {
             segs.push(style(Segment::new(dry_s, Cover::Dry)));
         }
-        segs.push(style(Segment::new(f64::INFINITY, ice).rate(rate)));
+        segs.push(match self.target {
+            Some(t) => style(Segment::new(f64::INFINITY, Cover::Dry).target(t)),
+            None => style(Segment::new(f64::INFINITY, ice).rate(rate)),
+        });
         Ok(Scene {
             timeline: Timeline::new(segs),
             sensor: sensor.unwrap_or(SensorKind::B),
@@ -223,6 +233,14 @@ pub fn describe(scene: &Scene) -> String {
     } else {
         String::new()
     };
+    if let Some(t) = last.target_ua {
+        return format!(
+            "{dry}a reference target of I1 {} µA, I2 {} µA at gain 1 on the face (LED ×{}), \
+             air {} °C, sensor {:?}, speed ×{}: practise `foisctl calibrate-gain --i1-ua {} \
+             --i2-ua {}`",
+            t[0], t[1], last.led_factor, last.air_temp_c, scene.sensor, scene.speed, t[0], t[1]
+        );
+    }
     format!(
         "{dry}{} at {} mm/h, air {} °C, sensor {:?}, speed ×{}{ignored}",
         last.cover.name(),

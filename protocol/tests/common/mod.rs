@@ -243,6 +243,7 @@ pub fn ack_result() -> impl Strategy<Value = AckResult> {
         config().prop_map(AckResult::ConfigV3),
         gain_estimate().prop_map(AckResult::GainCalibrated),
         Just(AckResult::GainReset),
+        Just(AckResult::NoAlarm),
     ]
 }
 
@@ -257,6 +258,21 @@ pub fn error_code() -> impl Strategy<Value = ErrorCode> {
         Just(ErrorCode::StorageFailed),
         Just(ErrorCode::NotDry),
         calibration_refusal().prop_map(ErrorCode::CalibrationRefused),
+        (any::<[i32; 4]>(), any::<u32>()).prop_map(|(b, allowed_na)| {
+            ErrorCode::BaselineShift(BaselineShift {
+                old: Baseline {
+                    i1_na: b[0],
+                    i2_na: b[1],
+                },
+                new: Baseline {
+                    i1_na: b[2],
+                    i2_na: b[3],
+                },
+                allowed_na,
+            })
+        }),
+        (state(), any::<i32>())
+            .prop_map(|(state, rise1_na)| ErrorCode::FaceNotDry(FaceReading { state, rise1_na })),
     ]
 }
 
@@ -291,6 +307,8 @@ pub fn command() -> impl Strategy<Value = Command> {
         (any::<u32>(), any::<u32>())
             .prop_map(|(i1_na, i2_na)| Command::CalibrateGain(GainTarget { i1_na, i2_na })),
         Just(Command::ResetGain),
+        any::<bool>().prop_map(|force| Command::CalibrateDarkV4 { force }),
+        Just(Command::AckAlarmV4),
     ]
 }
 

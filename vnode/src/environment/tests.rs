@@ -124,3 +124,25 @@ fn the_optical_gain_follows_led_temperature_and_fouling() {
     assert_eq!((t.optics_temp_c, t.gain.signal_gain()), (-40.0, 1.0));
     assert_eq!(t.led_signal_ua[0], 10.5);
 }
+
+#[test]
+fn a_target_reads_over_the_dry_face_times_the_gain_whatever_the_cover() {
+    let tl = Timeline::new(vec![
+        Segment::new(10.0, Cover::Dry),
+        Segment::new(10.0, Cover::Rime)
+            .rate(3600.0)
+            .led(0.8)
+            .target([25.2, 9.56]),
+        Segment::new(f64::INFINITY, Cover::Rime).rate(3600.0),
+    ]);
+    let env = Environment::with_curves(tl, [(Cover::Rime, line_curve())], [0.6, 0.2]);
+    let dry = env.truth(5_000_000_000).led_signal_ua;
+    assert!((dry[0] - 0.6).abs() < 1e-12 && (dry[1] - 0.2).abs() < 1e-12);
+    // The target on: (dry + target) × 0.8, the rime under it not seen.
+    let on = env.truth(15_000_000_000);
+    assert!((on.led_signal_ua[0] - 0.8 * 25.8).abs() < 1e-9, "{on:?}");
+    assert!((on.led_signal_ua[1] - 0.8 * 9.76).abs() < 1e-9, "{on:?}");
+    // Taken off: the rime's curve again.
+    let off = env.truth(25_000_000_000);
+    assert!((off.led_signal_ua[0] - on.led_signal_ua[0]).abs() > 1e-3);
+}
