@@ -8,16 +8,27 @@ use std::time::{Duration, Instant};
 
 use tokio::task::AbortHandle;
 
+use super::log_limit::LogLimit;
+
 /// At most one eviction warning per this long (the count since the last).
 pub const EVICTION_LOG_INTERVAL: Duration = Duration::from_secs(10);
 
 /// The connected clients.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Clients {
     next_id: u64,
     open: Vec<Client>,
-    unlogged: u64,
-    last_log: Option<Instant>,
+    evictions: LogLimit,
+}
+
+impl Default for Clients {
+    fn default() -> Clients {
+        Clients {
+            next_id: 0,
+            open: Vec::new(),
+            evictions: LogLimit::new(EVICTION_LOG_INTERVAL),
+        }
+    }
 }
 
 #[derive(Debug)]
@@ -72,18 +83,10 @@ impl Clients {
                 .map(|(k, _)| k);
             if let Some(k) = oldest {
                 let c = self.open.swap_remove(k);
-                self.unlogged += 1;
-                let due = self
-                    .last_log
-                    .is_none_or(|t| now.duration_since(t) >= EVICTION_LOG_INTERVAL);
-                let log = due.then(|| {
-                    self.last_log = Some(now);
-                    std::mem::take(&mut self.unlogged)
-                });
                 evicted = Some(Evicted {
                     peer: c.peer,
                     task: c.task,
-                    log,
+                    log: self.evictions.event(now),
                 });
             }
         }

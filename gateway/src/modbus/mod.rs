@@ -18,6 +18,7 @@
 //!   which parts are present.
 
 pub mod clients;
+pub mod log_limit;
 pub mod pdu;
 pub mod server;
 pub mod units;

@@ -7,11 +7,13 @@
 
 use std::net::SocketAddr;
 use std::sync::Mutex;
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use tokio::sync::mpsc;
 use tokio_modbus::{ExceptionCode, Request, Response};
 use tracing::info;
+
+use super::log_limit::LogLimit;
 
 use super::clients::Clients;
 use super::pdu::MAX_WRITE;
@@ -20,6 +22,10 @@ use crate::command::FrontEndCommand;
 use crate::command::NodeCommand;
 use crate::config::ModbusConfig;
 use crate::snapshot::Fleet;
+
+/// At most one log line per this long for the alarm-acknowledge writes
+/// handed to the command path (with their count).
+pub const ACK_LOG_INTERVAL: Duration = Duration::from_secs(10);
 
 /// Registers one read may ask for (Modbus: 125).
 pub const MAX_READ: u16 = 125;
@@ -31,6 +37,7 @@ pub struct ModbusUnits {
     pub(super) cfg: ModbusConfig,
     commands: mpsc::UnboundedSender<FrontEndCommand>,
     pub(super) clients: Mutex<Clients>,
+    acks_logged: Mutex<LogLimit>,
 }
 
 impl ModbusUnits {
@@ -45,6 +52,7 @@ impl ModbusUnits {
             cfg,
             commands,
             clients: Mutex::new(Clients::default()),
+            acks_logged: Mutex::new(LogLimit::new(ACK_LOG_INTERVAL)),
         }
     }
 
@@ -119,10 +127,23 @@ impl ModbusUnits {
         if !node.link_up {
             return Err(ExceptionCode::GatewayTargetDevice);
         }
-        info!(
-            "Modbus: alarm acknowledge for node {} from {peer}",
-            node.name.as_deref().unwrap_or(&node.port)
-        );
+        let log = self
+            .acks_logged
+            .lock()
+            .ok()
+            .and_then(|mut l| l.event(Instant::now()));
+        match log {
+            Some(1) => info!(
+                "Modbus: alarm acknowledge for node {} from {peer}",
+                node.name.as_deref().unwrap_or(&node.port)
+            ),
+            Some(n) => info!(
+                "Modbus: alarm acknowledge for node {} from {peer} ({n} acknowledge writes \
+                 handed over since the last such line)",
+                node.name.as_deref().unwrap_or(&node.port)
+            ),
+            None => {}
+        }
         self.commands
             .send(FrontEndCommand {
                 node: k,
