@@ -296,8 +296,9 @@ fn with_commands_on_writing_1_to_the_ack_register_acknowledges_the_nodes_alarm()
     });
     let r = client.read(1, 4, 0, 1).unwrap();
     assert_eq!(r[0] & (status::ALARM | status::ALARM_ACKED), status::ALARM);
-    // `max_clients = 2`: of 3 clients connected at once, one is closed at
-    // once (its first read gets no answer); the two others get all theirs.
+    // `max_clients = 2`: of 3 clients connected at once, the third evicts
+    // one of the two silent before it (whose first read gets no answer);
+    // the two others get all theirs.
     let p = client.run("poll", &["1".into(), "3".into(), "5".into()]);
     assert_eq!(
         (p["answers"].as_u64(), p["failed"].as_u64()),
@@ -327,4 +328,192 @@ fn with_commands_on_writing_1_to_the_ack_register_acknowledges_the_nodes_alarm()
         "the output stays on while ice remains, acknowledged"
     );
     gw.stop();
+}
+
+/// A raw Modbus TCP connection (std::net), for what a well-behaved client
+/// library never sends.
+struct Raw(std::net::TcpStream);
+
+impl Raw {
+    /// Connect to the gateway's server (retried while it starts).
+    fn connect(port: u16) -> Raw {
+        let t0 = Instant::now();
+        loop {
+            match std::net::TcpStream::connect(("127.0.0.1", port)) {
+                Ok(s) => return Raw(s),
+                Err(e) => assert!(t0.elapsed() < Duration::from_secs(10), "connect: {e}"),
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn send(&mut self, bytes: &[u8]) {
+        use std::io::Write;
+        self.0.write_all(bytes).unwrap();
+    }
+
+    /// Send `pdu` to `unit` as transaction `tid`.
+    fn request(&mut self, tid: u16, unit: u8, pdu: &[u8]) {
+        let mut adu = tid.to_be_bytes().to_vec();
+        adu.extend([0, 0]);
+        adu.extend(u16::try_from(pdu.len() + 1).unwrap().to_be_bytes());
+        adu.push(unit);
+        adu.extend(pdu);
+        self.send(&adu);
+    }
+
+    /// The next answer's (transaction, unit, PDU); `None` when nothing
+    /// comes within `within` (the connection stays open).
+    fn answer(&mut self, within: Duration) -> Option<(u16, u8, Vec<u8>)> {
+        use std::io::Read;
+        self.0.set_read_timeout(Some(within)).unwrap();
+        let mut h = [0u8; 7];
+        match self.0.read_exact(&mut h) {
+            Ok(()) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => return None,
+            Err(e) if e.kind() == std::io::ErrorKind::TimedOut => return None,
+            Err(e) => panic!("the connection ended: {e}"),
+        }
+        let mut pdu = vec![0u8; usize::from(u16::from_be_bytes([h[4], h[5]])) - 1];
+        self.0.read_exact(&mut pdu).unwrap();
+        Some((u16::from_be_bytes([h[0], h[1]]), h[6], pdu))
+    }
+
+    /// How long until the server closes the connection (from `t0`), or
+    /// `None` when it is still open `within` after `t0`.
+    fn closed_after(&mut self, t0: Instant, within: Duration) -> Option<Duration> {
+        use std::io::Read;
+        let left = within
+            .saturating_sub(t0.elapsed())
+            .max(Duration::from_millis(1));
+        self.0.set_read_timeout(Some(left)).unwrap();
+        let mut b = [0u8; 64];
+        match self.0.read(&mut b) {
+            Ok(0) => Some(t0.elapsed()),
+            Ok(n) => panic!("an answer of {n} bytes: {:02x?}", &b[..n]),
+            Err(e) if e.kind() == std::io::ErrorKind::ConnectionReset => Some(t0.elapsed()),
+            Err(_) => None,
+        }
+    }
+}
+
+/// A read of 24 input registers from address 0.
+const READ_ALL: [u8; 5] = [0x04, 0, 0, 0, 24];
+
+#[test]
+fn half_frames_huge_lengths_and_silence_are_closed_within_their_bounds() {
+    let gw = Gateway::start(&[("/dev/does-not-exist", "n1")], "idle_timeout_s = 3\n");
+    let silent = Raw::connect(gw.port);
+    let t0 = Instant::now();
+    let mut half_header = Raw::connect(gw.port);
+    half_header.send(&[0, 1, 0, 0]);
+    let mut half_pdu = Raw::connect(gw.port);
+    half_pdu.send(&[0, 1, 0, 0, 0, 6, 1, 0x04, 0]);
+    let mut huge = Raw::connect(gw.port);
+    huge.send(&[0, 1, 0, 0, 0xFF, 0xFF, 1, 0x04]);
+    // Each watched in its own thread from t0, while a master polling every
+    // second stays connected past the idle bound.
+    let watch = |mut c: Raw| std::thread::spawn(move || c.closed_after(t0, Duration::from_secs(6)));
+    let [huge, half_header, half_pdu, silent] = [huge, half_header, half_pdu, silent].map(watch);
+    let mut polling = Raw::connect(gw.port);
+    for k in 0..5u16 {
+        polling.request(k, 1, &READ_ALL);
+        let (tid, unit, pdu) = polling.answer(Duration::from_secs(2)).unwrap();
+        assert_eq!((tid, unit, pdu[..2].to_vec()), (k, 1, vec![4, 48]));
+        std::thread::sleep(Duration::from_millis(900));
+    }
+    let [huge_s, header_s, pdu_s, silent_s] =
+        [huge, half_header, half_pdu, silent].map(|t| t.join().unwrap());
+    println!(
+        "closed after: MBAP length 65535 {huge_s:?}, half header {header_s:?}, half PDU \
+         {pdu_s:?}, silent {silent_s:?}"
+    );
+    assert!(
+        huge_s.unwrap() < Duration::from_millis(500),
+        "length 65535: closed at once"
+    );
+    for (what, s) in [("half header", header_s), ("half PDU", pdu_s)] {
+        let s = s.unwrap().as_secs_f64();
+        assert!((1.9..2.6).contains(&s), "{what}: {s} s (frame timeout 2 s)");
+    }
+    let s = silent_s.unwrap().as_secs_f64();
+    assert!((2.9..3.6).contains(&s), "silent: {s} s (idle timeout 3 s)");
+    // The polling master was never closed.
+    polling.request(9, 1, &READ_ALL);
+    assert_eq!(polling.answer(Duration::from_secs(2)).unwrap().0, 9);
+}
+
+#[test]
+fn silent_connections_at_max_clients_do_not_lock_out_a_new_master() {
+    let gw = Gateway::start(&[("/dev/does-not-exist", "n1")], "max_clients = 3\n");
+    let mut first = Raw::connect(gw.port);
+    first.request(1, 1, &READ_ALL);
+    assert!(first.answer(Duration::from_secs(2)).is_some());
+    // Two silent connections take the other places.
+    let mut silent: Vec<Raw> = (0..2).map(|_| Raw::connect(gw.port)).collect();
+    std::thread::sleep(Duration::from_millis(200));
+    let t0 = Instant::now();
+    let mut master = Raw::connect(gw.port);
+    master.request(7, 1, &READ_ALL);
+    let (tid, unit, pdu) = master.answer(Duration::from_secs(2)).unwrap();
+    assert_eq!((tid, unit, pdu.len()), (7, 1, 2 + 48));
+    // The earliest silent connection made room, not `first`, which
+    // connected before it but asked something.
+    assert!(silent[0].closed_after(t0, Duration::from_secs(1)).is_some());
+    let t1 = Instant::now();
+    assert_eq!(silent[1].closed_after(t1, Duration::from_millis(200)), None);
+    first.request(2, 1, &READ_ALL);
+    assert_eq!(first.answer(Duration::from_secs(2)).unwrap().0, 2);
+    // A request on a place is answered on it.
+    silent[1].request(8, 1, &READ_ALL);
+    assert_eq!(silent[1].answer(Duration::from_secs(2)).unwrap().0, 8);
+}
+
+#[test]
+fn broadcasts_are_never_answered_and_malformed_requests_get_exceptions_not_a_closed_connection() {
+    let gw = Gateway::start(&[("/dev/does-not-exist", "n1")], "commands = true\n");
+    let mut c = Raw::connect(gw.port);
+    let quiet = Duration::from_millis(400);
+    // Unit 0: a read, a write, a function the gateway lacks: no answer.
+    c.request(1, 0, &READ_ALL);
+    c.request(2, 0, &[0x06, 0, 23, 0, 1]);
+    c.request(3, 0, &[0x2B, 0x0E, 1, 0]);
+    assert_eq!(c.answer(quiet), None);
+    let mut fc16_124 = vec![0x10, 0, 23, 0, 124, 248];
+    fc16_124.extend([0u8; 248]);
+    let cases: [(&str, Vec<u8>, [u8; 2]); 7] = [
+        (
+            "an exception code as a function",
+            vec![0x81, 0, 0, 0, 1],
+            [0x81, 1],
+        ),
+        ("function 0xC3", vec![0xC3], [0xC3, 1]),
+        ("a truncated FC 03", vec![0x03, 0, 0, 0], [0x83, 3]),
+        (
+            "FC 04 with a trailing byte",
+            vec![0x04, 0, 0, 0, 1, 0],
+            [0x84, 3],
+        ),
+        (
+            "FC 06 with a trailing byte",
+            vec![0x06, 0, 23, 0, 1, 0],
+            [0x86, 3],
+        ),
+        ("FC 16 of 124 registers", fc16_124, [0x90, 3]),
+        (
+            "FC 16 byte count 3 for 1 register",
+            vec![0x10, 0, 23, 0, 1, 3, 0, 1, 0],
+            [0x90, 3],
+        ),
+    ];
+    for (k, (what, pdu, want)) in cases.iter().enumerate() {
+        let tid = 100 + u16::try_from(k).unwrap();
+        c.request(tid, 1, pdu);
+        let got = c.answer(Duration::from_secs(2));
+        assert_eq!(got, Some((tid, 1, want.to_vec())), "{what}");
+    }
+    // The connection still serves.
+    c.request(200, 1, &READ_ALL);
+    let (tid, _, pdu) = c.answer(Duration::from_secs(2)).unwrap();
+    assert_eq!((tid, pdu.len()), (200, 50));
 }

@@ -20,6 +20,13 @@ pub const DEFAULT_STALE_AFTER_S: f64 = 10.0;
 /// At most this many Modbus clients at once, by default; more are refused
 /// (their connection closed at once).
 pub const DEFAULT_MAX_CLIENTS: usize = 64;
+/// A connection that sends no request for this long is closed, s, by
+/// default (a SCADA master polls every few seconds; a silent connection
+/// must not hold one of the `max_clients` places for ever).
+pub const DEFAULT_IDLE_TIMEOUT_S: f64 = 60.0;
+/// A request's bytes must all arrive within this long of its first byte,
+/// s, by default (a half frame then silence closes the connection).
+pub const DEFAULT_FRAME_TIMEOUT_S: f64 = 2.0;
 /// The largest unit id a node can have (Modbus: 1–247; 0 is broadcast,
 /// 248–255 reserved).
 pub const MAX_UNIT: u8 = 247;
@@ -40,6 +47,11 @@ pub struct ModbusFile {
     pub stale_after_s: Option<f64>,
     /// Clients at once [default: 64].
     pub max_clients: Option<usize>,
+    /// Close a connection silent for this long, s [default: 60].
+    pub idle_timeout_s: Option<f64>,
+    /// Close a connection whose request is not complete this long after
+    /// its first byte, s [default: 2].
+    pub frame_timeout_s: Option<f64>,
 }
 
 /// `[modbus]`, resolved (present only when enabled).
@@ -53,6 +65,10 @@ pub struct ModbusConfig {
     pub stale_after: Duration,
     /// Clients served at once.
     pub max_clients: usize,
+    /// A connection silent this long is closed.
+    pub idle_timeout: Duration,
+    /// A request must be complete this long after its first byte.
+    pub frame_timeout: Duration,
     /// The unit id of each node, in config order.
     pub units: Vec<u8>,
 }
@@ -105,6 +121,14 @@ pub fn resolve_modbus(
     if !(1..=1024).contains(&max_clients) {
         anyhow::bail!("[modbus] max_clients must be within 1..=1024 (not {max_clients})");
     }
+    let idle_s = m.idle_timeout_s.unwrap_or(DEFAULT_IDLE_TIMEOUT_S);
+    if !(1.0..=86_400.0).contains(&idle_s) {
+        anyhow::bail!("[modbus] idle_timeout_s must be within 1..=86400 (not {idle_s})");
+    }
+    let frame_s = m.frame_timeout_s.unwrap_or(DEFAULT_FRAME_TIMEOUT_S);
+    if !(0.1..=60.0).contains(&frame_s) {
+        anyhow::bail!("[modbus] frame_timeout_s must be within 0.1..=60 (not {frame_s})");
+    }
     if !m.enabled.unwrap_or(false) {
         return Ok(None);
     }
@@ -145,6 +169,8 @@ pub fn resolve_modbus(
         commands: m.commands.unwrap_or(false),
         stale_after: Duration::from_secs_f64(stale_s),
         max_clients,
+        idle_timeout: Duration::from_secs_f64(idle_s),
+        frame_timeout: Duration::from_secs_f64(frame_s),
         units,
     }))
 }

@@ -4,7 +4,8 @@
 //! function, [`register_map`], from the node's [`fois_link::Reading`] (the
 //! one mapping from the wire's integers to µA, °C, mm, fractions and gain
 //! factors), scaled back to integers by the factors of [`TABLE`];
-//! [`server`] serves it with [`tokio_modbus`].
+//! [`server`] serves it over TCP ([`pdu`]: the framing, [`units`]: the
+//! answers, [`clients`]: the connected clients).
 //!
 //! Conventions (the README's "Modbus TCP" section has the table):
 //! - function codes 03 (read holding registers) and 04 (read input
@@ -16,7 +17,11 @@
 //!   enums), `0x8000_0000` (i32), `0xFFFF_FFFF` (u32); the status word says
 //!   which parts are present.
 
+pub mod clients;
+pub mod log_limit;
+pub mod pdu;
 pub mod server;
+pub mod units;
 
 use std::time::{Duration, Instant};
 

@@ -1,203 +1,38 @@
-//! The Modbus TCP server: [`tokio_modbus`]'s server skeleton on the
-//! gateway's runtime, one [`Client`] per connection, every request
-//! answered from the shared snapshots ([`crate::snapshot::Fleet`]) by
-//! [`ModbusUnits::answer`], and the alarm acknowledge handed to the gateway's
-//! command path ([`crate::service::Service::commands`]: the node must be
-//! online, one command per node per `[commands] min_interval_ms`, the
-//! answer published on `<node>/command/result`).
+//! The Modbus TCP server: one task per connection on the gateway's
+//! runtime, reading MBAP frames ([`super::pdu`]) and answering each from
+//! [`ModbusUnits::answer`].
+//!
+//! A connection is closed when it sends no request for `[modbus]
+//! idle_timeout_s` (60 s by default), when a request is not complete
+//! `frame_timeout_s` (2 s) after its first byte, when an answer cannot be
+//! written within `frame_timeout_s`, and at once for an MBAP header that is
+//! not Modbus (protocol id ≠ 0, length 0, 1 or over 257). When
+//! `max_clients` are connected, a new connection evicts the longest-idle
+//! one ([`super::clients`]). Requests to unit 0 (broadcast) are read and
+//! never answered.
 //!
 //! Exceptions, as the Modbus application protocol (V1.1b3, §7) has them:
 //!
 //! | code | when |
 //! | --- | --- |
-//! | 01 illegal function | a function other than 03, 04, 06, 16; 06 and 16 while `commands = false` |
+//! | 01 illegal function | a function other than 03, 04, 06, 16 (codes ≥ 0x80 included); 06 and 16 while `commands = false` |
 //! | 02 illegal data address | registers beyond the table; a write to a register other than `alarm_ack` |
-//! | 03 illegal data value | a quantity of 0 or over 125 (read) / 123 (write); a value other than 1 written to `alarm_ack` |
+//! | 03 illegal data value | a PDU too short or too long for its function; a quantity of 0 or over 125 (read) / 123 (write), or an FC 16 byte count that disagrees; a value other than 1 written to `alarm_ack` |
 //! | 0A gateway path unavailable | a unit id no node has |
 //! | 0B gateway target device failed to respond | `alarm_ack` written while the node's link is down |
 
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-use tokio::net::TcpListener;
-use tokio::sync::mpsc;
-use tokio_modbus::server::tcp::{Server, accept_tcp_connection};
-use tokio_modbus::{ExceptionCode, Request, Response, SlaveRequest};
-use tracing::{debug, info, warn};
+use tokio::io::{AsyncReadExt, AsyncWriteExt};
+use tokio::net::{TcpListener, TcpStream};
+use tokio::time::{timeout, timeout_at};
+use tracing::{debug, warn};
 
-use super::{ACK, ACK_VALUE, REGISTERS, register_map};
-use crate::command::FrontEndCommand;
-use crate::command::NodeCommand;
+use super::pdu;
+pub use super::units::{MAX_READ, ModbusUnits};
 use crate::config::ModbusConfig;
-use crate::snapshot::Fleet;
-
-/// Registers one read may ask for (Modbus: 125).
-pub const MAX_READ: u16 = 125;
-/// Registers one write may carry (Modbus: 123).
-pub const MAX_WRITE: usize = 123;
-
-/// What the server answers from: the nodes' snapshots, the config, the
-/// command path, the count of connected clients.
-pub struct ModbusUnits {
-    fleet: Fleet,
-    cfg: ModbusConfig,
-    commands: mpsc::UnboundedSender<FrontEndCommand>,
-    clients: AtomicUsize,
-}
-
-impl ModbusUnits {
-    /// A server's state over `fleet`.
-    pub fn new(
-        cfg: ModbusConfig,
-        fleet: Fleet,
-        commands: mpsc::UnboundedSender<FrontEndCommand>,
-    ) -> ModbusUnits {
-        ModbusUnits {
-            fleet,
-            cfg,
-            commands,
-            clients: AtomicUsize::new(0),
-        }
-    }
-
-    /// The answer to `req` for `unit` at `now` (`peer`: for the log).
-    pub fn answer(
-        &self,
-        unit: u8,
-        req: &Request<'_>,
-        now: Instant,
-        peer: SocketAddr,
-    ) -> Result<Response, ExceptionCode> {
-        let Some(k) = self.cfg.node_of_unit(unit) else {
-            return Err(ExceptionCode::GatewayPathUnavailable);
-        };
-        match req {
-            Request::ReadInputRegisters(addr, n) => self
-                .read(k, *addr, *n, now)
-                .map(Response::ReadInputRegisters),
-            Request::ReadHoldingRegisters(addr, n) => self
-                .read(k, *addr, *n, now)
-                .map(Response::ReadHoldingRegisters),
-            Request::WriteSingleRegister(addr, v) => {
-                self.write(k, *addr, &[*v], peer)?;
-                Ok(Response::WriteSingleRegister(*addr, *v))
-            }
-            Request::WriteMultipleRegisters(addr, vs) => {
-                self.write(k, *addr, vs, peer)?;
-                Ok(Response::WriteMultipleRegisters(*addr, vs.len() as u16))
-            }
-            _ => Err(ExceptionCode::IllegalFunction),
-        }
-    }
-
-    fn read(&self, k: usize, addr: u16, n: u16, now: Instant) -> Result<Vec<u16>, ExceptionCode> {
-        if n == 0 || n > MAX_READ {
-            return Err(ExceptionCode::IllegalDataValue);
-        }
-        let (start, end) = (usize::from(addr), usize::from(addr) + usize::from(n));
-        if end > REGISTERS {
-            return Err(ExceptionCode::IllegalDataAddress);
-        }
-        let node = self
-            .fleet
-            .node(k)
-            .ok_or(ExceptionCode::ServerDeviceFailure)?;
-        Ok(register_map(&node, now, self.cfg.stale_after)[start..end].to_vec())
-    }
-
-    fn write(
-        &self,
-        k: usize,
-        addr: u16,
-        vs: &[u16],
-        peer: SocketAddr,
-    ) -> Result<(), ExceptionCode> {
-        if !self.cfg.commands {
-            return Err(ExceptionCode::IllegalFunction);
-        }
-        if vs.is_empty() || vs.len() > MAX_WRITE {
-            return Err(ExceptionCode::IllegalDataValue);
-        }
-        if addr != ACK || vs.len() != 1 {
-            return Err(ExceptionCode::IllegalDataAddress);
-        }
-        if vs[0] != ACK_VALUE {
-            return Err(ExceptionCode::IllegalDataValue);
-        }
-        let node = self
-            .fleet
-            .node(k)
-            .ok_or(ExceptionCode::ServerDeviceFailure)?;
-        if !node.link_up {
-            return Err(ExceptionCode::GatewayTargetDevice);
-        }
-        info!(
-            "Modbus: alarm acknowledge for node {} from {peer}",
-            node.name.as_deref().unwrap_or(&node.port)
-        );
-        self.commands
-            .send(FrontEndCommand {
-                node: k,
-                command: NodeCommand::AckAlarm,
-            })
-            .map_err(|_| ExceptionCode::ServerDeviceFailure)
-    }
-
-    /// Clients connected now.
-    pub fn clients(&self) -> usize {
-        self.clients.load(Ordering::Relaxed)
-    }
-}
-
-/// One connection: answers its requests, frees its place when dropped.
-pub struct Client {
-    units: Arc<ModbusUnits>,
-    peer: SocketAddr,
-}
-
-impl Client {
-    /// A place for `peer`, or `None` when `max_clients` are connected.
-    fn admit(units: &Arc<ModbusUnits>, peer: SocketAddr) -> Option<Client> {
-        let max = units.cfg.max_clients;
-        let taken = units
-            .clients
-            .fetch_update(Ordering::AcqRel, Ordering::Acquire, |n| {
-                (n < max).then_some(n + 1)
-            });
-        if taken.is_err() {
-            warn!("Modbus: refused {peer}: {max} clients are connected (max_clients)");
-            return None;
-        }
-        debug!("Modbus: {peer} connected");
-        Some(Client {
-            units: units.clone(),
-            peer,
-        })
-    }
-}
-
-impl Drop for Client {
-    fn drop(&mut self) {
-        self.units.clients.fetch_sub(1, Ordering::AcqRel);
-        debug!("Modbus: {} disconnected", self.peer);
-    }
-}
-
-impl tokio_modbus::server::Service for Client {
-    type Request = SlaveRequest<'static>;
-    type Response = Response;
-    type Exception = ExceptionCode;
-    type Future = std::future::Ready<Result<Response, ExceptionCode>>;
-
-    fn call(&self, req: Self::Request) -> Self::Future {
-        std::future::ready(
-            self.units
-                .answer(req.slave, &req.request, Instant::now(), self.peer),
-        )
-    }
-}
 
 /// Listen on the configured address (before the gateway runs: a taken
 /// port is an error at the start, not later).
@@ -210,18 +45,111 @@ pub async fn bind(cfg: &ModbusConfig) -> anyhow::Result<TcpListener> {
 /// Serve Modbus TCP on `listener` until the task is dropped; a failing
 /// `accept` (out of file descriptors) is logged and retried after a second.
 pub async fn serve(listener: TcpListener, units: Arc<ModbusUnits>) {
-    let server = Server::new(listener);
-    let on_connected = |stream, peer| {
-        let units = units.clone();
-        async move { accept_tcp_connection(stream, peer, |peer| Ok(Client::admit(&units, peer))) }
-    };
     loop {
-        if let Err(e) = server
-            .serve(&on_connected, |e| debug!("Modbus: a connection ended: {e}"))
-            .await
-        {
-            warn!("Modbus TCP: cannot accept a connection ({e}); retrying in 1 s");
-            tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+        let (stream, peer) = match listener.accept().await {
+            Ok(c) => c,
+            Err(e) => {
+                warn!("Modbus TCP: cannot accept a connection ({e}); retrying in 1 s");
+                tokio::time::sleep(std::time::Duration::from_secs(1)).await;
+                continue;
+            }
+        };
+        let Ok(mut clients) = units.clients.lock() else {
+            return;
+        };
+        let (id, evicted) = clients.admit(peer, Instant::now(), units.cfg.max_clients);
+        if let Some(ev) = evicted {
+            if let Some(task) = ev.task {
+                task.abort();
+            }
+            debug!("Modbus: closed {} to admit {peer} (max_clients)", ev.peer);
+            if let Some(n) = ev.log {
+                warn!(
+                    "Modbus: {} clients connected (max_clients): closed the longest-idle \
+                     connection to admit a new one, {n} time(s) since the last such warning",
+                    units.cfg.max_clients
+                );
+            }
+        }
+        debug!("Modbus: {peer} connected");
+        let task = tokio::spawn(connection(
+            stream,
+            peer,
+            Place {
+                units: units.clone(),
+                id,
+            },
+        ));
+        clients.set_task(id, task.abort_handle());
+    }
+}
+
+/// A client's place among the connected: freed when its task ends or is
+/// aborted.
+struct Place {
+    units: Arc<ModbusUnits>,
+    id: u64,
+}
+
+impl Drop for Place {
+    fn drop(&mut self) {
+        if let Ok(mut c) = self.units.clients.lock() {
+            c.leave(self.id);
+        }
+    }
+}
+
+/// Serve one connection until it closes, times out or sends a header that
+/// is not Modbus.
+async fn connection(mut stream: TcpStream, peer: SocketAddr, place: Place) {
+    let units = &place.units;
+    let (idle, frame) = (units.cfg.idle_timeout, units.cfg.frame_timeout);
+    let mut head = [0u8; pdu::HEADER];
+    let mut body = [0u8; pdu::MAX_LENGTH as usize];
+    loop {
+        match timeout(idle, stream.read(&mut head[..1])).await {
+            Err(_) => {
+                debug!("Modbus: {peer} closed: silent for {idle:?}");
+                return;
+            }
+            Ok(Ok(0) | Err(_)) => return,
+            Ok(Ok(_)) => {}
+        }
+        let deadline = tokio::time::Instant::now() + frame;
+        if !matches!(
+            timeout_at(deadline, stream.read_exact(&mut head[1..])).await,
+            Ok(Ok(_))
+        ) {
+            debug!("Modbus: {peer} closed: a header not complete within {frame:?}");
+            return;
+        }
+        let Some(h) = pdu::header(&head) else {
+            debug!("Modbus: {peer} closed: not a Modbus header {head:02x?}");
+            return;
+        };
+        let Some(request) = body.get_mut(..h.pdu_len) else {
+            return;
+        };
+        if !matches!(
+            timeout_at(deadline, stream.read_exact(request)).await,
+            Ok(Ok(_))
+        ) {
+            debug!("Modbus: {peer} closed: a request not complete within {frame:?}");
+            return;
+        }
+        let now = Instant::now();
+        if let Ok(mut c) = units.clients.lock() {
+            c.request(place.id, now);
+        }
+        if h.unit == 0 {
+            continue; // broadcast: never answered
+        }
+        let function = request.first().copied().unwrap_or(0);
+        let answer = pdu::request(request).and_then(|r| units.answer(h.unit, &r, now, peer));
+        let out = pdu::frame(h.transaction, h.unit, &pdu::response(function, answer));
+        if !matches!(timeout(frame, stream.write_all(&out)).await, Ok(Ok(()))) {
+            debug!("Modbus: {peer} closed: the answer not taken within {frame:?}");
+            return;
         }
     }
 }

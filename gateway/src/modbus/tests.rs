@@ -185,7 +185,7 @@ mod answers {
     use tokio::sync::mpsc;
     use tokio_modbus::{ExceptionCode, Request, Response};
 
-    use super::super::server::ModbusUnits;
+    use super::super::units::ModbusUnits;
     use super::iced;
     use crate::command::FrontEndCommand;
     use crate::command::NodeCommand;
@@ -208,6 +208,8 @@ mod answers {
             commands,
             stale_after: Duration::from_secs(2),
             max_clients: 4,
+            idle_timeout: Duration::from_secs(60),
+            frame_timeout: Duration::from_secs(2),
             units: vec![5, 9],
         };
         let (tx, rx) = mpsc::unbounded_channel();

@@ -24,6 +24,8 @@ fn off_by_default_then_loopback_5020_read_only_units_by_position() {
     assert!(!m.commands);
     assert_eq!(m.stale_after, Duration::from_secs(10));
     assert_eq!(m.max_clients, 64);
+    assert_eq!(m.idle_timeout, Duration::from_secs(60));
+    assert_eq!(m.frame_timeout, Duration::from_secs(2));
     assert_eq!(m.units, vec![1, 7, 3]);
     assert_eq!(m.node_of_unit(7), Some(1));
     assert_eq!(m.node_of_unit(2), None);
@@ -38,7 +40,8 @@ fn off_by_default_then_loopback_5020_read_only_units_by_position() {
 fn every_key_is_read() {
     let m = resolve(&format!(
         "[modbus]\nenabled = true\nlisten = \"[::1]:1502\"\ncommands = true\n\
-         stale_after_s = 2.5\nmax_clients = 100\n{NODES}"
+         stale_after_s = 2.5\nmax_clients = 100\n\
+         idle_timeout_s = 5\nframe_timeout_s = 0.5\n{NODES}"
     ))
     .unwrap()
     .unwrap();
@@ -46,6 +49,8 @@ fn every_key_is_read() {
     assert!(m.commands);
     assert_eq!(m.stale_after, Duration::from_millis(2500));
     assert_eq!(m.max_clients, 100);
+    assert_eq!(m.idle_timeout, Duration::from_secs(5));
+    assert_eq!(m.frame_timeout, Duration::from_millis(500));
 }
 
 #[test]
@@ -67,6 +72,14 @@ fn bad_values_are_refused_with_the_reason() {
     bad(&format!("{on}listen = \"127.0.0.1:0\"\n{NODES}"), "port 0");
     bad(&format!("{on}stale_after_s = 0\n{NODES}"), "stale_after_s");
     bad(&format!("{on}max_clients = 0\n{NODES}"), "max_clients");
+    bad(
+        &format!("{on}idle_timeout_s = 0.5\n{NODES}"),
+        "idle_timeout_s",
+    );
+    bad(
+        &format!("{on}frame_timeout_s = 61\n{NODES}"),
+        "frame_timeout_s",
+    );
     bad(&format!("{on}colour = 1\n{NODES}"), "unknown field");
     // The third node's default unit is 3: taken by the first.
     bad(
