@@ -271,6 +271,26 @@ fn logger_killed_with_sigkill_keeps_all_but_the_last_second() {
     drop(node);
 }
 
+/// Write all of `bytes` to the pty's master side. Its 1 ms timeout makes a
+/// write fail while the monitor is slow to read (a loaded machine): the
+/// frame must then wait, not vanish, or the wire loses frames the test did
+/// not mean to lose.
+fn wire_write(master: &mut serialport::TTYPort, mut bytes: &[u8]) {
+    use std::io::{ErrorKind, Write};
+    let start = Instant::now();
+    while !bytes.is_empty() && start.elapsed() < Duration::from_secs(5) {
+        match master.write(bytes) {
+            Ok(n) => bytes = &bytes[n..],
+            Err(e)
+                if matches!(
+                    e.kind(),
+                    ErrorKind::TimedOut | ErrorKind::WouldBlock | ErrorKind::Interrupted
+                ) => {}
+            Err(_) => return,
+        }
+    }
+}
+
 /// In process: a virtual node behind a pty whose "wire" drops frames 100..110
 /// and injects garbage; the monitor counts both and logs a gap row.
 #[test]
@@ -313,14 +333,14 @@ fn lossy_wire_gap_and_garbage_are_counted_not_fatal() {
                 }
                 if sent == 150 {
                     // Garbage: random bytes, a corrupted frame, an oversized run.
-                    let _ = master.write_all(&[0x13, 0x37, 0xff, 0x00]);
+                    wire_write(&mut master, &[0x13, 0x37, 0xff, 0x00]);
                     let mut bad = f.clone();
                     bad[3] ^= 0x55;
-                    let _ = master.write_all(&bad);
-                    let _ = master.write_all(&[0x42; 600]);
-                    let _ = master.write_all(&[0x00]);
+                    wire_write(&mut master, &bad);
+                    wire_write(&mut master, &[0x42; 600]);
+                    wire_write(&mut master, &[0x00]);
                 }
-                let _ = master.write_all(&f);
+                wire_write(&mut master, &f);
             }
             std::thread::sleep(Duration::from_micros(500));
         }
