@@ -298,7 +298,7 @@ fn lossy_wire_gap_and_garbage_are_counted_not_fatal() {
     use fois_host::monitor::{MonitorOptions, run};
     use fois_vnode::{Cover, Environment, NodeOptions, Segment, Timeline, VirtualNode};
     use serialport::SerialPort;
-    use std::io::{Read, Write};
+    use std::io::Read;
 
     let (mut master, slave) = serialport::TTYPort::pair().unwrap();
     master.set_timeout(Duration::from_millis(1)).unwrap();
