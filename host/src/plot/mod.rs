@@ -8,6 +8,8 @@
 
 pub mod comparison;
 pub mod log;
+pub mod log_layout;
+pub mod log_series;
 pub mod output;
 pub mod runs;
 pub mod series;
