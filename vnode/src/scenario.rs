@@ -414,6 +414,13 @@ mod tests {
         let e =
             parse("[[segment]]\nduration_s = 1\ncover = \"dry\"\nntc = \"loose\"\n").unwrap_err();
         assert!(e.contains("segment 1") && e.contains("loose"), "{e}");
+        for bad in ["[-1.0, 2.0]", "[20.0, nan]", "[20.0]", "\"20,8\""] {
+            let e = parse(&format!(
+                "[[segment]]\nduration_s = 1\ncover = \"dry\"\ntarget_ua = {bad}\n"
+            ))
+            .unwrap_err();
+            assert!(e.contains("target_ua"), "{bad}: {e}");
+        }
         let ok = parse("[[segment]]\nduration_s = \"inf\"\ncover = \"rime\"\nrate_mm_per_h = 3\n")
             .unwrap();
         assert_eq!(ok.timeline.segments()[0].duration_s, f64::INFINITY);
