@@ -43,6 +43,19 @@ fn foisctl(args: &[&str]) -> (i32, String, String) {
     )
 }
 
+/// `foisctl calibrate-gain --port PORT --i1-ua I1 --i2-ua I2`.
+fn calibrate_gain(port: &str, i1_ua: &str, i2_ua: &str) -> (i32, String, String) {
+    foisctl(&[
+        "calibrate-gain",
+        "--port",
+        port,
+        "--i1-ua",
+        i1_ua,
+        "--i2-ua",
+        i2_ua,
+    ])
+}
+
 fn kinds(t: &LogTable) -> Vec<String> {
     let k = t.col("kind").unwrap();
     t.rows.iter().map(|r| r[k].clone()).collect()
@@ -681,15 +694,7 @@ fn calibrate_gain_and_reset_gain_as_a_user_runs_them() {
 
     // The target's currents at gain 1 are 0.9× what the face reads: gain 1.11.
     let (t1, t2) = (format!("{:.3}", i1 / 1.11), format!("{:.3}", i2 / 1.11));
-    let (code, out, err) = foisctl(&[
-        "calibrate-gain",
-        "--port",
-        p,
-        "--i1-ua",
-        &t1,
-        "--i2-ua",
-        &t2,
-    ]);
+    let (code, out, err) = calibrate_gain(p, &t1, &t2);
     assert_eq!(code, 0, "{err}");
     assert!(out.contains("GainCalibrated"), "{out}");
     let log2 = dir.path().join("log2.csv");
@@ -701,15 +706,7 @@ fn calibrate_gain_and_reset_gain_as_a_user_runs_them() {
     // A target of another shape (channel 2 four times too large): refused,
     // exit 6, the reason said, the gain unchanged.
     let wrong = format!("{:.3}", 4.0 * i2 / 1.11);
-    let (code, _, err) = foisctl(&[
-        "calibrate-gain",
-        "--port",
-        p,
-        "--i1-ua",
-        &t1,
-        "--i2-ua",
-        &wrong,
-    ]);
+    let (code, _, err) = calibrate_gain(p, &t1, &wrong);
     assert_eq!(code, 6, "{err}");
     assert!(
         err.contains("implied gain is outside the plausible range"),
@@ -717,15 +714,7 @@ fn calibrate_gain_and_reset_gain_as_a_user_runs_them() {
     );
     // Bad target values never reach the node: usage errors.
     for bad in ["0", "-3", "nan", "x"] {
-        let (code, _, err) = foisctl(&[
-            "calibrate-gain",
-            "--port",
-            p,
-            "--i1-ua",
-            bad,
-            "--i2-ua",
-            "8",
-        ]);
+        let (code, _, err) = calibrate_gain(p, bad, "8");
         assert_eq!(code, 2, "{bad}: {err}");
     }
     let log3 = dir.path().join("log3.csv");
@@ -765,15 +754,7 @@ fn the_gain_calibration_is_practised_with_a_target_on_the_virtual_face() {
     let p = node.path.as_str();
     // Wait until the target is on (virtual 3 s = 0.15 s real, with room).
     std::thread::sleep(Duration::from_millis(800));
-    let (code, out, err) = foisctl(&[
-        "calibrate-gain",
-        "--port",
-        p,
-        "--i1-ua",
-        "25.2",
-        "--i2-ua",
-        "9.56",
-    ]);
+    let (code, out, err) = calibrate_gain(p, "25.2", "9.56");
     assert_eq!(code, 0, "{err}");
     let g: f64 = out
         .split("gain ")
@@ -785,15 +766,7 @@ fn the_gain_calibration_is_practised_with_a_target_on_the_virtual_face() {
     assert!((g - 0.8).abs() < 0.02, "{out}");
     // The wrong target values (channel 2 four times too large): refused,
     // with what to do.
-    let (code, _, err) = foisctl(&[
-        "calibrate-gain",
-        "--port",
-        p,
-        "--i1-ua",
-        "25.2",
-        "--i2-ua",
-        "38.24",
-    ]);
+    let (code, _, err) = calibrate_gain(p, "25.2", "38.24");
     assert_eq!(code, 6, "{err}");
     assert!(
         err.contains("what to do:") && err.contains("--i1-ua/--i2-ua"),
@@ -807,15 +780,7 @@ fn a_gain_calibration_without_a_target_says_to_put_one_on() {
     let node = NodeProc::start(&["--speed", "20", "--dry-s", "1000", "--seed", "6"]);
     let p = node.path.as_str();
     std::thread::sleep(Duration::from_millis(300));
-    let (code, _, err) = foisctl(&[
-        "calibrate-gain",
-        "--port",
-        p,
-        "--i1-ua",
-        "25.2",
-        "--i2-ua",
-        "9.56",
-    ]);
+    let (code, _, err) = calibrate_gain(p, "25.2", "9.56");
     assert_eq!(code, 6, "{err}");
     // The node sees the currents jump about a zero mean (`Step`): the
     // advice for a gain calibration is to put the target on.
