@@ -47,6 +47,21 @@ fn up() -> NodeMsg {
     }
 }
 
+/// An iced frame's measurement: 30 and 9 µA at −5 °C.
+fn iced_measurement(uptime_ms: u64, flags: u16) -> Measurement {
+    Measurement {
+        uptime_ms,
+        i1_na: 30_000,
+        i2_na: 9_000,
+        ambient1_na: 0,
+        ambient2_na: 0,
+        temperature_centi_c: -500,
+        vdda_mv: 3300,
+        flags,
+        state: DetectorState::Ice,
+    }
+}
+
 fn frame(seq: u32, uptime_ms: u64, gain: Option<GainEstimate>, flags: u16) -> NodeMsg {
     NodeMsg {
         node: 0,
@@ -55,17 +70,7 @@ fn frame(seq: u32, uptime_ms: u64, gain: Option<GainEstimate>, flags: u16) -> No
             DeviceFrame {
                 seq,
                 msg: DeviceMsg::MeasurementV3(MeasurementV3 {
-                    measurement: Measurement {
-                        uptime_ms,
-                        i1_na: 30_000,
-                        i2_na: 9_000,
-                        ambient1_na: 0,
-                        ambient2_na: 0,
-                        temperature_centi_c: -500,
-                        vdda_mv: 3300,
-                        flags,
-                        state: DetectorState::Ice,
-                    },
+                    measurement: iced_measurement(uptime_ms, flags),
                     estimate: None,
                     gain,
                 }),

@@ -7,13 +7,12 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use fois_protocol::{
-    DetectorState, DeviceFrame, DeviceMsg, Event, EventKind, IceEstimate, Measurement,
-    MeasurementV3, Medium, SeqEvent, flags,
+    DeviceFrame, DeviceMsg, Event, EventKind, IceEstimate, MeasurementV3, Medium, SeqEvent, flags,
 };
 
 use super::super::Gateway;
 use super::super::journal::{LINES_PER_WINDOW, WINDOW};
-use super::{gateway, up};
+use super::{gateway, iced_measurement, up};
 use crate::reader::{NodeMsg, NodeUpdate};
 
 /// A `tracing` writer into a shared buffer.
@@ -66,17 +65,7 @@ fn measurement(seq: u32, flags: u16) -> NodeMsg {
     frame(
         seq,
         DeviceMsg::MeasurementV3(MeasurementV3 {
-            measurement: Measurement {
-                uptime_ms: u64::from(seq) * 100,
-                i1_na: 30_000,
-                i2_na: 9_000,
-                ambient1_na: 0,
-                ambient2_na: 0,
-                temperature_centi_c: -500,
-                vdda_mv: 3300,
-                flags,
-                state: DetectorState::Ice,
-            },
+            measurement: iced_measurement(u64::from(seq) * 100, flags),
             estimate: Some(IceEstimate {
                 thickness_um: 1_240,
                 sigma_um: 310,
