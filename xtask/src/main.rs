@@ -51,7 +51,7 @@ mod shell;
 mod tools;
 
 use generated_docs::Mode;
-use shell::{have, run};
+use shell::{have, run, run_in};
 
 /// Flash budget of the firmware image (the project's goal for a small MCU).
 const FLASH_BUDGET_BYTES: u64 = 128 * 1024;
@@ -349,20 +349,6 @@ fn host_triple() -> Result<String> {
         .find_map(|l| l.strip_prefix("host: "))
         .map(str::to_string)
         .context("rustc -vV printed no host triple")
-}
-
-/// Run a command in `dir`, echoing it, failing on a non-zero exit.
-fn run_in(dir: &str, program: &str, args: &[&str]) -> Result<()> {
-    eprintln!("\n$ (cd {dir} && {program} {})", args.join(" "));
-    let status = Command::new(program)
-        .args(args)
-        .current_dir(dir)
-        .status()
-        .with_context(|| format!("could not start `{program}`"))?;
-    if !status.success() {
-        bail!("`{program} {}` in {dir} failed ({status})", args.join(" "));
-    }
-    Ok(())
 }
 
 /// `cargo xtask fuzz [--runs N] [--target NAME]`: each target (or the one
