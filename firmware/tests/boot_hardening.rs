@@ -44,6 +44,15 @@ fn stored_config() -> (MemStorage, Config) {
     (node.into_parts().5, c)
 }
 
+/// The reset a panic ends in (`SCB::sys_reset`: SFTRSTF and PINRST).
+fn software_reset() -> boot::ResetCause {
+    boot::ResetCause::from_flags(boot::ResetFlags {
+        software: true,
+        pin: true,
+        ..Default::default()
+    })
+}
+
 #[test]
 fn a_panic_reset_is_reported_once_and_the_third_in_a_row_skips_the_store() {
     let (storage, stored) = stored_config();
@@ -52,11 +61,11 @@ fn a_panic_reset_is_reported_once_and_the_third_in_a_row_skips_the_store() {
     let mut storage = Some(storage);
     for n in 1..=3u8 {
         words = boot::record_panic(words, 412);
-        let plan = boot::plan_boot(words, false);
+        let plan = boot::plan_boot(words, software_reset());
         words = plan.words;
         let w = World::default();
         let skip = plan.skip_store;
-        let store = SkippableStorage(if skip { None } else { storage.take() });
+        let store = SkippableStorage::new(storage.take().expect("the store"), skip);
         let mut node = sim_board::sim_node(w.clone(), store, "sim");
         node.set_boot_faults(false, skip);
         if let Some((line, resets)) = plan.panic_reset {
@@ -69,37 +78,42 @@ fn a_panic_reset_is_reported_once_and_the_third_in_a_row_skips_the_store() {
             line: 412,
             resets_in_row: n,
         };
-        if skip {
-            // Defaults, not the stored config; STORE_SKIPPED raised.
-            assert_eq!(node.config(), &Config::default());
-            assert_ne!(flags_of(&fs) & flags::STORE_SKIPPED, 0);
-            assert_eq!(
-                events(&fs),
-                [EventKind::FaultRaised(flags::STORE_SKIPPED), panic]
-            );
-            // Nothing is saved: a calibration "saves" into nothing, without
-            // a storage fault; the real store stays untouched (below).
-            command(&mut node, &w, 2, Command::CalibrateDark);
-            let fs = run_until_saved(&mut node, &w);
-            assert!(fs.iter().all(|f| !matches!(
-                &f.msg,
-                DeviceMsg::MeasurementV3(m) if m.measurement.flags & flags::STORAGE_FAILED != 0
-            )));
-        } else {
+        if !skip {
             assert_eq!(node.config(), &stored);
             assert_eq!(flags_of(&fs) & flags::STORE_SKIPPED, 0);
             assert_eq!(events(&fs), [panic]);
-            storage = node.into_parts().5.0;
+            storage = Some(node.into_parts().5.into_inner());
             continue;
         }
+        // Defaults, not the stored config; STORE_SKIPPED raised.
+        assert_eq!(node.config(), &Config::default());
+        assert_ne!(flags_of(&fs) & flags::STORE_SKIPPED, 0);
+        assert_eq!(
+            events(&fs),
+            [EventKind::FaultRaised(flags::STORE_SKIPPED), panic]
+        );
         // Reported once.
         let mut bytes = Vec::new();
         w.run_frame(&mut node, &mut |b| bytes.extend_from_slice(b));
         assert_eq!(events(&frames(&bytes)), []);
+        // A calibration in the skip mode is saved: the store is started
+        // afresh with the record the node runs (the bad record replaced
+        // remotely), without a storage fault.
+        command(&mut node, &w, 2, Command::CalibrateDark);
+        let fs = run_until_saved(&mut node, &w);
+        assert!(fs.iter().all(|f| !matches!(
+            &f.msg,
+            DeviceMsg::MeasurementV3(m) if m.measurement.flags & flags::STORAGE_FAILED != 0
+        )));
+        let baseline = node.baseline();
+        assert!(baseline.is_some());
+        let kept = node.into_parts().5.into_inner();
+        assert_eq!(kept.writes, 2, "the original save and the skip mode's");
+        // The next boot reads it: the defaults and the new baseline.
+        let node = sim_board::sim_node(World::default(), kept, "sim");
+        assert_eq!(node.config(), &Config::default());
+        assert_eq!(node.baseline(), baseline);
     }
-    // The real store was never written while skipped.
-    let kept = storage.expect("the store was handed back").writes;
-    assert_eq!(kept, 1, "only the original save");
 }
 
 #[test]
@@ -130,7 +144,7 @@ fn iced_node() -> (SimNode, World, [u32; boot::RULE_WORDS]) {
 }
 
 #[test]
-fn the_alarm_holds_across_a_watchdog_reset_and_not_across_a_power_on() {
+fn the_alarm_holds_across_a_watchdog_reset_and_a_brown_out_and_not_across_a_power_on() {
     let (_, _, words) = iced_node();
     // A watchdog reset: the outputs are low (GPIO reset state: floating
     // inputs, the board's pull-down reads low) until the new node resumes.
@@ -142,6 +156,7 @@ fn the_alarm_holds_across_a_watchdog_reset_and_not_across_a_power_on() {
     let mut node = sim_board::sim_node(w.clone(), MemStorage::new(), "sim");
     assert!(!w.alarm.get());
     node.resume_rule(RuleSnapshot::resume(words, false));
+    assert!(RuleSnapshot::resume(words, false).alarm_on());
     // Alarm and LD2 at once, before any frame; the ack kept; no new onset.
     assert!(w.alarm.get() && w.indicator.get());
     let fs = step(&mut node, &w);
@@ -162,10 +177,36 @@ fn the_alarm_holds_across_a_watchdog_reset_and_not_across_a_power_on() {
     assert_eq!(cleared, Some(node.config().clear_frames));
     assert!(!w.alarm.get());
 
-    // A power-on: dry, outputs off, the ice must be seen again.
+    // A brown-out alone (BORRSTF without PORRSTF): the backup registers
+    // held, the alarm and its acknowledgement resume as after a watchdog.
+    let brown_out = boot::ResetCause::from_flags(boot::ResetFlags {
+        brown_out: true,
+        pin: true,
+        ..Default::default()
+    });
+    assert_eq!(brown_out.reason, ResetReason::PowerOn);
     let w = World::default();
     let mut node = sim_board::sim_node(w.clone(), MemStorage::new(), "sim");
-    node.resume_rule(RuleSnapshot::resume(words, true));
+    node.resume_rule(RuleSnapshot::resume(words, brown_out.power_lost));
+    assert!(w.alarm.get());
+    assert_eq!(
+        node.rule_snapshot(),
+        RuleSnapshot {
+            state: DetectorState::Ice,
+            acked: true
+        }
+    );
+
+    // A power-on: dry, outputs off, the ice must be seen again.
+    let power_on = boot::ResetCause::from_flags(boot::ResetFlags {
+        power_on: true,
+        brown_out: true,
+        pin: true,
+        ..Default::default()
+    });
+    let w = World::default();
+    let mut node = sim_board::sim_node(w.clone(), MemStorage::new(), "sim");
+    node.resume_rule(RuleSnapshot::resume(words, power_on.power_lost));
     assert_eq!(node.state(), DetectorState::Dry);
     assert!(!w.alarm.get());
 }
@@ -231,4 +272,38 @@ fn a_clock_that_fails_over_mid_run_is_flagged_and_the_node_keeps_working() {
     // Commands are still answered.
     let fs = command(&mut node, &w, 5, Command::GetConfig);
     assert!(matches!(&fs[0].msg, DeviceMsg::Ack(a) if a.id == 5));
+}
+
+#[test]
+fn failed_saves_back_off_to_an_hour() {
+    let mut storage = MemStorage::new();
+    storage.fail_writes = true;
+    let (mut node, w) = node_with(storage);
+    command(
+        &mut node,
+        &w,
+        1,
+        Command::SetConfigV3(Config {
+            onset_frames: 9,
+            ..Config::default()
+        }),
+    );
+    // Three hours of a store that never takes a write, polled every second:
+    // the attempts (each an erase on the board) come 10, 10, 20, 40, ... s
+    // apart, then hourly — 11 of them, not 1 080.
+    let t0 = w.now_ms();
+    let mut attempts = Vec::new();
+    let mut due = node.save_due_ms();
+    for s in 0..3 * 3_600u64 {
+        let now = t0 + s * 1_000;
+        node.poll_storage(now);
+        if node.save_due_ms() != due {
+            attempts.push(s);
+            due = node.save_due_ms();
+        }
+    }
+    assert!(node.save_pending(), "still retried");
+    let gaps: Vec<u64> = attempts.windows(2).map(|p| p[1] - p[0]).collect();
+    assert_eq!(gaps, [10, 20, 40, 80, 160, 320, 640, 1_280, 2_560, 3_600]);
+    assert_eq!(node.into_parts().5.writes, 0);
 }

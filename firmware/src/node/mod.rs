@@ -91,6 +91,8 @@ where
     stored: Option<Record>,
     pending_save: Option<PendingSave>,
     last_save_ms: Option<u64>,
+    /// Failed saves in a row (the retries back off: `saving`).
+    save_failures: u32,
     rule: Rule,
     seq: u32,
     streaming: bool,
@@ -171,6 +173,7 @@ where
             stored,
             pending_save: None,
             last_save_ms: None,
+            save_failures: 0,
             rule: Rule::new(),
             seq: 0,
             stream_period_ms: None,

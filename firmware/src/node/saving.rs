@@ -1,8 +1,11 @@
 //! When the node writes its record: a change is saved once no further
 //! change came for [`SAVE_QUIET_MS`], at most [`SAVE_MAX_DELAY_MS`] after the
 //! first, saves at least [`SAVE_MIN_INTERVAL_MS`] apart, only while the
-//! supply is healthy; a failed save is retried. The record's bytes are
-//! [`crate::storage::record`].
+//! supply is healthy; a failed save is retried after an interval that
+//! doubles with each failure in a row, from [`SAVE_MIN_INTERVAL_MS`] up to
+//! [`SAVE_RETRY_MAX_MS`] ([`save_interval_ms`]): a stuck flash cell costs
+//! an erase an hour, not one every 10 s (each stalls the CPU for up to
+//! 2.6 s). The record's bytes are [`crate::storage::record`].
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
@@ -21,6 +24,25 @@ pub const SAVE_MAX_DELAY_MS: u64 = 10_000;
 /// Saves (and retries after a failed one) are at least this far apart, ms:
 /// at most 8 640 a day, whatever a host sends (wear: `firmware/README.md`).
 pub const SAVE_MIN_INTERVAL_MS: u64 = 10_000;
+/// The longest wait before retrying after failed saves, ms (1 h).
+pub const SAVE_RETRY_MAX_MS: u64 = 3_600_000;
+
+/// How long after a save attempt the next may start, ms, after `failures`
+/// failed saves in a row: [`SAVE_MIN_INTERVAL_MS`] (none or one failed),
+/// then doubled per further failure, capped at [`SAVE_RETRY_MAX_MS`]
+/// (10, 10, 20, 40 s, ..., 2 560 s, then 1 h).
+pub const fn save_interval_ms(failures: u32) -> u64 {
+    let doublings = failures.saturating_sub(1);
+    if doublings >= 20 {
+        return SAVE_RETRY_MAX_MS;
+    }
+    let interval = SAVE_MIN_INTERVAL_MS << doublings;
+    if interval > SAVE_RETRY_MAX_MS {
+        SAVE_RETRY_MAX_MS
+    } else {
+        interval
+    }
+}
 
 impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
 where
@@ -40,15 +62,15 @@ where
             .last_ms
             .saturating_add(SAVE_QUIET_MS)
             .min(p.first_ms.saturating_add(SAVE_MAX_DELAY_MS));
-        let earliest = self
-            .last_save_ms
-            .map_or(0, |t| t.saturating_add(SAVE_MIN_INTERVAL_MS));
+        let earliest = self.last_save_ms.map_or(0, |t| {
+            t.saturating_add(save_interval_ms(self.save_failures))
+        });
         Some(coalesced.max(earliest))
     }
 
     /// Save the pending change if it is due. A failed save sets
     /// `STORAGE_FAILED` (reported as a fault event with the next frame) and
-    /// is retried [`SAVE_MIN_INTERVAL_MS`] later.
+    /// is retried [`save_interval_ms`] later.
     pub fn poll_storage(&mut self, now_ms: u64) {
         if self.save_due_ms().is_some_and(|due| now_ms >= due) {
             self.save(now_ms);
@@ -106,15 +128,41 @@ where
         };
         self.last_save_ms = Some(now_ms);
         self.storage_failed = !written;
+        self.save_failures = if written {
+            0
+        } else {
+            self.save_failures.saturating_add(1)
+        };
         if written {
             self.stored = Some(record);
             self.pending_save = None;
         } else {
-            // Retry once the interval has passed.
+            // Retry once the (backed-off) interval has passed.
             self.pending_save = Some(PendingSave {
                 first_ms: now_ms,
                 last_ms: now_ms,
             });
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn retries_back_off_from_10_s_to_an_hour() {
+        let intervals: [u64; 10] = core::array::from_fn(|n| save_interval_ms(n as u32) / 1_000);
+        assert_eq!(intervals, [10, 10, 20, 40, 80, 160, 320, 640, 1_280, 2_560]);
+        assert_eq!(save_interval_ms(10), 3_600_000);
+        assert_eq!(save_interval_ms(u32::MAX), 3_600_000);
+        // A day of a stuck cell: 32 attempts instead of 8 640.
+        let (mut t, mut attempts, mut failures) = (0u64, 0, 0u32);
+        while t < 86_400_000 {
+            attempts += 1;
+            failures += 1;
+            t += save_interval_ms(failures);
+        }
+        assert_eq!(attempts, 32);
     }
 }

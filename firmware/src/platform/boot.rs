@@ -3,31 +3,46 @@
 //! RM0390 §22: kept across every reset but a power loss or a backup domain
 //! reset), each record with a CRC so that garbage reads as nothing.
 //!
-//! - **Panic resets** ([`PanicRecord`]): the panic handler records the
+//! - **Unhealthy resets** ([`PanicRecord`]): the panic handler records the
 //!   source line, counts the panic resets in a row and resets at once
-//!   ([`record_panic`]). At the next boot [`plan_boot`] reports it once
-//!   (`EventKind::PanicReset`) and, after [`PANIC_RESETS_BEFORE_SKIP`] in a
-//!   row, boots without the flash store (`STORE_SKIPPED`: a panic that
-//!   stored data causes would otherwise repeat at every boot). A run of
-//!   [`HEALTHY_AFTER_MS`] without a panic ends the row ([`healthy`]); so
-//!   does any reset that was not a panic.
-//! - **The ice rule's state** ([`RuleSnapshot`]): after a watchdog, software,
-//!   pin or panic reset the node comes back in the state it had — an alarm
-//!   holds from the first instant instead of waiting `onset_frames` for the
-//!   ice to be seen again, and its acknowledgement is kept. After a power-on
-//!   it starts dry (the backup registers are powered from V_BAT, which the
-//!   NUCLEO ties to V_DD: a power loss clears them anyway).
+//!   ([`record_panic`]). Every boot also sets a *booting* marker that a run
+//!   of [`HEALTHY_AFTER_MS`] clears ([`healthy`]) and a commanded reset
+//!   clears ([`commanded_reset`]): a boot that finds the marker still set
+//!   after a watchdog, window-watchdog, low-power, software or unknown
+//!   reset counts that reset like a panic (a hang or a lockup ends in the
+//!   watchdog with no panic). [`plan_boot`] reports a panic once
+//!   (`EventKind::PanicReset`) and, after [`PANIC_RESETS_BEFORE_SKIP`]
+//!   unhealthy resets in a row, boots without reading the flash store
+//!   (`STORE_SKIPPED`: a fault that stored data causes would otherwise
+//!   repeat at every boot). A pin reset, a brown-out and a power-on end
+//!   the row.
+//! - **The ice rule's state** ([`RuleSnapshot`]): after any reset that kept
+//!   the backup domain powered — watchdog, software, pin, panic and a
+//!   brown-out alone (BORRSTF without PORRSTF: V_DD sagged below the BOR
+//!   level but not below the power-on reset's) — the node comes back in the
+//!   state it had: an alarm holds from the first instant instead of waiting
+//!   `onset_frames` for the ice to be seen again, and its acknowledgement
+//!   is kept. After a power-on (PORRSTF) it starts dry (the backup
+//!   registers are powered from V_BAT, which the NUCLEO ties to V_DD: a
+//!   power loss clears them anyway). [`ResetCause::from_flags`] reads the
+//!   RCC's reset flags.
+//! - **Skipping the store** ([`SkippableStorage`]): a skipped store reads as
+//!   empty (the defaults), and its first save starts the store afresh
+//!   (erases it and writes the record, never parsing what was there), so a
+//!   host can overwrite a bad record remotely.
 //!
 //! The words are plain `u32`s: the board reads and writes the registers,
 //! the host tests an array.
 
-use fois_protocol::DetectorState;
 use fois_protocol::framing::CRC;
+use fois_protocol::{DetectorState, ResetReason};
 
+use crate::ice_rule::Rule;
 use crate::storage::{Storage, StorageError};
 
-/// Panic resets in a row after which the node boots without its flash
-/// store.
+/// Unhealthy resets (panics, or watchdog and other resets before a boot
+/// became healthy) in a row after which the node boots without reading
+/// its flash store.
 pub const PANIC_RESETS_BEFORE_SKIP: u8 = 3;
 /// Uptime after which a boot counts as healthy (the row of panic resets
 /// ends), ms.
@@ -59,12 +74,19 @@ pub struct PanicRecord {
     pub line: u32,
     /// Set by the panic handler, cleared by the boot that reported it.
     pub pending: bool,
+    /// Set by every boot, cleared once it ran [`HEALTHY_AFTER_MS`] or
+    /// before a commanded reset.
+    pub booting: bool,
 }
 
 impl PanicRecord {
-    /// The record as backup-register words (magic, count, pending; line; CRC).
+    /// The record as backup-register words (magic, count, pending,
+    /// booting; line; CRC).
     pub fn encode(&self) -> [u32; PANIC_WORDS] {
-        let w0 = PANIC_MAGIC | (u32::from(self.pending) << 8) | u32::from(self.resets_in_row);
+        let w0 = PANIC_MAGIC
+            | (u32::from(self.booting) << 9)
+            | (u32::from(self.pending) << 8)
+            | u32::from(self.resets_in_row);
         let w1 = self.line;
         [w0, w1, crc(&[w0, w1])]
     }
@@ -73,13 +95,14 @@ impl PanicRecord {
     /// a damaged word).
     pub fn decode(words: [u32; PANIC_WORDS]) -> Option<Self> {
         let [w0, w1, c] = words;
-        if w0 & MAGIC_MASK != PANIC_MAGIC || w0 & 0xFE00 != 0 || crc(&[w0, w1]) != c {
+        if w0 & MAGIC_MASK != PANIC_MAGIC || w0 & 0xFC00 != 0 || crc(&[w0, w1]) != c {
             return None;
         }
         Some(PanicRecord {
             resets_in_row: (w0 & 0xFF) as u8,
             line: w1,
             pending: w0 & 0x100 != 0,
+            booting: w0 & 0x200 != 0,
         })
     }
 }
@@ -91,54 +114,152 @@ pub fn record_panic(words: [u32; PANIC_WORDS], line: u32) -> [u32; PANIC_WORDS] 
         resets_in_row: before.resets_in_row.saturating_add(1),
         line,
         pending: true,
+        booting: before.booting,
     }
     .encode()
 }
 
-/// What a boot does about the panics before it.
+/// The RCC's reset flags (RCC_CSR, RM0390 §6.3.21), as read at boot.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct ResetFlags {
+    /// LPWRRSTF: low-power reset.
+    pub low_power: bool,
+    /// WWDGRSTF: window watchdog.
+    pub window_watchdog: bool,
+    /// IWDGRSTF: independent watchdog.
+    pub independent_watchdog: bool,
+    /// SFTRSTF: software reset (a commanded reset, a panic).
+    pub software: bool,
+    /// PORRSTF: power-on / power-down reset (V_DD below ≈ 1.7 V).
+    pub power_on: bool,
+    /// PINRST: the NRST pin (also pulsed by every internal reset).
+    pub pin: bool,
+    /// BORRSTF: brown-out reset (set by a power-on reset too).
+    pub brown_out: bool,
+}
+
+/// Why the chip reset, and whether the backup registers lived through it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ResetCause {
+    /// The reason reported in `Hello` (a brown-out alone is reported as
+    /// `PowerOn`: the protocol has no reason of its own for it).
+    pub reason: ResetReason,
+    /// The supply fell below the power-on reset's level: the backup
+    /// registers hold nothing of the run before.
+    pub power_lost: bool,
+}
+
+impl ResetCause {
+    /// The cause from the flags. The most specific flag wins (a watchdog
+    /// or software reset also pulses NRST, so PINRST is set with them).
+    pub fn from_flags(f: ResetFlags) -> ResetCause {
+        let reason = if f.independent_watchdog {
+            ResetReason::IndependentWatchdog
+        } else if f.window_watchdog {
+            ResetReason::WindowWatchdog
+        } else if f.low_power {
+            ResetReason::LowPower
+        } else if f.software {
+            ResetReason::Software
+        } else if f.power_on || f.brown_out {
+            ResetReason::PowerOn
+        } else if f.pin {
+            ResetReason::Pin
+        } else {
+            ResetReason::Unknown
+        };
+        ResetCause {
+            reason,
+            power_lost: f.power_on,
+        }
+    }
+
+    /// A reset that, before the boot became healthy, counts toward the
+    /// boot-loop guard: one the node did not ask for and no person or
+    /// supply explains.
+    pub fn unhealthy(&self) -> bool {
+        !self.power_lost
+            && matches!(
+                self.reason,
+                ResetReason::IndependentWatchdog
+                    | ResetReason::WindowWatchdog
+                    | ResetReason::LowPower
+                    | ResetReason::Software
+                    | ResetReason::Unknown
+            )
+    }
+}
+
+/// What a boot does about the resets before it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct BootPlan {
     /// The panic reset this boot follows, to report once: (line, resets in
     /// a row).
     pub panic_reset: Option<(u32, u8)>,
-    /// Boot without the flash store (defaults, nothing saved).
+    /// This boot follows a watchdog (or other unhealthy) reset of a boot
+    /// that never became healthy: counted in the row.
+    pub unhealthy_reset: bool,
+    /// Boot without reading the flash store (defaults; the first save
+    /// starts the store afresh).
     pub skip_store: bool,
-    /// The words to write back (the report is marked done).
+    /// The words to write back (the report marked done, the booting
+    /// marker set).
     pub words: [u32; PANIC_WORDS],
 }
 
-/// Decide the boot from the backup words and whether this was a power-on
-/// reset.
-pub fn plan_boot(words: [u32; PANIC_WORDS], power_on: bool) -> BootPlan {
-    let record = PanicRecord::decode(words).filter(|_| !power_on);
+/// Decide the boot from the backup words and the reset's cause.
+pub fn plan_boot(words: [u32; PANIC_WORDS], cause: ResetCause) -> BootPlan {
+    let record = PanicRecord::decode(words).filter(|_| !cause.power_lost);
+    let plan = |resets_in_row: u8, line: u32| BootPlan {
+        panic_reset: None,
+        unhealthy_reset: false,
+        skip_store: resets_in_row >= PANIC_RESETS_BEFORE_SKIP,
+        words: PanicRecord {
+            resets_in_row,
+            line,
+            pending: false,
+            booting: true,
+        }
+        .encode(),
+    };
     match record {
         Some(r) if r.pending => BootPlan {
             panic_reset: Some((r.line, r.resets_in_row)),
-            skip_store: r.resets_in_row >= PANIC_RESETS_BEFORE_SKIP,
-            words: PanicRecord {
-                pending: false,
-                ..r
-            }
-            .encode(),
+            ..plan(r.resets_in_row, r.line)
         },
-        // Power-on, nothing recorded, or a reset that was not a panic: the
-        // row (if any) is over.
-        _ => BootPlan {
-            panic_reset: None,
-            skip_store: false,
-            words: PanicRecord::default().encode(),
+        Some(r) if r.booting && cause.unhealthy() => BootPlan {
+            unhealthy_reset: true,
+            ..plan(r.resets_in_row.saturating_add(1), r.line)
         },
+        // Power-on, nothing recorded, or a reset that was not a panic after
+        // a healthy boot (or a pin reset, a brown-out): the row is over.
+        Some(r) => plan(0, r.line),
+        None => plan(0, 0),
     }
 }
 
-/// The words once the node has run [`HEALTHY_AFTER_MS`] without a panic:
-/// the row is over (the last line is kept for a debugger).
+/// The words once the node has run [`HEALTHY_AFTER_MS`]: the row is over,
+/// the booting marker cleared (the last line is kept for a debugger).
 pub fn healthy(words: [u32; PANIC_WORDS]) -> [u32; PANIC_WORDS] {
     let line = PanicRecord::decode(words).map_or(0, |r| r.line);
     PanicRecord {
         resets_in_row: 0,
         line,
         pending: false,
+        booting: false,
+    }
+    .encode()
+}
+
+/// The words right before a commanded reset: the booting marker cleared,
+/// so the reset does not count as unhealthy (and the next boot reads the
+/// store again).
+pub fn commanded_reset(words: [u32; PANIC_WORDS]) -> [u32; PANIC_WORDS] {
+    let r = PanicRecord::decode(words).unwrap_or_default();
+    PanicRecord {
+        booting: false,
+        pending: false,
+        ..r
     }
     .encode()
 }
@@ -189,36 +310,74 @@ impl RuleSnapshot {
         })
     }
 
-    /// The state to resume after a reset: the stored one, unless this was a
-    /// power-on or the words hold no snapshot.
-    pub fn resume(words: [u32; RULE_WORDS], power_on: bool) -> RuleSnapshot {
-        if power_on {
+    /// The state to resume after a reset: the stored one, unless the power
+    /// was lost (`ResetCause::power_lost`) or the words hold no snapshot.
+    pub fn resume(words: [u32; RULE_WORDS], power_lost: bool) -> RuleSnapshot {
+        if power_lost {
             return RuleSnapshot::DRY;
         }
         Self::decode(words).unwrap_or(RuleSnapshot::DRY)
     }
+
+    /// The alarm output in this state (what the board drives the pin to
+    /// before anything else at boot).
+    pub fn alarm_on(&self) -> bool {
+        Rule::resumed(self.state, self.acked).alarm()
+    }
 }
 
-/// The node's storage, or none: after [`PANIC_RESETS_BEFORE_SKIP`] panic
-/// resets in a row the board boots with `SkippableStorage(None)`, which
-/// reads as empty (the defaults) and discards every write, so nothing the
-/// store holds is read and nothing is saved until a reset.
+/// The node's storage, its read skipped or not: after
+/// [`PANIC_RESETS_BEFORE_SKIP`] unhealthy resets in a row (or with a supply
+/// too low to read the store safely at boot) the board boots with the read
+/// skipped. Then `read` gives nothing (the defaults), and the first `write`
+/// starts the store afresh with [`Storage::overwrite`] — it erases what is
+/// there without parsing it and writes the record — so a `SetConfig` or a
+/// calibration replaces a bad record instead of being dropped. Writes after
+/// that go to the store as usual.
 #[derive(Debug)]
-pub struct SkippableStorage<S>(pub Option<S>);
+pub struct SkippableStorage<S> {
+    store: S,
+    skip_read: bool,
+}
+
+impl<S> SkippableStorage<S> {
+    /// `store`, read or not.
+    pub fn new(store: S, skip_read: bool) -> Self {
+        SkippableStorage { store, skip_read }
+    }
+
+    /// True until the first write after a skipped read.
+    pub fn read_skipped(&self) -> bool {
+        self.skip_read
+    }
+
+    /// The store back.
+    pub fn into_inner(self) -> S {
+        self.store
+    }
+}
 
 impl<S: Storage> Storage for SkippableStorage<S> {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, StorageError> {
-        match &mut self.0 {
-            Some(s) => s.read(buf),
-            None => Ok(0),
+        if self.skip_read {
+            return Ok(0);
         }
+        self.store.read(buf)
     }
 
     fn write(&mut self, data: &[u8]) -> Result<(), StorageError> {
-        match &mut self.0 {
-            Some(s) => s.write(data),
-            None => Ok(()),
+        if self.skip_read {
+            self.store.overwrite(data)?;
+            self.skip_read = false;
+            return Ok(());
         }
+        self.store.write(data)
+    }
+
+    fn overwrite(&mut self, data: &[u8]) -> Result<(), StorageError> {
+        self.store.overwrite(data)?;
+        self.skip_read = false;
+        Ok(())
     }
 }
 
@@ -226,12 +385,55 @@ impl<S: Storage> Storage for SkippableStorage<S> {
 mod tests {
     use super::*;
 
+    const POWER_ON: ResetFlags = ResetFlags {
+        power_on: true,
+        brown_out: true,
+        pin: true,
+        ..NONE
+    };
+    const BROWN_OUT: ResetFlags = ResetFlags {
+        brown_out: true,
+        pin: true,
+        ..NONE
+    };
+    const NONE: ResetFlags = ResetFlags {
+        low_power: false,
+        window_watchdog: false,
+        independent_watchdog: false,
+        software: false,
+        power_on: false,
+        pin: false,
+        brown_out: false,
+    };
+    /// A panic's (or a command's) `SCB::sys_reset`.
+    fn software() -> ResetCause {
+        ResetCause::from_flags(ResetFlags {
+            software: true,
+            pin: true,
+            ..NONE
+        })
+    }
+    fn watchdog() -> ResetCause {
+        ResetCause::from_flags(ResetFlags {
+            independent_watchdog: true,
+            pin: true,
+            ..NONE
+        })
+    }
+    fn pin() -> ResetCause {
+        ResetCause::from_flags(ResetFlags { pin: true, ..NONE })
+    }
+    fn power_on() -> ResetCause {
+        ResetCause::from_flags(POWER_ON)
+    }
+
     #[test]
     fn panic_records_round_trip_and_refuse_damage() {
         let r = PanicRecord {
             resets_in_row: 2,
             line: 417,
             pending: true,
+            booting: true,
         };
         let w = r.encode();
         assert_eq!(PanicRecord::decode(w), Some(r));
@@ -251,34 +453,34 @@ mod tests {
     #[test]
     fn three_panics_in_a_row_skip_the_store_and_a_healthy_run_ends_the_row() {
         let mut w = [0u32; 3]; // backup registers after a power-on
-        let plan = plan_boot(w, true);
+        let plan = plan_boot(w, power_on());
         assert_eq!((plan.panic_reset, plan.skip_store), (None, false));
         w = plan.words;
         for n in 1..=4u8 {
             w = record_panic(w, 100 + u32::from(n));
-            let plan = plan_boot(w, false);
+            let plan = plan_boot(w, software());
             assert_eq!(plan.panic_reset, Some((100 + u32::from(n), n)));
             assert_eq!(plan.skip_store, n >= PANIC_RESETS_BEFORE_SKIP, "{n}");
             w = plan.words;
             // Reported once: a second boot without a new panic is clean.
-            assert_eq!(plan_boot(w, false).panic_reset, None);
+            assert_eq!(plan_boot(w, pin()).panic_reset, None);
         }
         // A healthy minute ends the row: the next panic is the first again.
         w = healthy(w);
         assert_eq!(PanicRecord::decode(w).map(|r| r.line), Some(104));
         w = record_panic(w, 7);
-        assert_eq!(plan_boot(w, false).panic_reset, Some((7, 1)));
+        assert_eq!(plan_boot(w, software()).panic_reset, Some((7, 1)));
         // A power-on forgets everything.
         w = record_panic(record_panic(record_panic(w, 7), 7), 7);
-        assert_eq!(plan_boot(w, true).panic_reset, None);
-        // So does a reset that was not a panic (watchdog, command, pin).
+        assert_eq!(plan_boot(w, power_on()).panic_reset, None);
+        // So does a pin reset.
         let w = record_panic([0; 3], 9);
-        let after_report = plan_boot(w, false).words;
+        let after_report = plan_boot(w, software()).words;
         let w = record_panic(after_report, 9);
-        assert_eq!(plan_boot(w, false).panic_reset, Some((9, 2)));
-        let clean = plan_boot(plan_boot(w, false).words, false).words;
+        assert_eq!(plan_boot(w, software()).panic_reset, Some((9, 2)));
+        let clean = plan_boot(plan_boot(w, software()).words, pin()).words;
         assert_eq!(
-            plan_boot(record_panic(clean, 9), false).panic_reset,
+            plan_boot(record_panic(clean, 9), software()).panic_reset,
             Some((9, 1))
         );
     }
@@ -290,7 +492,95 @@ mod tests {
             w = record_panic(w, 1);
         }
         assert_eq!(PanicRecord::decode(w).map(|r| r.resets_in_row), Some(255));
-        assert!(plan_boot(w, false).skip_store);
+        assert!(plan_boot(w, software()).skip_store);
+    }
+
+    #[test]
+    fn the_reset_flags_tell_a_brown_out_from_a_power_loss() {
+        let c = ResetCause::from_flags(POWER_ON);
+        assert_eq!((c.reason, c.power_lost), (ResetReason::PowerOn, true));
+        let c = ResetCause::from_flags(BROWN_OUT);
+        assert_eq!((c.reason, c.power_lost), (ResetReason::PowerOn, false));
+        assert!(!c.unhealthy());
+        assert_eq!(watchdog().reason, ResetReason::IndependentWatchdog);
+        assert_eq!(software().reason, ResetReason::Software);
+        assert_eq!(pin().reason, ResetReason::Pin);
+        assert_eq!(ResetCause::from_flags(NONE).reason, ResetReason::Unknown);
+        assert!(watchdog().unhealthy() && software().unhealthy());
+        assert!(!pin().unhealthy() && !power_on().unhealthy());
+    }
+
+    #[test]
+    fn watchdog_resets_before_a_healthy_boot_count_toward_the_skip() {
+        // Every boot sets the marker; a hang then ends in the watchdog.
+        let mut w = plan_boot([0; 3], power_on()).words;
+        assert_eq!(PanicRecord::decode(w).map(|r| r.booting), Some(true));
+        for n in 1..=3u8 {
+            let plan = plan_boot(w, watchdog());
+            assert!(plan.unhealthy_reset, "{n}");
+            assert_eq!(plan.panic_reset, None, "no panic to report");
+            assert_eq!(plan.skip_store, n >= PANIC_RESETS_BEFORE_SKIP, "{n}");
+            w = plan.words;
+        }
+        // A panic on top is the fourth in the row.
+        let plan = plan_boot(record_panic(w, 55), software());
+        assert_eq!(plan.panic_reset, Some((55, 4)));
+        assert!(plan.skip_store);
+        // A boot that became healthy: the next watchdog reset starts nothing.
+        let plan = plan_boot(healthy(plan.words), watchdog());
+        assert!(!plan.unhealthy_reset && !plan.skip_store);
+        // A commanded reset is not unhealthy, even in the first minute, and
+        // the boot after it reads the store again.
+        let mut w = plan.words;
+        for _ in 0..3 {
+            w = plan_boot(w, watchdog()).words;
+        }
+        assert!(plan_boot(w, watchdog()).skip_store);
+        let plan = plan_boot(commanded_reset(w), software());
+        assert!(!plan.unhealthy_reset && !plan.skip_store);
+        // Nor is a brown-out.
+        let plan = plan_boot(w, ResetCause::from_flags(BROWN_OUT));
+        assert!(!plan.unhealthy_reset && !plan.skip_store);
+    }
+
+    #[test]
+    fn a_brown_out_alone_resumes_the_rule_and_its_acknowledgement() {
+        let s = RuleSnapshot {
+            state: DetectorState::Ice,
+            acked: true,
+        };
+        let w = s.encode();
+        let brown_out = ResetCause::from_flags(BROWN_OUT);
+        assert_eq!(RuleSnapshot::resume(w, brown_out.power_lost), s);
+        assert!(RuleSnapshot::resume(w, brown_out.power_lost).alarm_on());
+        assert_eq!(
+            RuleSnapshot::resume(w, power_on().power_lost),
+            RuleSnapshot::DRY
+        );
+        assert!(!RuleSnapshot::DRY.alarm_on());
+    }
+
+    #[test]
+    #[allow(clippy::expect_used)]
+    fn a_skipped_store_is_overwritten_by_the_first_save() {
+        use crate::storage::flash_store::FlashStore;
+        use crate::storage::ram_flash::RamFlash;
+        // Another program's bytes in the store's pages.
+        let mut flash = RamFlash::<_, 1024, 2>::new([0u8; 2 * 1024]);
+        for (i, b) in flash.bytes_mut().iter_mut().enumerate() {
+            *b = (i * 7 + 3) as u8;
+        }
+        let store = FlashStore::new(flash, 0..2 * 1024).expect("two pages");
+        let mut s = SkippableStorage::new(store, true);
+        let mut buf = [0u8; 64];
+        assert_eq!(s.read(&mut buf), Ok(0), "the read is skipped");
+        s.write(b"a new record").expect("overwritten");
+        assert!(!s.read_skipped());
+        s.write(b"and another").expect("written");
+        // Another boot on the same flash reads the last record.
+        let mut again = FlashStore::new(s.into_inner().into_flash(), 0..2 * 1024).expect("pages");
+        let n = again.read(&mut buf).expect("readable");
+        assert_eq!(buf.get(..n), Some(&b"and another"[..]));
     }
 
     #[test]

@@ -15,6 +15,12 @@
 //! slowest link rate ([`TX_QUEUE_MAX_MS`]), and on the field link waits for
 //! a quiet line and the driver enable ([`TURNAROUND_MAX_MS`]). (The save a command causes is
 //! deferred and coalesced: it never delays the command's own answer.)
+//!
+//! A commanded `Reset` waits until its `Ack` has left: the board resets
+//! once the transmit pipe and the UART's buffer are empty and the USART
+//! reported transmission complete, or after [`drain_ms`] of everything
+//! that can be queued at the link's rate ([`RESET_DRAIN_BYTES`]) as a
+//! bound — not after a fixed time, which at 19 200 Bd could cut the `Ack`.
 
 use crate::calibration::dark::CAL_MAX_MS;
 use crate::platform::field_link::TURNAROUND_MAX_MS;
@@ -31,6 +37,21 @@ pub const SLOWEST_BAUD: u32 = crate::platform::field_link::LONG_CABLE_BAUD;
 /// The transmit pipe drained at [`SLOWEST_BAUD`], 10 bits a byte, ms
 /// (rounded up: 534 ms; 89 ms at 115 200 Bd).
 pub const TX_QUEUE_MAX_MS: u32 = (TX_PIPE_BYTES * 10 * 1_000).div_ceil(SLOWEST_BAUD);
+/// The UART driver's own transmit buffer on the board, bytes.
+pub const UART_TX_BUFFER_BYTES: u32 = 512;
+/// Everything that can wait for the wire when a `Reset` is acknowledged:
+/// the pipe and the UART's buffer, bytes.
+pub const RESET_DRAIN_BYTES: u32 = TX_PIPE_BYTES + UART_TX_BUFFER_BYTES;
+/// Added to a drain time for the turnaround and the scheduling, ms.
+pub const DRAIN_MARGIN_MS: u32 = 50;
+
+/// How long `bytes` take to leave at `baud` (10 bits a byte, rounded up),
+/// plus the field link's turnaround and [`DRAIN_MARGIN_MS`], ms.
+pub const fn drain_ms(bytes: u32, baud: u32) -> u32 {
+    let wire = (bytes as u64 * 10 * 1_000).div_ceil(if baud == 0 { 1 } else { baud as u64 });
+    wire as u32 + TURNAROUND_MAX_MS + DRAIN_MARGIN_MS
+}
+
 /// The worst time from a command's last byte to the first byte of its
 /// answer, ms (5 829 ms).
 pub const WORST_REPLY_MS: u32 = LONGEST_FRAME_MS
@@ -56,6 +77,23 @@ mod tests {
         // the 8 s it waits now.
         assert_eq!(WORST_REPLY_MS, 5_829);
         assert_eq!(fois_protocol::REPLY_TIMEOUT_MS, 8_000);
+    }
+
+    #[test]
+    fn a_commanded_reset_waits_for_everything_queued_to_leave() {
+        // A full pipe and UART buffer at 19 200 Bd take 800 ms: the former
+        // fixed 600 ms wait cut them.
+        assert_eq!(RESET_DRAIN_BYTES, 1_536);
+        assert_eq!(drain_ms(RESET_DRAIN_BYTES, 19_200), 800 + 2 + 50);
+        assert!(drain_ms(RESET_DRAIN_BYTES, 19_200) > 600);
+        // 134 ms at 115 200 Bd; one 20-byte Ack alone: 11 + 52 ms.
+        assert_eq!(drain_ms(RESET_DRAIN_BYTES, 115_200), 134 + 52);
+        assert_eq!(drain_ms(20, 19_200), 11 + 52);
+        assert_eq!(drain_ms(20, 0), 200_000 + 52, "no division by zero");
+        // Well inside the watchdog's shortest timeout.
+        assert!(
+            drain_ms(RESET_DRAIN_BYTES, 19_200) < crate::platform::watchdog::SHORTEST_TIMEOUT_MS
+        );
     }
 
     #[test]

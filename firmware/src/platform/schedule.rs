@@ -116,6 +116,26 @@ impl Schedule {
         }
     }
 
+    /// The measure loop has proved progress: right after [`Self::poll`] at
+    /// `now_ms`, the last frame ran at most one period ago and the next is
+    /// due at most one period ahead (`period_ms` as passed to `poll`).
+    /// False before the first poll and whenever the clock went backwards or
+    /// jumped (a wrapped timer: the next frame would lie years away, and
+    /// the loop would feed the watchdog for ever without a frame). The
+    /// board feeds the watchdog only while this holds.
+    pub fn on_track(&self, now_ms: u64, period_ms: u32) -> bool {
+        let period = u64::from(period_ms.max(1));
+        match (self.last_frame_ms, self.next_frame_ms) {
+            (Some(last), Some(next)) => {
+                now_ms.checked_sub(last).is_some_and(|ago| ago <= period)
+                    && next
+                        .checked_sub(now_ms)
+                        .is_some_and(|ahead| ahead <= period)
+            }
+            _ => false,
+        }
+    }
+
     /// Grid slots dropped because the node was busy past them.
     pub fn skipped_frames(&self) -> u32 {
         self.skipped
@@ -221,6 +241,29 @@ mod tests {
         assert!(s.poll(2_590, true, 100).frame);
         assert_eq!(s.next_wake_ms(true), 2_645);
         assert_eq!(s.skipped_frames(), 22);
+    }
+
+    #[test]
+    fn progress_holds_on_a_running_grid_and_fails_when_time_jumps() {
+        let mut s = Schedule::new();
+        assert!(!s.on_track(0, 100), "nothing ran yet");
+        for t in 0..1_000 {
+            s.poll(t, true, 100);
+            assert!(s.on_track(t, 100), "{t}");
+        }
+        // Overrun by an erase: still on track after the late frame.
+        s.poll(3_000, true, 100);
+        assert!(s.on_track(3_000, 100));
+        // A new, shorter period: on track with it after the poll.
+        s.poll(3_010, true, 10);
+        assert!(s.on_track(3_010, 10));
+        // The clock went backwards: not on track, whatever the poll says.
+        s.poll(5, true, 10);
+        assert!(!s.on_track(5, 10));
+        // Or jumped far ahead without a poll.
+        let mut s = Schedule::new();
+        s.poll(0, true, 100);
+        assert!(!s.on_track(10_000, 100));
     }
 
     #[test]

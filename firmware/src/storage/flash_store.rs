@@ -16,9 +16,12 @@
 //! - **First boot vs. damage.** A range that is entirely erased is *empty*
 //!   (defaults, no fault). A range that holds anything but no readable
 //!   record is reported as a read failure, so the node raises
-//!   `CONFIG_DEFAULTED`: defaults never come back silently. Nothing is
-//!   erased at boot; if the damage is beyond sequential-storage's own
-//!   repair, the next save erases the range and writes its record. (A cut
+//!   `CONFIG_DEFAULTED`: defaults never come back silently. The read itself
+//!   may erase: sequential-storage's `fetch_item` repairs an interrupted
+//!   page change by erasing a page, so the board reads the store at boot
+//!   only with a healthy supply (`storage::supply::boot_read`). If the
+//!   damage is beyond sequential-storage's own repair, the next save erases
+//!   the range and writes its record. (A cut
 //!   in the moment between that erase and the new record leaves erased
 //!   flash, which the next boot takes for a first boot: the one window in
 //!   which defaults can come back without the flag, and only after the
@@ -220,6 +223,29 @@ impl<F: NorFlash> Storage for FlashStore<F> {
                     .map_err(|_| StorageError::Write)?;
             }
         }
+        self.read_back(data)
+    }
+
+    /// Erase both pages and write `data` as the only record, never parsing
+    /// what the pages held (the store after a skipped read at boot). A cut
+    /// between the erase and the record leaves erased flash: the defaults,
+    /// which the node was running anyway.
+    fn overwrite(&mut self, data: &[u8]) -> Result<(), StorageError> {
+        if data.len() > MAX_RECORD {
+            return Err(StorageError::TooLarge);
+        }
+        let mut work = [0u8; WORK_LEN];
+        block_on(self.map.erase_all()).map_err(|_| StorageError::Write)?;
+        block_on(self.map.store_item(&mut work, &RECORD_KEY, &data))
+            .map_err(|_| StorageError::Write)?;
+        self.read_back(data)
+    }
+}
+
+impl<F: NorFlash> FlashStore<F> {
+    /// Read the record back after a save: it must be `data`.
+    fn read_back(&mut self, data: &[u8]) -> Result<(), StorageError> {
+        let mut work = [0u8; WORK_LEN];
         let back = block_on(self.map.fetch_item::<&[u8]>(&mut work, &RECORD_KEY))
             .map_err(|_| StorageError::Read)?;
         if back != Some(data) {

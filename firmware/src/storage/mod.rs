@@ -42,6 +42,13 @@ pub trait Storage {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, StorageError>;
     /// Replace the stored record with `data`.
     fn write(&mut self, data: &[u8]) -> Result<(), StorageError>;
+    /// Replace whatever the medium holds with `data`, without reading or
+    /// parsing what is there first (after a skipped read at boot: the
+    /// stored data may be what made the node fail). A flash store erases
+    /// and writes afresh; the default is [`Self::write`].
+    fn overwrite(&mut self, data: &[u8]) -> Result<(), StorageError> {
+        self.write(data)
+    }
 }
 
 impl<T: Storage + ?Sized> Storage for &mut T {
@@ -50,6 +57,9 @@ impl<T: Storage + ?Sized> Storage for &mut T {
     }
     fn write(&mut self, data: &[u8]) -> Result<(), StorageError> {
         (**self).write(data)
+    }
+    fn overwrite(&mut self, data: &[u8]) -> Result<(), StorageError> {
+        (**self).overwrite(data)
     }
 }
 
