@@ -2,15 +2,21 @@
 //! board modules (`board`, `safety`, `link`) touch the HAL; all the logic is
 //! `fois_firmware::node::Node` and the library's pure modules.
 //!
-//! Boot: the watchdog first, the HSE probe, `embassy_stm32::init`, the
-//! backup registers (panic record, the rule's state), the flash store
-//! (skipped after panic resets in a row), the node, the link. Tasks:
-//! `measure` (the library's `Schedule`: `Hello` at boot and every second
-//! until streaming, a frame every frame period, pending saves; the only
-//! place besides the flash erase that feeds the watchdog), `uart_rx` (bytes
-//! → `Node::handle_rx`, one host frame at a time, yielding between them),
+//! Boot: the watchdog first; the reset's cause and the rule's state from
+//! the backup registers, and at once the alarm, LD2 and (field link) DE/RE̅
+//! driven from them; the HSE probe, `embassy_stm32::init`, the boot plan
+//! (panic record, booting marker); the ADC; the flash store's read, only
+//! on a healthy supply and not after unhealthy resets in a row; the node,
+//! the link. Tasks: `measure` (the library's `Schedule` on a wrap-safe
+//! `Uptime`: `Hello` at boot and every second until streaming, a frame
+//! every frame period, pending saves, the HSE retries; it feeds the
+//! watchdog only while the schedule shows progress, and besides it only
+//! the flash erase and the bounded boot wait do), `uart_rx` (bytes →
+//! `Node::handle_rx`, one host frame at a time, yielding between them),
 //! `uart_tx` (frame bytes → the link; on the field link with the
-//! transceiver's driver enable around each burst) and `button` (B1 →
+//! transceiver's driver enable around each burst; on a higher-priority
+//! executor, so DE drops at transmission complete even while the
+//! measure loop runs a frame or a calibration) and `button` (B1 →
 //! `Node::button_pressed`). The node sits in one mutex; frames go to the
 //! transmitter through a byte pipe, and a frame that does not fit is dropped
 //! whole (the host sees the gap in the sequence numbers) rather than
@@ -33,28 +39,33 @@ mod app {
     use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 
     use defmt_rtt as _;
-    use embassy_executor::Spawner;
+    use embassy_executor::{InterruptExecutor, Spawner};
     use embassy_stm32::exti::{self, ExtiInput};
     use embassy_stm32::flash::Flash;
     use embassy_stm32::gpio::{Level, Output, Pull, Speed};
+    use embassy_stm32::interrupt::{InterruptExt, Priority};
     use embassy_stm32::usart::{BufferedUartRx, BufferedUartTx};
     use embassy_stm32::{bind_interrupts, interrupt};
-    use embassy_sync::blocking_mutex::raw::ThreadModeRawMutex;
+    use embassy_sync::blocking_mutex::raw::{CriticalSectionRawMutex, ThreadModeRawMutex};
     use embassy_sync::mutex::Mutex;
     use embassy_sync::pipe::Pipe;
     use embassy_sync::signal::Signal;
     use embassy_time::{Delay, Instant, Timer};
     use embedded_io_async::{Read, Write};
-    use fois_firmware::hal::BoardInfo;
+    use fois_firmware::hal::{BoardInfo, PhotoAdc};
+    use fois_firmware::measure::vref;
     use fois_firmware::node::Node;
     use fois_firmware::platform::boot::{self, RuleSnapshot, SkippableStorage};
+    use fois_firmware::platform::clock_retry::HseRetry;
     use fois_firmware::platform::field_link;
+    use fois_firmware::platform::reply_time::{RESET_DRAIN_BYTES, drain_ms};
     use fois_firmware::platform::schedule::Schedule;
+    use fois_firmware::platform::uptime::{self, Uptime};
     use fois_firmware::platform::watchdog::MAX_SLEEP_MS;
     use fois_firmware::storage::flash_store::FlashStore;
-    use fois_protocol::ResetReason;
+    use fois_firmware::storage::supply::{self, BOOT_SUPPLY_STEP_MS, BootRead};
 
-    use crate::board::{self, BoardAdc, BoardFlash};
+    use crate::board::{self, BoardAdc, BoardFlash, HeldOutput};
     use crate::link;
     use crate::safety::{self, Watchdog};
 
@@ -65,15 +76,16 @@ mod app {
     type BoardNode = Node<
         BoardAdc,
         Output<'static>,
-        Output<'static>,
-        Output<'static>,
+        HeldOutput,
+        HeldOutput,
         Delay,
         SkippableStorage<FlashStore<BoardFlash>>,
     >;
 
     static NODE: Mutex<ThreadModeRawMutex, Option<BoardNode>> = Mutex::new(None);
-    /// Encoded frames waiting for the UART.
-    static TX: Pipe<ThreadModeRawMutex, 1024> = Pipe::new();
+    /// Encoded frames waiting for the UART (written in thread mode, read by
+    /// the transmit task on the link executor).
+    static TX: Pipe<CriticalSectionRawMutex, 1024> = Pipe::new();
     /// Raised by the link and the button after the node took a command: the
     /// measurement loop polls the schedule again at once, so a new stream
     /// period, a `StopStream`'s first `Hello`, a `Reset` and a save come
@@ -83,6 +95,17 @@ mod app {
     /// has: the field link's transmitter waits for a quiet line.
     static LAST_RX_US: AtomicU32 = AtomicU32::new(0);
     static RX_SEEN: AtomicBool = AtomicBool::new(false);
+
+    /// The executor of the transmit task, above thread mode and below the
+    /// USART's interrupt, on an interrupt nothing else uses (UART5).
+    static LINK_EXECUTOR: InterruptExecutor = InterruptExecutor::new();
+
+    #[interrupt]
+    #[allow(non_snake_case)]
+    unsafe fn UART5() {
+        // SAFETY: the executor's own interrupt, started in `main`.
+        unsafe { LINK_EXECUTOR.on_interrupt() }
+    }
 
     /// Queue one whole frame for the UART, or drop it whole if there is no room.
     fn queue(frame: &[u8]) {
@@ -98,6 +121,9 @@ mod app {
         }
     }
 
+    /// ms of uptime for commands and the button (wrap-safe: the measure
+    /// loop resets the node a day before the raw tick wraps, so within a
+    /// run the raw milliseconds equal `Uptime`'s).
     fn now_ms() -> u64 {
         Instant::now().as_millis()
     }
@@ -111,6 +137,12 @@ mod app {
         // First the watchdog: everything after it may hang only until it
         // fires (embassy's clock setup waits without a bound).
         let wdg = Watchdog::start_first();
+        // Then the outputs, before the clock, the ADC and the flash: the
+        // alarm as the backup registers left it (after any reset but a
+        // power loss), DE/RE̅ low.
+        let cause = safety::take_reset_cause();
+        let snapshot = RuleSnapshot::resume(safety::rule_words(), cause.power_lost);
+        board::hold_outputs_early(snapshot.alarm_on());
         // Probe the ST-LINK's 8 MHz (or a crystal at X3) before embassy's
         // clock setup, which would wait for it for ever; then run on it or
         // on HSI.
@@ -120,27 +152,14 @@ mod app {
             safety::enable_css();
         }
         safety::enable_pvd();
-        let reset_reason = board::take_reset_reason();
-        let power_on = reset_reason == ResetReason::PowerOn;
-        let plan = boot::plan_boot(safety::panic_words(), power_on);
+        let plan = boot::plan_boot(safety::panic_words(), cause);
         safety::set_panic_words(plan.words);
         let bor_ok = safety::bor_level_set();
-        defmt::info!(
-            "fois-node up, reset reason {=str}, clock {=str}, BOR {=bool}, store {=str}",
-            board::reset_reason_name(reset_reason),
-            match hse {
-                Some(safety::HseSource::Bypass) => "HSE 8 MHz (ST-LINK MCO)",
-                Some(safety::HseSource::Crystal) => "HSE 8 MHz (crystal)",
-                None => "HSI (HSE missing)",
-            },
-            bor_ok,
-            if plan.skip_store { "skipped" } else { "flash" }
-        );
 
         let info = BoardInfo {
             board: board::BOARD_NAME,
             unique_id: board::unique_id(),
-            reset_reason,
+            reset_reason: cause.reason,
             cal: board::factory_cal(),
         };
         let mut adc = BoardAdc::new(p.ADC1, p.PA0, p.PA1, p.PA4);
@@ -150,26 +169,70 @@ mod app {
             defmt::info!("photo pair: {=u32} cycles ({=u32} µs)", cycles, cycles / 16);
         }
         let led = Output::new(p.PB0, Level::Low, Speed::Low);
-        let alarm = Output::new(p.PA9, Level::Low, Speed::Low);
-        let ld2 = Output::new(p.PA5, Level::Low, Speed::Low);
-        let store = if plan.skip_store {
-            None
+        let level = if snapshot.alarm_on() {
+            Level::High
         } else {
-            let flash = BoardFlash::new(Flash::new_blocking(p.FLASH), wdg);
-            match FlashStore::new(flash, BoardFlash::RANGE) {
-                Ok(s) => Some(s),
-                Err(_) => defmt::panic!("flash store: sectors 6-7 are not two equal pages"),
+            Level::Low
+        };
+        let alarm = HeldOutput::new(Output::new(p.PA9, level, Speed::Low));
+        let ld2 = HeldOutput::new(Output::new(p.PA5, level, Speed::Low));
+        // The store's read may repair (erase): only on a healthy supply,
+        // waited for at most 10 s (fed), else skipped.
+        let mut waited_ms = 0;
+        let supply_ok = loop {
+            let vdda_mv = vref::vdda_mv(&info.cal.or_typical(), adc.read_vrefint());
+            board::LAST_VDDA_MV.store(vdda_mv, Ordering::Relaxed);
+            match supply::boot_read(vdda_mv, safety::supply_low(), waited_ms) {
+                BootRead::Read => break true,
+                BootRead::Skip => break false,
+                BootRead::Wait => {
+                    wdg.pet();
+                    embassy_time::block_for(embassy_time::Duration::from_millis(u64::from(
+                        BOOT_SUPPLY_STEP_MS,
+                    )));
+                    waited_ms += BOOT_SUPPLY_STEP_MS;
+                }
             }
         };
-        let mut node = Node::new(adc, led, alarm, ld2, Delay, SkippableStorage(store), info);
+        let skip_read = plan.skip_store || !supply_ok;
+        defmt::info!(
+            "fois-node up, reset reason {=str}{=str}, clock {=str}, BOR {=bool}, store {=str}",
+            board::reset_reason_name(cause.reason),
+            if cause.reason == fois_protocol::ResetReason::PowerOn && !cause.power_lost {
+                " (brown-out)"
+            } else {
+                ""
+            },
+            match hse {
+                Some(safety::HseSource::Bypass) => "HSE 8 MHz (ST-LINK MCO)",
+                Some(safety::HseSource::Crystal) => "HSE 8 MHz (crystal)",
+                None => "HSI (HSE missing)",
+            },
+            bor_ok,
+            if plan.skip_store {
+                "skipped (unhealthy resets)"
+            } else if !supply_ok {
+                "skipped (supply low)"
+            } else {
+                "flash"
+            }
+        );
+        let flash = BoardFlash::new(Flash::new_blocking(p.FLASH), wdg);
+        let store = match FlashStore::new(flash, BoardFlash::RANGE) {
+            Ok(s) => s,
+            Err(_) => defmt::panic!("flash store: sectors 6-7 are not two equal pages"),
+        };
+        let store = SkippableStorage::new(store, skip_read);
+        let mut node = Node::new(adc, led, alarm, ld2, Delay, store, info);
         node.set_clock_fallback(hse.is_none());
-        node.set_boot_faults(!bor_ok, plan.skip_store);
+        node.set_boot_faults(!bor_ok, skip_read);
         if let Some((line, resets)) = plan.panic_reset {
             node.report_panic_reset(line, resets);
         }
-        // After a watchdog, software, pin or panic reset: the alarm (and its
-        // acknowledgement) as before the reset, at once.
-        node.resume_rule(RuleSnapshot::resume(safety::rule_words(), power_on));
+        // The outputs kept their early level through the store's read; the
+        // node drives them from here, at the same level.
+        board::release_outputs();
+        node.resume_rule(snapshot);
         // Moved in without an await: a node held across one would live in
         // this task's future as well as in NODE (7 KiB of static RAM twice).
         match NODE.try_lock() {
@@ -184,10 +247,15 @@ mod app {
         defmt::info!("link at {=u32} Bd", link.baud);
         let button = ExtiInput::new(p.PC13, p.EXTI13, Pull::None, Irqs);
 
-        spawn(&spawner, uart_tx(link.tx, link.de, link.baud));
+        interrupt::UART5.set_priority(Priority::P6);
+        let link_spawner = LINK_EXECUTOR.start(interrupt::UART5);
+        match uart_tx(link.tx, link.de, link.baud) {
+            Ok(t) => link_spawner.spawn(t),
+            Err(e) => defmt::panic!("spawn: {}", e),
+        }
         spawn(&spawner, uart_rx(link.rx));
         spawn(&spawner, button_task(button));
-        measure(wdg).await
+        measure(wdg, link.baud, hse.is_none()).await
     }
 
     fn spawn<S>(
@@ -201,29 +269,52 @@ mod app {
     }
 
     /// The measurement loop, on the library's `Schedule` (the same one the
-    /// virtual node runs): `Hello` at boot and every second until
-    /// streaming, frames on a fixed grid, pending saves when due, the
-    /// watchdog fed at least every `MAX_SLEEP_MS` (periods go up to 10 min).
-    /// It also keeps the rule's state in the backup registers, tells the
-    /// node about the supply and the clock, and ends a row of panic resets
-    /// once the node has run for `boot::HEALTHY_AFTER_MS`.
-    async fn measure(wdg: Watchdog) -> ! {
+    /// virtual node runs) and `Uptime` (milliseconds that go on across the
+    /// timer's wrap): `Hello` at boot and every second until streaming,
+    /// frames on a fixed grid, pending saves when due. It feeds the
+    /// watchdog at least every `MAX_SLEEP_MS` (periods go up to 10 min),
+    /// and only while the schedule shows progress (`Schedule::on_track`: a
+    /// frame within the last period, the next within one): a loop that
+    /// runs on without frames ends in the watchdog. It also keeps the
+    /// rule's state in the backup registers, tells the node about the
+    /// supply and the clock, tries the HSE again on HSI
+    /// (`clock_retry::HseRetry`), marks the boot healthy after
+    /// `boot::HEALTHY_AFTER_MS`, and resets the node a day before the raw
+    /// timer wraps (`uptime::reset_before_wrap`).
+    async fn measure(wdg: Watchdog, baud: u32, hse_missing: bool) -> ! {
         let mut schedule = Schedule::new();
+        let mut uptime = Uptime::new();
+        let mut hse_retry = HseRetry::new();
+        if hse_missing {
+            hse_retry.fell_back(0);
+        }
         let mut kept = None;
         let mut healthy = false;
         loop {
-            let (wake_ms, reset) = {
+            let raw = Instant::now().as_ticks();
+            let now = uptime.now_ms(raw);
+            if safety::clock_failed() {
+                hse_retry.fell_back(now);
+            }
+            if hse_retry.due(now) {
+                match safety::try_restore_hse() {
+                    Some(_) => {
+                        defmt::info!("clock: back on the HSE");
+                        hse_retry.restored(now);
+                    }
+                    None => hse_retry.failed(now),
+                }
+            }
+            let (wake_ms, reset, on_track) = {
                 let mut guard = NODE.lock().await;
                 let Some(node) = guard.as_mut() else {
                     defmt::panic!("node missing")
                 };
-                let now = now_ms();
                 node.set_supply_low(safety::supply_low());
-                if safety::clock_failed() {
-                    node.set_clock_fallback(true);
-                }
+                node.set_clock_fallback(safety::on_hsi());
                 let streaming = node.is_streaming();
-                let due = schedule.poll(now, streaming, node.frame_period_ms());
+                let period_ms = node.frame_period_ms();
+                let due = schedule.poll(now, streaming, period_ms);
                 if due.hello {
                     node.send_hello(&mut queue);
                 }
@@ -236,6 +327,7 @@ mod app {
                 } else {
                     node.poll_storage(now);
                 }
+                let on_track = schedule.on_track(now, period_ms);
                 let snapshot = node.rule_snapshot();
                 if kept != Some(snapshot) {
                     safety::set_rule_words(snapshot.encode());
@@ -252,39 +344,67 @@ mod app {
                 if let Some(save) = node.save_due_ms() {
                     wake = wake.min(save);
                 }
-                (wake, node.take_reset_request())
+                if let Some(retry) = hse_retry.next_ms() {
+                    wake = wake.min(retry);
+                }
+                (wake, node.take_reset_request(), on_track)
             };
-            wdg.pet();
-            if reset {
-                // Let the Ack leave (1 KiB at 19 200 Bd is < 0.6 s).
-                Timer::after_millis(600).await;
-                cortex_m::peripheral::SCB::sys_reset();
+            if on_track {
+                wdg.pet();
+            } else {
+                defmt::error!("measure loop without progress: the watchdog will reset");
             }
-            embassy_futures::select::select(
-                Timer::at(Instant::from_millis(wake_ms)),
-                COMMANDED.wait(),
-            )
-            .await;
+            if reset || uptime::reset_before_wrap(raw) {
+                reset_after_drain(baud).await;
+            }
+            let sleep_ms = wake_ms.saturating_sub(uptime.now_ms(Instant::now().as_ticks()));
+            embassy_futures::select::select(Timer::after_millis(sleep_ms), COMMANDED.wait()).await;
         }
     }
 
-    /// Frames to the link. On the field link (`de` present): wait for a
-    /// quiet line (two-wire RS-485 is half duplex), raise DE, send what is
-    /// queued, wait for transmission complete, drop DE.
+    /// A commanded (or planned) reset: clear the booting marker (it is not
+    /// an unhealthy reset), let everything queued leave — the pipe empty
+    /// and the USART's transmission complete — bounded by `drain_ms` of a
+    /// full pipe and UART buffer at the link's rate, then reset.
+    async fn reset_after_drain(baud: u32) -> ! {
+        safety::set_panic_words(boot::commanded_reset(safety::panic_words()));
+        let start = Instant::now();
+        let bound =
+            embassy_time::Duration::from_millis(u64::from(drain_ms(RESET_DRAIN_BYTES, baud)));
+        while (!TX.is_empty() || board::LINK_SENDING.load(Ordering::Acquire))
+            && start.elapsed() < bound
+        {
+            Timer::after_millis(2).await;
+        }
+        cortex_m::peripheral::SCB::sys_reset()
+    }
+
+    /// Frames to the link, on the link executor (above thread mode). On the
+    /// field link (`de` present): wait for a quiet line (two-wire RS-485 is
+    /// half duplex; the RX pin itself sampled for the quiet bytes), raise
+    /// DE, send what is queued, wait for transmission complete, drop DE.
+    /// `board::LINK_SENDING` is set across each burst (a flash erase and a
+    /// commanded reset wait for it).
     #[embassy_executor::task]
     async fn uart_tx(mut tx: BufferedUartTx<'static>, mut de: Option<Output<'static>>, baud: u32) {
         let mut buf = [0u8; 128];
         loop {
             let n = TX.read(&mut buf).await;
+            board::LINK_SENDING.store(true, Ordering::Release);
             if let Some(de) = de.as_mut() {
                 loop {
                     let quiet = RX_SEEN
                         .load(Ordering::Relaxed)
                         .then(|| now_us32().wrapping_sub(LAST_RX_US.load(Ordering::Relaxed)));
-                    if field_link::line_free(quiet, baud) {
+                    if field_link::line_free(quiet, baud) && line_idle(baud) {
                         break;
                     }
-                    Timer::after_micros(u64::from(field_link::byte_time_us(baud))).await;
+                    // Not free: wait as long as the quiet bytes before looking
+                    // again, so a busy line leaves thread mode most of the CPU.
+                    Timer::after_micros(u64::from(
+                        field_link::IDLE_BYTES_BEFORE_TX * field_link::byte_time_us(baud),
+                    ))
+                    .await;
                 }
                 de.set_high();
                 embassy_time::block_for(embassy_time::Duration::from_micros(u64::from(
@@ -295,18 +415,40 @@ mod app {
             if let Some(bytes) = buf.get(..n) {
                 let _ = tx.write_all(bytes).await;
             }
-            if let Some(de) = de.as_mut() {
-                // Whatever else is queued goes in the same burst.
-                while let Ok(n) = TX.try_read(&mut buf) {
-                    if let Some(bytes) = buf.get(..n) {
-                        let _ = tx.write_all(bytes).await;
-                    }
+            // Whatever else is queued goes in the same burst.
+            while let Ok(n) = TX.try_read(&mut buf) {
+                if let Some(bytes) = buf.get(..n) {
+                    let _ = tx.write_all(bytes).await;
                 }
-                // TC: the last stop bit has left the shift register.
-                let _ = tx.flush().await;
+            }
+            // TC: the last stop bit has left the shift register. embassy's
+            // flush can return early: its interrupt handler sets `tx_done`
+            // on a TC between two chunks (the ring buffer ran dry for a
+            // moment) and then sends the next chunk; so the USART's own TC
+            // flag must agree (cleared again by that next byte), bounded.
+            let _ = tx.flush().await;
+            let start = Instant::now();
+            let bound =
+                embassy_time::Duration::from_millis(u64::from(drain_ms(RESET_DRAIN_BYTES, baud)));
+            while !board::link_tx_complete() && start.elapsed() < bound {
+                Timer::after_micros(u64::from(field_link::byte_time_us(baud))).await;
+            }
+            if let Some(de) = de.as_mut() {
                 de.set_low();
             }
+            board::LINK_SENDING.store(false, Ordering::Release);
         }
+    }
+
+    /// The field link's RX pin stayed idle for the quiet bytes.
+    #[cfg(feature = "field-link")]
+    fn line_idle(baud: u32) -> bool {
+        board::field_rx_idle_for(field_link::IDLE_BYTES_BEFORE_TX * field_link::byte_time_us(baud))
+    }
+
+    #[cfg(not(feature = "field-link"))]
+    fn line_idle(_baud: u32) -> bool {
+        true
     }
 
     /// Bytes from the link to the node, one host frame (up to its 0x00) at

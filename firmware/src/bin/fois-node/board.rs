@@ -5,16 +5,20 @@
 //! chip's identity (unique id, factory calibration, reset reason). Porting
 //! to another STM32 means rewriting these three files.
 
-use core::sync::atomic::{AtomicU16, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU16, Ordering};
 
 use embassy_stm32::Peri;
 use embassy_stm32::adc::{Adc, SampleTime, Temperature, VrefInt};
 use embassy_stm32::flash::{Blocking, Error as FlashError, Flash};
+use embassy_stm32::gpio::Output;
 use embassy_stm32::pac;
 use embassy_stm32::pac::flash::vals::Psize;
+use embassy_stm32::pac::gpio::vals::Moder;
 use embassy_stm32::peripherals::{ADC1, PA0, PA1, PA4};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use fois_firmware::hal::{FactoryCal, PhotoAdc};
+use fois_firmware::platform::field_link::LONG_CABLE_BAUD;
+use fois_firmware::platform::reply_time::{RESET_DRAIN_BYTES, drain_ms};
 use fois_protocol::ResetReason;
 
 use crate::safety::Watchdog;
@@ -43,30 +47,81 @@ pub fn unique_id() -> [u8; 12] {
     embassy_stm32::uid::uid()
 }
 
-/// Why the chip reset, from the RCC CSR flags; the flags are then cleared so
-/// the next reset reports only its own cause.
-pub fn take_reset_reason() -> ResetReason {
-    let rcc = embassy_stm32::pac::RCC;
-    let csr = rcc.csr().read();
-    // Precedence: the most specific cause wins (a watchdog or software reset
-    // also pulses NRST, so PINRST is set with them).
-    let reason = if csr.wdgrstf() {
-        ResetReason::IndependentWatchdog
-    } else if csr.wwdgrstf() {
-        ResetReason::WindowWatchdog
-    } else if csr.lpwrrstf() {
-        ResetReason::LowPower
-    } else if csr.sftrstf() {
-        ResetReason::Software
-    } else if csr.porrstf() || csr.borrstf() {
-        ResetReason::PowerOn
-    } else if csr.padrstf() {
-        ResetReason::Pin
-    } else {
-        ResetReason::Unknown
-    };
-    rcc.csr().modify(|w| w.set_rmvf(true));
-    reason
+// ---- Outputs from the first instant ----
+
+/// The alarm (PA9) and LD2 (PA5) pins, and the field link's DE/RE̅ (PA8).
+const ALARM_PIN: usize = 9;
+const LD2_PIN: usize = 5;
+#[cfg(feature = "field-link")]
+const DE_PIN: usize = 8;
+
+/// Drive the outputs before anything else (before the HSE probe, the clock
+/// setup, the ADC and the flash store's scan): the alarm and LD2 at the
+/// level of the rule resumed from the backup registers, and on the field
+/// link the transceiver's DE/RE̅ low (listening, the bus released) instead
+/// of floating until the link is set up. Through the PAC: only the port's
+/// clock, the level, then the mode (no glitch: the output register is set
+/// first). embassy's `Output::new` later takes the pins over at the same
+/// levels (`embassy_stm32::init` only enables the GPIO clocks).
+pub fn hold_outputs_early(alarm_on: bool) {
+    pac::RCC.ahb1enr().modify(|w| w.set_gpioaen(true));
+    let a = pac::GPIOA;
+    for pin in [ALARM_PIN, LD2_PIN] {
+        a.bsrr().write(|w| {
+            if alarm_on {
+                w.set_bs(pin, true)
+            } else {
+                w.set_br(pin, true)
+            }
+        });
+        a.moder().modify(|w| w.set_moder(pin, Moder::OUTPUT));
+    }
+    #[cfg(feature = "field-link")]
+    {
+        a.bsrr().write(|w| w.set_br(DE_PIN, true));
+        a.moder().modify(|w| w.set_moder(DE_PIN, Moder::OUTPUT));
+    }
+}
+
+/// Set once the node has resumed the rule: until then the node's writes to
+/// the alarm and LD2 are not applied (its constructor drives them for a
+/// dry rule before `resume_rule` sets the resumed one).
+static OUTPUTS_HELD: AtomicBool = AtomicBool::new(true);
+
+/// An output pin that keeps the level `hold_outputs_early` gave it until
+/// [`release_outputs`].
+pub struct HeldOutput(Output<'static>);
+
+impl HeldOutput {
+    /// Wrap a pin (created at the held level).
+    pub fn new(pin: Output<'static>) -> Self {
+        HeldOutput(pin)
+    }
+}
+
+/// From now on the node drives the alarm and LD2 (call it right before
+/// `Node::resume_rule`, which drives them to the same level).
+pub fn release_outputs() {
+    OUTPUTS_HELD.store(false, Ordering::Relaxed);
+}
+
+impl embedded_hal::digital::ErrorType for HeldOutput {
+    type Error = core::convert::Infallible;
+}
+
+impl embedded_hal::digital::OutputPin for HeldOutput {
+    fn set_low(&mut self) -> Result<(), Self::Error> {
+        if !OUTPUTS_HELD.load(Ordering::Relaxed) {
+            self.0.set_low();
+        }
+        Ok(())
+    }
+    fn set_high(&mut self) -> Result<(), Self::Error> {
+        if !OUTPUTS_HELD.load(Ordering::Relaxed) {
+            self.0.set_high();
+        }
+        Ok(())
+    }
 }
 
 /// A short name for the log.
@@ -208,6 +263,26 @@ const X32_MIN_VDDA_MV: u16 = fois_firmware::storage::supply::FLASH_WRITE_MIN_VDD
 /// erase parallelism.
 pub static LAST_VDDA_MV: AtomicU16 = AtomicU16::new(0);
 
+/// Set by the transmit task from the start of a burst until the USART
+/// reported transmission complete (and DE is low again on the field link).
+pub static LINK_SENDING: AtomicBool = AtomicBool::new(false);
+
+/// The longest a sector erase waits for the link to finish its burst, ms:
+/// everything queued drained at the slowest rate (852 ms).
+const ERASE_WAITS_FOR_LINK_MS: u32 = drain_ms(RESET_DRAIN_BYTES, LONG_CABLE_BAUD);
+
+/// Before an erase stalls the CPU (and with it the interrupt that drops
+/// DE/RE̅ at transmission complete) for up to 2.6 s: let the burst on the
+/// wire end. The transmit task runs on the higher-priority executor, so it
+/// finishes while this waits (bounded).
+fn wait_for_link_idle() {
+    let start = embassy_time::Instant::now();
+    let bound = embassy_time::Duration::from_millis(u64::from(ERASE_WAITS_FOR_LINK_MS));
+    while LINK_SENDING.load(Ordering::Acquire) && start.elapsed() < bound {
+        core::hint::spin_loop();
+    }
+}
+
 /// Sectors 6 and 7 as one `NorFlash` of two 128 KiB pages (offset 0 =
 /// 0x0804_0000). Reads and programming go through embassy-stm32 (which
 /// programs at x32); erases through the PAC at x32 (x16 below 2.7 V or
@@ -235,6 +310,8 @@ impl BoardFlash {
             Psize::PSIZE16
         };
         let flash = pac::FLASH;
+        self.wdg.pet();
+        wait_for_link_idle();
         self.wdg.pet();
         while flash.sr().read().bsy() {}
         if flash.cr().read().lock() {
@@ -325,4 +402,41 @@ impl NorFlash for BoardFlash {
         }
         self.flash.blocking_write(STORE_OFFSET + offset, bytes)
     }
+}
+
+// ---- The link's transmitter ----
+
+/// The link USART's TC flag (SR.TC: the last stop bit left and nothing
+/// waits in the data register).
+pub fn link_tx_complete() -> bool {
+    #[cfg(feature = "field-link")]
+    let usart = pac::USART6;
+    #[cfg(not(feature = "field-link"))]
+    let usart = pac::USART2;
+    usart.sr().read().tc()
+}
+
+// ---- The field link's receive line ----
+
+/// USART6 RX (PC7): its input register reads the pin in its alternate
+/// function too.
+#[cfg(feature = "field-link")]
+const FIELD_RX_PIN: usize = 7;
+
+/// The field link's RX line stayed high (idle, no start bit) for `us`:
+/// sampled directly, because the receive task stamps line activity only
+/// when it wakes (half a buffer or an IDLE), so a host command still
+/// arriving would look like a quiet line. Busy-waits `us` (≤ 1.6 ms at
+/// 19 200 Bd) on the transmit task's executor.
+#[cfg(feature = "field-link")]
+pub fn field_rx_idle_for(us: u32) -> bool {
+    use embassy_stm32::pac::gpio::vals::Idr;
+    let start = embassy_time::Instant::now();
+    let span = embassy_time::Duration::from_micros(u64::from(us));
+    while start.elapsed() < span {
+        if pac::GPIOC.idr().read().idr(FIELD_RX_PIN) == Idr::LOW {
+            return false;
+        }
+    }
+    true
 }

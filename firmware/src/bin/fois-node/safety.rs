@@ -3,14 +3,15 @@
 //! its fail-over to HSI), the brown-out level (read only), the programmable
 //! voltage detector, the backup registers, and the panic and HardFault
 //! handlers that record the cause and reset at once. The decisions are the
-//! library's (`fois_firmware::platform::boot`, `::supply`, `::watchdog`); this file
-//! only moves bits.
+//! library's (`fois_firmware::platform::boot`, `::clock_retry`, `::supply`,
+//! `::watchdog`); this file only moves bits.
 
 use core::sync::atomic::{AtomicBool, Ordering};
 
 use cortex_m_rt::{ExceptionFrame, exception};
 use embassy_stm32::pac;
 use embassy_stm32::pac::iwdg::vals::{Key, Pr};
+use embassy_stm32::pac::rcc::vals::{Pllm, Plln, Pllp, Pllq, Pllsrc, Sw};
 use fois_firmware::platform::{boot, watchdog};
 
 // ---- Watchdog ----
@@ -87,8 +88,13 @@ pub fn probe_hse() -> Option<HseSource> {
 fn hse_ready(bypass: bool) -> bool {
     let rcc = pac::RCC;
     rcc.cr().modify(|w| w.set_hseon(false));
-    // HSEBYP may only change while HSE is off (RM0390 §6.3.1).
-    while rcc.cr().read().hserdy() {}
+    // HSEBYP may only change while HSE is off (RM0390 §6.3.1). HSERDY
+    // falls within six HSE periods; bounded all the same.
+    for _ in 0..10_000u32 {
+        if !rcc.cr().read().hserdy() {
+            break;
+        }
+    }
     rcc.cr().modify(|w| w.set_hsebyp(bypass));
     rcc.cr().modify(|w| w.set_hseon(true));
     for _ in 0..HSE_PROBE_MS {
@@ -138,6 +144,58 @@ pub fn clock_config(hse: Option<HseSource>) -> embassy_stm32::Config {
     config
 }
 
+/// Polls of PLLRDY and of the clock switch before a retry gives up
+/// (≥ 10 ms at 16 MHz; the PLL locks in ≤ 0.2 ms, datasheet t_LOCK).
+const PLL_POLLS: u32 = 40_000;
+
+/// Try the HSE again while the chip runs on HSI (after a failed probe at
+/// boot or a fail-over by the clock security system; when, is the
+/// library's `platform::clock_retry`). Probes the HSE as at boot; if it is
+/// there, sets the PLL up as `clock_config` does (8 / 4 × 64 / 8 = 16 MHz),
+/// waits for its lock (bounded), switches SYSCLK to it and turns the clock
+/// security system on again. SYSCLK stays 16 MHz, so the flash wait states
+/// (0), the bus prescalers, the baud dividers and the timer are unchanged;
+/// the switch itself is glitch-free (RM0390 §6.2.6). Blocks ≤ 210 ms
+/// (`clock_retry::RETRY_COST_MAX_MS`). Anything that fails leaves the chip
+/// on HSI with the HSE and the PLL off.
+pub fn try_restore_hse() -> Option<HseSource> {
+    let rcc = pac::RCC;
+    if rcc.cfgr().read().sws() != Sw::HSI {
+        return None;
+    }
+    // The PLL may only be configured while off (the fail-over turned it off).
+    rcc.cr().modify(|w| w.set_pllon(false));
+    let source = probe_hse()?;
+    rcc.pllcfgr().modify(|w| {
+        w.set_pllsrc(Pllsrc::HSE);
+        w.set_pllm(Pllm::DIV4);
+        w.set_plln(Plln::MUL64);
+        w.set_pllp(Pllp::DIV8);
+        w.set_pllq(Pllq::DIV8);
+    });
+    rcc.cr().modify(|w| w.set_pllon(true));
+    let locked = (0..PLL_POLLS).any(|_| rcc.cr().read().pllrdy());
+    if locked {
+        rcc.cfgr().modify(|w| w.set_sw(Sw::PLL1_P));
+        if (0..PLL_POLLS).any(|_| rcc.cfgr().read().sws() == Sw::PLL1_P) {
+            CLOCK_FAILED.store(false, Ordering::Relaxed);
+            enable_css();
+            return Some(source);
+        }
+        rcc.cfgr().modify(|w| w.set_sw(Sw::HSI));
+    }
+    rcc.cr().modify(|w| {
+        w.set_pllon(false);
+        w.set_hseon(false);
+    });
+    None
+}
+
+/// The chip runs on HSI (no HSE at boot, or a fail-over not yet undone).
+pub fn on_hsi() -> bool {
+    pac::RCC.cfgr().read().sws() == Sw::HSI
+}
+
 /// Set by the NMI when the clock security system switched the chip to HSI.
 static CLOCK_FAILED: AtomicBool = AtomicBool::new(false);
 
@@ -158,8 +216,12 @@ pub fn clock_failed() -> bool {
 unsafe fn NonMaskableInt() {
     let rcc = pac::RCC;
     if rcc.cir().read().cssf() {
-        // CSSF holds the NMI until cleared.
+        // CSSF holds the NMI until cleared; the write must have reached
+        // the RCC before the exception returns, or the NMI is taken again
+        // (the bus write buffer: ARM's guidance on clearing interrupt
+        // sources at the end of a handler).
         rcc.cir().modify(|w| w.set_cssc(true));
+        cortex_m::asm::dsb();
         CLOCK_FAILED.store(true, Ordering::Relaxed);
     }
 }
@@ -220,6 +282,27 @@ fn write_words(first: usize, words: &[u32]) {
     }
 }
 
+// ---- Reset cause ----
+
+/// Why the chip reset, from the RCC CSR flags (the library decides:
+/// `boot::ResetCause::from_flags`); the flags are then cleared so the next
+/// reset reports only its own cause. Readable before the clock setup.
+pub fn take_reset_cause() -> boot::ResetCause {
+    let rcc = pac::RCC;
+    let csr = rcc.csr().read();
+    let flags = boot::ResetFlags {
+        low_power: csr.lpwrrstf(),
+        window_watchdog: csr.wwdgrstf(),
+        independent_watchdog: csr.wdgrstf(),
+        software: csr.sftrstf(),
+        power_on: csr.porrstf(),
+        pin: csr.padrstf(),
+        brown_out: csr.borrstf(),
+    };
+    rcc.csr().modify(|w| w.set_rmvf(true));
+    boot::ResetCause::from_flags(flags)
+}
+
 /// The panic record's words.
 pub fn panic_words() -> [u32; boot::PANIC_WORDS] {
     read_words(PANIC_AT)
@@ -243,8 +326,9 @@ pub fn set_rule_words(words: [u32; boot::RULE_WORDS]) {
 // ---- Panics and faults ----
 
 /// Record one more panic reset in a row at `line` and reset at once: the
-/// next boot reports it, resumes the rule's state (the alarm output floats
-/// only for the boot) and skips the store after several in a row.
+/// next boot reports it, resumes the rule's state (the alarm output is
+/// driven from the backup registers before anything else) and skips the
+/// store's read after several unhealthy resets in a row.
 fn record_and_reset(line: u32) -> ! {
     set_panic_words(boot::record_panic(panic_words(), line));
     cortex_m::peripheral::SCB::sys_reset()
