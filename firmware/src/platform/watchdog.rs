@@ -12,14 +12,17 @@
 //! time t_ERASE128KB is 1 s typ / 2 s max at x32 parallelism, 1.3 / 2.6 s at
 //! x16 and 2 / 4 s at x8 (embassy-stm32 0.6 erases at x8; the board erases
 //! at x32, or x16 when V_DDA is below 2.7 V). The board feeds the watchdog
-//! only in its measure loop and right before and after each erase (a hung
-//! loop must not be kept alive by anything else). Between two feeds the loop
-//! sleeps, may wait for the node behind one command from the link and one
-//! button press (the link task yields after each host frame and wakes the
-//! loop), each at most a dark calibration, then runs a frame and the save
-//! work before an erase.
+//! only in its measure loop, and there only while the schedule shows
+//! progress (`Schedule::on_track`), right before and after each erase, and
+//! in the boot's bounded wait for a healthy supply (a hung loop must not be
+//! kept alive by anything else). Between two feeds the loop sleeps, may try
+//! the HSE again (`clock_retry::RETRY_COST_MAX_MS`), may wait for the node
+//! behind one command from the link and one button press (the link task
+//! yields after each host frame and wakes the loop), each at most a dark
+//! calibration, then runs a frame and the save work before an erase.
 
 use crate::calibration::dark::CAL_MAX_MS;
+use crate::platform::clock_retry::RETRY_COST_MAX_MS;
 
 /// Slowest LSI, Hz (F446 datasheet, LSI oscillator characteristics).
 pub const LSI_MIN_HZ: u32 = 17_000;
@@ -48,12 +51,12 @@ pub const MAX_SLEEP_MS: u32 = 500;
 pub const LONGEST_FRAME_MS: u32 = 643;
 /// A save's programming and read-back around its erase, ms.
 pub const SAVE_WORK_MS: u32 = 50;
-/// The most the node can go without a feed, ms: a sleep, two dark
-/// calibrations (a command's and the button's) and a frame with the save
-/// work before an erase; or an erase (fed just before, at the worst
-/// parallelism the board may use, x16) and the programming after it.
+/// The most the node can go without a feed, ms: a sleep, an HSE retry,
+/// two dark calibrations (a command's and the button's) and a frame with
+/// the save work before an erase; or an erase (fed just before, at the
+/// worst parallelism the board may use, x16) and the programming after it.
 pub const WORST_UNFED_MS: u32 = max(
-    MAX_SLEEP_MS + 2 * CAL_MAX_MS + LONGEST_FRAME_MS + SAVE_WORK_MS,
+    MAX_SLEEP_MS + RETRY_COST_MAX_MS as u32 + 2 * CAL_MAX_MS + LONGEST_FRAME_MS + SAVE_WORK_MS,
     ERASE_128K_X16_MAX_MS + SAVE_WORK_MS,
 );
 
@@ -89,7 +92,7 @@ mod tests {
         assert_eq!(SHORTEST_TIMEOUT_MS, 8_170);
         assert_eq!(timeout_ms(LSI_TYP_HZ), 12_000);
         assert_eq!(LONGEST_TIMEOUT_MS, 22_588);
-        // 0.5 s + 2 × 2 s + 0.643 s + 0.05 s.
-        assert_eq!(WORST_UNFED_MS, 5_193);
+        // 0.5 s + 0.21 s + 2 × 2 s + 0.643 s + 0.05 s.
+        assert_eq!(WORST_UNFED_MS, 5_403);
     }
 }
