@@ -65,7 +65,12 @@ fn a_panic_reset_is_reported_once_and_the_third_in_a_row_skips_the_store() {
         words = plan.words;
         let w = World::default();
         let skip = plan.skip_store;
-        let store = SkippableStorage::new(storage.take().expect("the store"), skip);
+        let mode = if skip {
+            boot::StoreRead::Skip
+        } else {
+            boot::StoreRead::Read
+        };
+        let store = SkippableStorage::new(storage.take().expect("the store"), mode);
         let mut node = sim_board::sim_node(w.clone(), store, "sim");
         node.set_boot_faults(false, skip);
         if let Some((line, resets)) = plan.panic_reset {

@@ -55,7 +55,7 @@ mod app {
     use fois_firmware::hal::{BoardInfo, PhotoAdc};
     use fois_firmware::measure::vref;
     use fois_firmware::node::Node;
-    use fois_firmware::platform::boot::{self, RuleSnapshot, SkippableStorage};
+    use fois_firmware::platform::boot::{self, RuleSnapshot, SkippableStorage, StoreRead};
     use fois_firmware::platform::clock_retry::HseRetry;
     use fois_firmware::platform::field_link;
     use fois_firmware::platform::reply_time::{RESET_DRAIN_BYTES, drain_ms};
@@ -194,7 +194,13 @@ mod app {
                 }
             }
         };
-        let skip_read = plan.skip_store || !supply_ok;
+        let store_read = if plan.skip_store {
+            StoreRead::Skip
+        } else if !supply_ok {
+            StoreRead::Defer
+        } else {
+            StoreRead::Read
+        };
         defmt::info!(
             "fois-node up, reset reason {=str}{=str}, clock {=str}, BOR {=bool}, store {=str}",
             board::reset_reason_name(cause.reason),
@@ -212,7 +218,7 @@ mod app {
             if plan.skip_store {
                 "skipped (unhealthy resets)"
             } else if !supply_ok {
-                "skipped (supply low)"
+                "deferred (supply low)"
             } else {
                 "flash"
             }
@@ -222,10 +228,10 @@ mod app {
             Ok(s) => s,
             Err(_) => defmt::panic!("flash store: sectors 6-7 are not two equal pages"),
         };
-        let store = SkippableStorage::new(store, skip_read);
+        let store = SkippableStorage::new(store, store_read);
         let mut node = Node::new(adc, led, alarm, ld2, Delay, store, info);
         node.set_clock_fallback(hse.is_none());
-        node.set_boot_faults(!bor_ok, skip_read);
+        node.set_boot_faults(!bor_ok, store_read != StoreRead::Read);
         if let Some((line, resets)) = plan.panic_reset {
             node.report_panic_reset(line, resets);
         }
@@ -255,7 +261,13 @@ mod app {
         }
         spawn(&spawner, uart_rx(link.rx));
         spawn(&spawner, button_task(button));
-        measure(wdg, link.baud, hse.is_none()).await
+        measure(
+            wdg,
+            link.baud,
+            hse.is_none(),
+            store_read == StoreRead::Defer,
+        )
+        .await
     }
 
     fn spawn<S>(
@@ -279,9 +291,11 @@ mod app {
     /// rule's state in the backup registers, tells the node about the
     /// supply and the clock, tries the HSE again on HSI
     /// (`clock_retry::HseRetry`), marks the boot healthy after
-    /// `boot::HEALTHY_AFTER_MS`, and resets the node a day before the raw
-    /// timer wraps (`uptime::reset_before_wrap`).
-    async fn measure(wdg: Watchdog, baud: u32, hse_missing: bool) -> ! {
+    /// `boot::HEALTHY_AFTER_MS`, resets the node a day before the raw
+    /// timer wraps (`uptime::reset_before_wrap`), and, if the boot deferred
+    /// the store's read for a low supply, resets it once the supply has
+    /// been healthy for `boot::DEFERRED_READ_RESET_MS` (that boot reads it).
+    async fn measure(wdg: Watchdog, baud: u32, hse_missing: bool, store_deferred: bool) -> ! {
         let mut schedule = Schedule::new();
         let mut uptime = Uptime::new();
         let mut hse_retry = HseRetry::new();
@@ -290,6 +304,7 @@ mod app {
         }
         let mut kept = None;
         let mut healthy = false;
+        let mut supply_healthy_since = None;
         loop {
             let raw = Instant::now().as_ticks();
             let now = uptime.now_ms(raw);
@@ -354,7 +369,16 @@ mod app {
             } else {
                 defmt::error!("measure loop without progress: the watchdog will reset");
             }
-            if reset || uptime::reset_before_wrap(raw) {
+            let read_store_now = store_deferred
+                && boot::deferred_read_due(
+                    &mut supply_healthy_since,
+                    supply::flash_write_allowed(
+                        board::LAST_VDDA_MV.load(Ordering::Relaxed),
+                        safety::supply_low(),
+                    ),
+                    now,
+                );
+            if reset || read_store_now || uptime::reset_before_wrap(raw) {
                 reset_after_drain(baud).await;
             }
             let sleep_ms = wake_ms.saturating_sub(uptime.now_ms(Instant::now().as_ticks()));

@@ -326,29 +326,58 @@ impl RuleSnapshot {
     }
 }
 
-/// The node's storage, its read skipped or not: after
-/// [`PANIC_RESETS_BEFORE_SKIP`] unhealthy resets in a row (or with a supply
-/// too low to read the store safely at boot) the board boots with the read
-/// skipped. Then `read` gives nothing (the defaults), and the first `write`
-/// starts the store afresh with [`Storage::overwrite`] — it erases what is
-/// there without parsing it and writes the record — so a `SetConfig` or a
-/// calibration replaces a bad record instead of being dropped. Writes after
-/// that go to the store as usual.
+/// How the boot treats the store.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StoreRead {
+    /// Read it (a healthy boot).
+    Read,
+    /// After [`PANIC_RESETS_BEFORE_SKIP`] unhealthy resets in a row: not
+    /// read; the first write starts it afresh ([`Storage::overwrite`]), so
+    /// a `SetConfig` or a calibration replaces a bad record remotely.
+    Skip,
+    /// The supply was too low to read it at boot (a read may repair by
+    /// erasing): not read, and nothing written either — the record stays
+    /// as it is (writes fail: `STORAGE_FAILED`, retried with the save
+    /// back-off) until the board, once the supply has been healthy for
+    /// [`DEFERRED_READ_RESET_MS`], resets to read it.
+    Defer,
+}
+
+/// How long the supply must stay healthy before a node that deferred its
+/// store's read resets to read it, ms.
+pub const DEFERRED_READ_RESET_MS: u64 = 10_000;
+
+/// The board's watch over a deferred read: `healthy` is the supply gate's
+/// answer now (`storage::supply::flash_write_allowed`); true once it has
+/// held for [`DEFERRED_READ_RESET_MS`] (the board then resets to read the
+/// store). `since` keeps when it began to hold.
+pub fn deferred_read_due(since: &mut Option<u64>, healthy: bool, now_ms: u64) -> bool {
+    if !healthy {
+        *since = None;
+        return false;
+    }
+    let start = *since.get_or_insert(now_ms);
+    now_ms.saturating_sub(start) >= DEFERRED_READ_RESET_MS
+}
+
+/// The node's storage, read at boot or not ([`StoreRead`]). Unread, `read`
+/// gives nothing (the defaults).
 #[derive(Debug)]
 pub struct SkippableStorage<S> {
     store: S,
-    skip_read: bool,
+    mode: StoreRead,
 }
 
 impl<S> SkippableStorage<S> {
-    /// `store`, read or not.
-    pub fn new(store: S, skip_read: bool) -> Self {
-        SkippableStorage { store, skip_read }
+    /// `store`, treated as `mode` says.
+    pub fn new(store: S, mode: StoreRead) -> Self {
+        SkippableStorage { store, mode }
     }
 
-    /// True until the first write after a skipped read.
-    pub fn read_skipped(&self) -> bool {
-        self.skip_read
+    /// How the store is treated now (a skipped store is `Read` after its
+    /// first write).
+    pub fn mode(&self) -> StoreRead {
+        self.mode
     }
 
     /// The store back.
@@ -359,24 +388,26 @@ impl<S> SkippableStorage<S> {
 
 impl<S: Storage> Storage for SkippableStorage<S> {
     fn read(&mut self, buf: &mut [u8]) -> Result<usize, StorageError> {
-        if self.skip_read {
-            return Ok(0);
+        match self.mode {
+            StoreRead::Read => self.store.read(buf),
+            StoreRead::Skip | StoreRead::Defer => Ok(0),
         }
-        self.store.read(buf)
     }
 
     fn write(&mut self, data: &[u8]) -> Result<(), StorageError> {
-        if self.skip_read {
-            self.store.overwrite(data)?;
-            self.skip_read = false;
-            return Ok(());
+        match self.mode {
+            StoreRead::Read => self.store.write(data),
+            StoreRead::Skip => self.overwrite(data),
+            StoreRead::Defer => Err(StorageError::Write),
         }
-        self.store.write(data)
     }
 
     fn overwrite(&mut self, data: &[u8]) -> Result<(), StorageError> {
+        if self.mode == StoreRead::Defer {
+            return Err(StorageError::Write);
+        }
         self.store.overwrite(data)?;
-        self.skip_read = false;
+        self.mode = StoreRead::Read;
         Ok(())
     }
 }
@@ -561,6 +592,19 @@ mod tests {
     }
 
     #[test]
+    fn a_deferred_read_resets_after_10_s_of_healthy_supply() {
+        let mut since = None;
+        assert!(!deferred_read_due(&mut since, false, 0));
+        assert!(!deferred_read_due(&mut since, true, 1_000));
+        assert!(!deferred_read_due(&mut since, true, 10_999));
+        // A dip starts the count again.
+        assert!(!deferred_read_due(&mut since, false, 11_000));
+        assert!(!deferred_read_due(&mut since, true, 12_000));
+        assert!(!deferred_read_due(&mut since, true, 21_999));
+        assert!(deferred_read_due(&mut since, true, 22_000));
+    }
+
+    #[test]
     #[allow(clippy::expect_used)]
     fn a_skipped_store_is_overwritten_by_the_first_save() {
         use crate::storage::flash_store::FlashStore;
@@ -571,15 +615,25 @@ mod tests {
             *b = (i * 7 + 3) as u8;
         }
         let store = FlashStore::new(flash, 0..2 * 1024).expect("two pages");
-        let mut s = SkippableStorage::new(store, true);
+        let mut s = SkippableStorage::new(store, StoreRead::Skip);
         let mut buf = [0u8; 64];
         assert_eq!(s.read(&mut buf), Ok(0), "the read is skipped");
         s.write(b"a new record").expect("overwritten");
-        assert!(!s.read_skipped());
+        assert_eq!(s.mode(), StoreRead::Read);
         s.write(b"and another").expect("written");
         // Another boot on the same flash reads the last record.
         let mut again = FlashStore::new(s.into_inner().into_flash(), 0..2 * 1024).expect("pages");
         let n = again.read(&mut buf).expect("readable");
+        assert_eq!(buf.get(..n), Some(&b"and another"[..]));
+
+        // Deferred (a low supply at boot): nothing read, nothing written,
+        // the record kept for the boot that reads it.
+        let mut d = SkippableStorage::new(again, StoreRead::Defer);
+        assert_eq!(d.read(&mut buf), Ok(0));
+        assert_eq!(d.write(b"defaults"), Err(StorageError::Write));
+        assert_eq!(d.overwrite(b"defaults"), Err(StorageError::Write));
+        let mut later = d.into_inner();
+        let n = later.read(&mut buf).expect("readable");
         assert_eq!(buf.get(..n), Some(&b"and another"[..]));
     }
 

@@ -19,7 +19,8 @@
 //!   `CONFIG_DEFAULTED`: defaults never come back silently. The read itself
 //!   may erase: sequential-storage's `fetch_item` repairs an interrupted
 //!   page change by erasing a page, so the board reads the store at boot
-//!   only with a healthy supply (`storage::supply::boot_read`). If the
+//!   only with a healthy supply (`storage::supply::boot_read`, else the read
+//!   is deferred: `platform::boot::StoreRead::Defer`). If the
 //!   damage is beyond sequential-storage's own repair, the next save erases
 //!   the range and writes its record. (A cut
 //!   in the moment between that erase and the new record leaves erased

@@ -14,8 +14,9 @@
 //! sequential-storage repairs an interrupted operation while reading, by
 //! erasing, and a boot typically follows the power cut that interrupted
 //! it. The board waits up to [`BOOT_SUPPLY_WAIT_MAX_MS`] for the supply,
-//! then boots with the read skipped (`STORE_SKIPPED`, the defaults; the
-//! first save writes the store afresh).
+//! then boots with the read deferred (`STORE_SKIPPED`, the defaults, the
+//! record left as it is: `platform::boot::StoreRead::Defer`) and resets to
+//! read it once the supply has been healthy for a while.
 
 /// The lowest V_DDA at which the node starts a flash write, mV.
 pub const FLASH_WRITE_MIN_VDDA_MV: u16 = 2_700;
@@ -41,7 +42,7 @@ pub enum BootRead {
     /// Not yet: look again after [`BOOT_SUPPLY_STEP_MS`].
     Wait,
     /// The supply stayed low for [`BOOT_SUPPLY_WAIT_MAX_MS`]: boot with the
-    /// read skipped.
+    /// read deferred.
     Skip,
 }
 
