@@ -306,25 +306,28 @@ mod app {
         let mut healthy = false;
         let mut supply_healthy_since = None;
         loop {
-            let raw = Instant::now().as_ticks();
-            let now = uptime.now_ms(raw);
+            let before = uptime.now_ms(Instant::now().as_ticks());
             if safety::clock_failed() {
-                hse_retry.fell_back(now);
+                hse_retry.fell_back(before);
             }
-            if hse_retry.due(now) {
+            if hse_retry.due(before) {
                 match safety::try_restore_hse() {
                     Some(_) => {
                         defmt::info!("clock: back on the HSE");
-                        hse_retry.restored(now);
+                        hse_retry.restored(before);
                     }
-                    None => hse_retry.failed(now),
+                    None => hse_retry.failed(before),
                 }
             }
-            let (wake_ms, reset, on_track) = {
+            let (raw, now, wake_ms, reset, on_track) = {
                 let mut guard = NODE.lock().await;
                 let Some(node) = guard.as_mut() else {
                     defmt::panic!("node missing")
                 };
+                // The time after the lock: a command may have held the node
+                // for a dark calibration meanwhile.
+                let raw = Instant::now().as_ticks();
+                let now = uptime.now_ms(raw);
                 node.set_supply_low(safety::supply_low());
                 node.set_clock_fallback(safety::on_hsi());
                 let streaming = node.is_streaming();
@@ -362,7 +365,7 @@ mod app {
                 if let Some(retry) = hse_retry.next_ms() {
                     wake = wake.min(retry);
                 }
-                (wake, node.take_reset_request(), on_track)
+                (raw, now, wake, node.take_reset_request(), on_track)
             };
             if on_track {
                 wdg.pet();
