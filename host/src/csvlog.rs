@@ -359,7 +359,7 @@ impl LogReader {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fois_protocol::{DetectorState, IceEstimate, Measurement, flags};
+    use fois_protocol::{DetectorState, DeviceMsg, IceEstimate, Measurement, flags};
     use std::io::Write;
 
     fn meas() -> Measurement {

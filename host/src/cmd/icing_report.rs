@@ -66,8 +66,10 @@ pub fn run(a: IcingReportArgs) -> anyhow::Result<()> {
             b.bytes as f64 / 1e6 / b.seconds.max(1e-9),
             b.events,
             b.meteorological_h,
-            b.peak_rss_kib
-                .map_or("unknown".to_string(), |k| format!("{:.1} MiB", k as f64 / 1024.0))
+            b.peak_rss_kib.map_or("unknown".to_string(), |k| format!(
+                "{:.1} MiB",
+                k as f64 / 1024.0
+            ))
         );
         return Ok(());
     }

@@ -295,7 +295,9 @@ impl LogSamples {
                 state_ice: c.state.is_some_and(|i| &self.row[i] == b"Ice"),
                 thickness_mm: num(c.thickness, "est_thickness_mm")?,
                 sigma_mm: num(c.sigma, "est_sigma_mm")?,
-                medium: c.medium.map_or(Medium::Unknown, |i| Medium::parse(&self.row[i])),
+                medium: c
+                    .medium
+                    .map_or(Medium::Unknown, |i| Medium::parse(&self.row[i])),
                 rate_mm_per_h: num(c.rate, "est_rate_mm_per_h")?,
                 rate_sigma_mm_per_h: num(c.rate_sigma, "est_rate_sigma_mm_per_h")?,
                 accreting: num(c.accreting, "est_accreting")?.map(|p| p >= 0.5),

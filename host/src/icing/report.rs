@@ -118,7 +118,13 @@ fn summarise(f: Findings, files: Vec<FileStats>, th: Thresholds) -> Report {
     let covered_h = sum(|m| m.covered_h);
     let met_h = sum(|m| m.meteorological_h);
     let instr_h = sum(|m| m.instrumental_h);
-    let pct = |h: f64| if covered_h > 0.0 { 100.0 * h / covered_h } else { 0.0 };
+    let pct = |h: f64| {
+        if covered_h > 0.0 {
+            100.0 * h / covered_h
+        } else {
+            0.0
+        }
+    };
     Report {
         measurements: files.iter().map(|s| s.measurements).sum(),
         files,

@@ -66,16 +66,20 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, r: &Report) -> anyhow
     let instr_style = RGBColor(150, 150, 150).mix(0.25).filled();
     let met_style = RGBColor(30, 120, 220).mix(0.35).filled();
     chart
-        .draw_series(r.instr_periods.iter().map(|&(a, b)| {
-            Rectangle::new([(days(a), 0.0), (days(b), y_max)], instr_style)
-        }))
+        .draw_series(
+            r.instr_periods
+                .iter()
+                .map(|&(a, b)| Rectangle::new([(days(a), 0.0), (days(b), y_max)], instr_style)),
+        )
         .map_err(draw_err)?
         .label("instrumental icing (ice on the sensor)")
         .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 16, y + 6)], instr_style));
     chart
-        .draw_series(r.met_periods.iter().map(|&(a, b)| {
-            Rectangle::new([(days(a), 0.0), (days(b), y_max * 0.08)], met_style)
-        }))
+        .draw_series(
+            r.met_periods.iter().map(|&(a, b)| {
+                Rectangle::new([(days(a), 0.0), (days(b), y_max * 0.08)], met_style)
+            }),
+        )
         .map_err(draw_err)?
         .label("meteorological icing (accreting), bar at the foot")
         .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 16, y + 6)], met_style));
