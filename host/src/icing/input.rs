@@ -286,7 +286,7 @@ impl LogSamples {
             let num = |i: Option<usize>, what: &str| -> anyhow::Result<Option<f64>> {
                 match i.map(|i| &self.row[i]) {
                     None => Ok(None),
-                    Some(v) if v.is_empty() => Ok(None),
+                    Some(b"") => Ok(None),
                     Some(v) => parse_f64(v).map(Some).ok_or_else(|| bad(what, v)),
                 }
             };

@@ -81,8 +81,7 @@ fn template(icing: Option<IcingDay>, period_s: u32, with_rate: bool) -> Template
         iso_at: Vec::new(),
         ms_at: Vec::new(),
     };
-    let mut seq = 0u32;
-    for s in (0..86_400u32).step_by(period_s.max(1) as usize) {
+    for (seq, s) in (0..86_400u32).step_by(period_s.max(1) as usize).enumerate() {
         let ms = BASE_MS + u64::from(s) * 1000;
         let (d, growing) = match icing {
             Some(i) if s >= i.start_s && s < i.shed_s => {
@@ -138,7 +137,6 @@ fn template(icing: Option<IcingDay>, period_s: u32, with_rate: bool) -> Template
             t.bytes.extend_from_slice(v.as_bytes());
         }
         t.bytes.push(b'\n');
-        seq += 1;
     }
     t
 }

@@ -145,7 +145,7 @@ fn a_bad_line_is_an_error_naming_file_and_line() {
     lines[100] = lines[100].replacen(",1767", ",17x7", 1);
     let dir = tempfile::tempdir().unwrap();
     let p = write(dir.path(), "bad.csv", (lines.join("\n") + "\n").as_bytes());
-    let err = analyse(&[p.clone()], Thresholds::default())
+    let err = analyse(std::slice::from_ref(&p), Thresholds::default())
         .unwrap_err()
         .to_string();
     assert!(err.contains(&format!("{}, line 101", p.display())), "{err}");
