@@ -53,7 +53,7 @@ pub fn table(r: &Report) -> String {
     );
     let _ = writeln!(
         o,
-        "Meteorological icing (ice accreting; {}): {:.2} h = {:.3} % of the covered time",
+        "Meteorological icing (ice accreting), from {}: {:.2} h = {:.3} % of the covered time",
         r.source_text(),
         r.meteorological_h,
         r.meteorological_pct

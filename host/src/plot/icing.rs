@@ -42,7 +42,8 @@ fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, r: &Report) -> anyhow
         .iter()
         .map(|b| b.mean_mm() + b.sigma_mm())
         .fold(1.0f64, f64::max)
-        * 1.1;
+        // Room above the peaks for the legend.
+        * 1.4;
     let mut chart = ChartBuilder::on(root)
         .caption(
             format!(
