@@ -304,12 +304,16 @@ fn the_log_thread_writes_rolls_over_and_stops_with_an_injected_clock() {
     );
 }
 
+/// The gateway's files of a day of icing that crosses midnight, as
+/// checked in under `tests/fixtures/daily-log/`: `foisctl icing-report`
+/// is run on exactly these by fois-host's `tests/icing_report_cli.rs`
+/// (neither crate depends on the other). `FOIS_BLESS=1` rewrites them.
 #[test]
-fn the_icing_report_runs_on_the_gateways_files() {
+fn the_daily_files_of_an_icing_night_match_the_fixture_the_report_reads() {
     let tmp = tempfile::tempdir().unwrap();
     let mut f = DailyFiles::new(tmp.path().to_path_buf(), 30);
     // Rime at 2 mm/h from 20:00 for 3 h (6 mm), shed at 02:00 the next
-    // day; a row every 10 s from 12:00 to 04:00: midnight in the event.
+    // day; a row a minute from 12:00 to 04:00.
     let grow_from = DAY0_MS + 20 * 3_600_000;
     let shed = DAY0_MS + DAY_MS + 2 * 3_600_000;
     let mut seq = 0;
@@ -324,32 +328,36 @@ fn the_icing_report_runs_on_the_gateways_files() {
         f.write("ridge", &row(t, seq, um)).unwrap();
         assert!(f.housekeeping(t).is_empty());
         seq += 1;
-        t += 10_000;
+        t += 60_000;
     }
     f.close_all().unwrap();
+    assert_eq!(f.rows, 16 * 60);
     let dir = tmp.path().join("ridge");
-    assert_eq!(
-        names(&dir),
-        ["ridge-2026-03-01.csv.gz", "ridge-2026-03-02.csv"]
-    );
-    let files: Vec<_> = names(&dir).iter().map(|n| dir.join(n)).collect();
-    let r = fois_host::icing::report::analyse(&files, Default::default()).unwrap();
-    assert_eq!(r.measurements, 16 * 360);
-    assert_eq!(r.files.len(), 2);
-    assert_eq!(r.events.len(), 1, "{:?}", r.events);
-    let e = &r.events[0];
-    // Ice on the sensor from 0.3 mm (20:09) to the shedding (02:00).
-    assert!((e.instrumental_h - 5.85).abs() < 1e-9, "{e:?}");
-    assert_eq!(e.peak_thickness_mm, Some(6.0));
-    assert_eq!(e.peak_sigma_mm, Some(0.4));
-    // The gateway's rows have no est_accreting (the node's own icing rate
-    // is not in this layout): derived from the growth, 3 h and the
-    // 20-minute window's lag.
-    assert!(r.source_text().contains("derived"));
-    assert!(
-        e.meteorological_h > 3.0 && e.meteorological_h < 3.5,
-        "{e:?}"
-    );
-    assert!((r.covered_h - (16.0 - 10.0 / 3600.0)).abs() < 1e-9);
-    assert!((r.gap_h).abs() < 1e-12);
+    let files = names(&dir);
+    assert_eq!(files, ["ridge-2026-03-01.csv.gz", "ridge-2026-03-02.csv"]);
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/daily-log/ridge");
+    let text = |p: &Path| {
+        if p.extension().is_some_and(|e| e == "gz") {
+            gunzip(p)
+        } else {
+            std::fs::read_to_string(p).unwrap()
+        }
+    };
+    if std::env::var_os("FOIS_BLESS").is_some() {
+        std::fs::create_dir_all(&fixture).unwrap();
+        for n in &files {
+            std::fs::copy(dir.join(n), fixture.join(n)).unwrap();
+        }
+    }
+    assert_eq!(names(&fixture), files);
+    for n in &files {
+        assert!(
+            text(&dir.join(n)) == text(&fixture.join(n)),
+            "{n} differs from tests/fixtures/daily-log/ridge/{n}: FOIS_BLESS=1 cargo test -p fois-gateway --lib season_log rewrites it"
+        );
+    }
+    // The day before midnight: 12:00 to 23:59, the header first.
+    let day1 = text(&fixture.join("ridge-2026-03-01.csv.gz"));
+    assert_eq!(day1.lines().count(), 1 + 12 * 60);
+    assert!(day1.starts_with(&format!("{HEADER}\n")));
 }
