@@ -86,6 +86,21 @@ fn two_known_events_give_exact_hours_and_the_class() {
 }
 
 #[test]
+fn accreting_as_a_0_1_flag_reads_as_the_probability() {
+    let text = String::from_utf8(forty_days(true)).unwrap();
+    // est_accreting, the only column of 0.970 / 0.020 in these rows: → 1 / 0.
+    let flags = text
+        .replace(",0.970\n", ",1\n")
+        .replace(",0.020\n", ",0\n")
+        .replace(",0.970,", ",1,")
+        .replace(",0.020,", ",0,");
+    assert_ne!(flags, text);
+    let r = report_of(flags.as_bytes());
+    assert_eq!(r.events, report_of(text.as_bytes()).events);
+    assert!(close(r.meteorological_h, 6.0));
+}
+
+#[test]
 fn older_logs_derive_meteorological_icing_from_the_growth_and_say_so() {
     let r = report_of(&forty_days(false));
     assert_eq!(r.meteorological_source.node, 0);
