@@ -361,3 +361,57 @@ fn the_daily_files_of_an_icing_night_match_the_fixture_the_report_reads() {
     assert_eq!(day1.lines().count(), 1 + 12 * 60);
     assert!(day1.starts_with(&format!("{HEADER}\n")));
 }
+
+#[test]
+fn a_node_report_becomes_the_rows_the_monitor_writes() {
+    use crate::reader::{NodeMsg, NodeUpdate};
+    use fois_protocol::{DeviceFrame, SeqEvent};
+    let frame = DeviceFrame {
+        seq: 42,
+        msg: DeviceMsg::MeasurementV3(MeasurementV3 {
+            measurement: Measurement {
+                uptime_ms: 9,
+                i1_na: 25_000,
+                i2_na: 8_000,
+                ambient1_na: 0,
+                ambient2_na: 0,
+                temperature_centi_c: -500,
+                vdda_mv: 3300,
+                flags: 0,
+                state: DetectorState::Dry,
+            },
+            estimate: None,
+            gain: None,
+        }),
+    };
+    let msg = |update| NodeMsg {
+        node: 0,
+        host_unix_ms: DAY0_MS + 7,
+        update,
+    };
+    let rows = super::rows_of(&msg(NodeUpdate::Frame(frame.clone(), SeqEvent::Gap(3))));
+    let kinds: Vec<&str> = rows.iter().map(|r| r.kind).collect();
+    assert_eq!(kinds, ["gap", "measurement"]);
+    assert_eq!(rows[0].frames_lost, Some(3));
+    assert!(rows.iter().all(|r| r.host_unix_ms == DAY0_MS + 7));
+    let line = csv_line(&rows[1]);
+    assert!(
+        line.starts_with(
+            "2026-03-01T00:00:00.007Z,1772323200007,measurement,42,9,25.000,8.000,0.000,0.000,-5.00,3300,Dry,0,1,0,,,,"
+        ),
+        "{line}"
+    );
+    assert_eq!(line.split(',').count(), HEADER.split(',').count());
+    let rows = super::rows_of(&msg(NodeUpdate::Frame(frame, SeqEvent::Restart)));
+    assert_eq!(rows[0].kind, "node_restart");
+    let rows = super::rows_of(&msg(NodeUpdate::Down("port gone".into())));
+    assert_eq!(
+        (rows[0].kind, rows[0].detail.as_str()),
+        ("link_lost", "port gone")
+    );
+    assert_eq!(
+        super::rows_of(&msg(NodeUpdate::Rejected))[0].kind,
+        "rejected"
+    );
+    assert!(super::rows_of(&msg(NodeUpdate::Unreachable("x".into()))).is_empty());
+}
