@@ -114,7 +114,7 @@ pub fn check_config(cfg: &GatewayConfig) -> anyhow::Result<String> {
     }
     Ok(format!(
         "config OK: gateway {}, {} node(s), broker {}, queue {} (at most {} bytes), \
-         Home Assistant discovery {}, MQTT commands {}, {}",
+         Home Assistant discovery {}, MQTT commands {}, {}, {}",
         cfg.name,
         cfg.nodes.len(),
         cfg.broker.describe(),
@@ -136,6 +136,14 @@ pub fn check_config(cfg: &GatewayConfig) -> anyhow::Result<String> {
         match &cfg.modbus {
             Some(m) => m.describe(),
             None => "Modbus TCP off".to_string(),
+        },
+        match &cfg.log {
+            Some(l) => format!(
+                "daily logs in {} ({} day(s) kept)",
+                l.dir.display(),
+                l.days_kept
+            ),
+            None => "daily logs off".to_string(),
         },
     ))
 }

@@ -2,7 +2,8 @@
 //! rumqttc's event loop and forwards its events; one thread per node reads
 //! its serial port ([`crate::reader`]); the loop here feeds all of it to the
 //! state machine ([`crate::machine::Gateway`]) and carries out the actions
-//! it returns with the `AsyncClient`.
+//! it returns with the `AsyncClient`. With `[log] dir`, the nodes' rows go
+//! to the daily logs' own thread ([`crate::season_log`]).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -19,6 +20,7 @@ use crate::machine::{Action, Gateway, GatewaySummary, RECONNECT_DELAY};
 use crate::mqtt::{describe, mqtt_options};
 use crate::queue::{Queue, QueueLimits};
 use crate::reader::{NodeMsg, ReaderTimings, spawn_serial_reader};
+use crate::season_log::{SeasonLog, rows_of};
 use crate::snapshot::Fleet;
 use crate::topics::Topics;
 
@@ -211,6 +213,9 @@ impl Service {
         }
         drop(node_tx);
 
+        // The daily logs: a thread of their own, off the runtime.
+        let mut season = cfg.log.as_ref().map(SeasonLog::start).transpose()?;
+        let log_fleet = fleet.clone();
         let started = Instant::now();
         let mut gw = Gateway::new(cfg, queue, fleet, started);
         let mut io = Io {
@@ -231,10 +236,10 @@ impl Service {
                 },
                 m = node_rx.recv(), if !readers_done => match m {
                     Some(m) => {
-                        gw.on_node(m, Instant::now());
+                        on_node(&mut gw, season.as_mut(), &log_fleet, m);
                         for _ in 0..256 {
                             match node_rx.try_recv() {
-                                Ok(m) => gw.on_node(m, Instant::now()),
+                                Ok(m) => on_node(&mut gw, season.as_mut(), &log_fleet, m),
                                 Err(_) => break,
                             }
                         }
@@ -274,6 +279,9 @@ impl Service {
         for t in threads {
             let _ = t.join();
         }
+        if let Some(s) = season.take() {
+            s.stop();
+        }
         let conflict = gw.conflict().map(str::to_string);
         if let Some(why) = conflict {
             // No goodbye: the other gateway's nodes are not ours to mark
@@ -303,6 +311,19 @@ impl Service {
         }
         broker.abort();
         Ok(gw.finish())
+    }
+}
+
+/// A node report to the machine, and its rows to the daily log (under
+/// the node's name, known once it has connected).
+fn on_node(gw: &mut Gateway, season: Option<&mut SeasonLog>, fleet: &Fleet, m: NodeMsg) {
+    let rows = season.as_ref().map(|_| rows_of(&m));
+    let k = m.node;
+    gw.on_node(m, Instant::now());
+    if let (Some(s), Some(rows)) = (season, rows)
+        && let Some(name) = fleet.read(k, |n| n.name.clone()).flatten()
+    {
+        s.record(&name, rows);
     }
 }
 

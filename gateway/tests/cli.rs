@@ -176,11 +176,17 @@ fn check_config_validates_certificates_and_opens_nothing() {
     let present_cfg = write(
         dir.path(),
         "present.toml",
-        &format!("[queue]\ndir = \"{d}/q3\"\n[[node]]\nport = \"{present}\"\n"),
+        &format!(
+            "[queue]\ndir = \"{d}/q3\"\n[log]\ndir = \"{d}/logs\"\ndays_kept = 30\n[[node]]\nport = \"{present}\"\n"
+        ),
     );
     let (code, out, err) = gateway(&["--config", &present_cfg, "--check-config"]);
     assert_eq!(code, Some(0), "{out}{err}");
     assert!(out.contains("config OK"), "{out}");
+    assert!(
+        out.contains(&format!(", daily logs in {d}/logs (30 day(s) kept)")),
+        "{out}"
+    );
     assert!(!err.contains("warning"), "{err}");
     // Modbus on a port another program holds: --check-config does not
     // listen, so it is OK; the run stops at once with exit 1 and the reason.

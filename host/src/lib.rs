@@ -7,6 +7,7 @@
 //!   [`legend`] what its status lines mean; [`keys`] commands typed into it;
 //!   [`status`] its status lines.
 //! - [`estimate`]: a log or a simulated curve replayed through the node's ice estimator.
+//! - [`icing`]: the icing report (`foisctl icing-report`): events, monthly totals, IEA ice class.
 //! - [`compare`]: a log against the simulator's band; [`plot`]: every figure.
 //! - [`exit`]: the exit codes; [`mod@bench`]: the decoder benchmark and the
 //!   long-run check.
@@ -21,6 +22,7 @@ pub mod compare;
 pub mod csvlog;
 pub mod estimate;
 pub mod exit;
+pub mod icing;
 pub mod keys;
 pub mod legend;
 pub mod monitor;

@@ -4,6 +4,8 @@
 //!
 //! - [`link`]: the serial link (open, handshake, commands, frames with their
 //!   sequence events).
+//! - [`log_row`]: one row of the monitor's CSV log (its columns), shared by
+//!   `foisctl monitor` and the gateway's daily logs.
 //! - [`reading`]: a measurement or event in µA, °C, mm, with fault names.
 //! - [`text`]: one-line texts of protocol messages.
 //! - [`advice`]: what to do after a calibration was refused.
@@ -18,6 +20,7 @@ pub mod advice;
 #[cfg(any(test, feature = "fixtures"))]
 pub mod fixtures;
 pub mod link;
+pub mod log_row;
 pub mod numbers;
 pub mod reading;
 pub mod text;

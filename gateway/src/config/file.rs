@@ -36,6 +36,9 @@ pub struct FileConfig {
     /// The Modbus TCP server.
     #[serde(default)]
     pub modbus: super::modbus::ModbusFile,
+    /// The daily logs of the nodes' frames.
+    #[serde(default)]
+    pub log: super::log::LogFile,
     /// The nodes, one `[[node]]` table each.
     #[serde(default, rename = "node")]
     pub nodes: Vec<NodeFile>,

@@ -5,19 +5,21 @@
 //! | module | what lives there |
 //! | --- | --- |
 //! | [`file`] | the file as written ([`file::FileConfig`]: every key optional, unknown keys refused) and the flags' [`file::Overrides`] |
+//! | [`log`] | `[log]`: the directory and the days kept of the nodes' daily CSV logs |
 //! | [`modbus`] | `[modbus]`: the Modbus TCP server's address, commands, stale time, unit ids |
 //! | [`resolve`] | [`file::FileConfig::resolve`]: flags over file over defaults, section by section, every check |
-//! | here (reads only [`modbus`]) | the resolved [`GatewayConfig`], [`Secret`], names, [`BrokerAddr`], [`NodeSpec`] |
+//! | here (reads only [`modbus`] and [`log`]) | the resolved [`GatewayConfig`], [`Secret`], names, [`BrokerAddr`], [`NodeSpec`] |
 //!
-//! The imports go one way: `modbus` reads none of its siblings (its tests,
-//! which parse whole files, live in `modbus/tests.rs`), this file reads
-//! `modbus`, `file` reads both, `resolve` reads all three.
+//! The imports go one way: `modbus` and `log` read none of their siblings
+//! (modbus's tests, which parse whole files, live in `modbus/tests.rs`),
+//! this file reads them, `file` reads those and this, `resolve` reads all.
 //!
 //! Secrets (the broker password, the client key's path is not one) are held
 //! in [`Secret`], whose `Debug` and `Display` print `***`: a config printed
 //! with `{:?}` or `--print-config` never shows them.
 
 pub mod file;
+pub mod log;
 pub mod modbus;
 pub mod resolve;
 
@@ -27,6 +29,7 @@ use std::time::Duration;
 
 use serde::Deserialize;
 
+pub use log::LogConfig;
 pub use modbus::ModbusConfig;
 
 /// A value that must never be printed (a password).
@@ -143,6 +146,8 @@ pub struct GatewayConfig {
     pub nodes: Vec<NodeSpec>,
     /// The Modbus TCP server (None: off).
     pub modbus: Option<ModbusConfig>,
+    /// The daily logs of the nodes' frames (None: off).
+    pub log: Option<LogConfig>,
 }
 
 /// Default queue bound: 256 MiB (a day of 200 nodes at one measurement per

@@ -95,6 +95,7 @@ impl FileConfig {
         let nodes = resolve_nodes(self.nodes, o)?;
         units.resize(nodes.len(), None);
         let modbus = super::modbus::resolve_modbus(self.modbus, &units)?;
+        let log = super::log::resolve_log(self.log)?;
         Ok(GatewayConfig {
             name,
             topic_prefix,
@@ -111,6 +112,7 @@ impl FileConfig {
             command_min_interval: commands.min_interval,
             nodes,
             modbus,
+            log,
         })
     }
 }

@@ -9,6 +9,7 @@ pub mod compare;
 pub mod config;
 pub mod demo;
 pub mod estimate;
+pub mod icing_report;
 pub mod monitor;
 pub mod plot;
 pub mod request;
@@ -92,6 +93,17 @@ pub enum Cmd {
     /// estimate appended (thickness ± sigma in mm, medium, its probability).
     #[command(after_help = exit::OFFLINE_TABLE)]
     Estimate(estimate::EstimateArgs),
+    /// An icing report from one node's logs (monitor or gateway, `.csv` or
+    /// `.csv.gz`): the icing events (start, end, meteorological and
+    /// instrumental icing hours, peak thickness ± σ, peak and mean rate,
+    /// medium), monthly totals, the share of the period with each kind of
+    /// icing and the IEA Wind (Task 19) ice class it implies; a timeline
+    /// figure with --plot. Meteorological icing is the node's own
+    /// `est_accreting`; in older logs it is derived from the thickness
+    /// series' growth (said so). Streams the files: a year at 1 Hz in
+    /// bounded memory (--bench measures it).
+    #[command(after_help = exit::OFFLINE_TABLE)]
+    IcingReport(icing_report::IcingReportArgs),
     /// Decoder throughput: encode a stream of measurement frames and decode
     /// it, print frames/s and MB/s.
     #[command(after_help = exit::OFFLINE_TABLE)]
@@ -137,6 +149,7 @@ impl Cli {
             Cmd::Compare(a) => compare::run(a),
             Cmd::Plot(a) => plot::run(a),
             Cmd::Estimate(a) => estimate::run(a),
+            Cmd::IcingReport(a) => icing_report::run(a),
             Cmd::BenchDecode(a) => bench_decode::run(a),
             Cmd::Sim(a) => sim::run(a),
         }

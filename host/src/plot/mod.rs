@@ -3,10 +3,12 @@
 //!
 //! - [`log`]: a monitor log over time (`foisctl plot`), its lines broken at
 //!   gaps by [`runs`];
+//! - [`icing`]: the icing report's timeline (`foisctl icing-report --plot`);
 //! - [`comparison`]: logged currents against the simulator's band (`foisctl compare --plot`);
 //! - [`series`]: curves over ice thickness in the thesis's layout (`foisctl sim ... --plot`).
 
 pub mod comparison;
+pub mod icing;
 pub mod log;
 pub mod log_layout;
 pub mod log_series;
