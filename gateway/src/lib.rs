@@ -29,6 +29,7 @@ pub mod logging;
 pub mod machine;
 pub mod modbus;
 pub mod mqtt;
+pub mod net_runtime;
 pub mod payload;
 pub mod queue;
 pub mod reader;

@@ -1,8 +1,10 @@
-//! The runtime wiring: one current-thread tokio runtime; a task drives
-//! rumqttc's event loop and forwards its events; one thread per node reads
-//! its serial port ([`crate::reader`]); the loop here feeds all of it to the
-//! state machine ([`crate::machine::Gateway`]) and carries out the actions
-//! it returns with the `AsyncClient`.
+//! The runtime wiring: the network runtime ([`crate::net_runtime`], its
+//! own thread) drives rumqttc's event loop, forwarding its events, and
+//! serves Modbus TCP; one thread per node reads its serial port
+//! ([`crate::reader`]); the loop here, on the main current-thread runtime,
+//! feeds all of it to the state machine ([`crate::machine::Gateway`]),
+//! which owns the disk queue, and carries out the actions it returns with
+//! the `AsyncClient`. A stalled disk blocks this loop only.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -17,6 +19,7 @@ use crate::command::{FrontEndCommand, NodeCommand};
 use crate::config::GatewayConfig;
 use crate::machine::{Action, Gateway, GatewaySummary, RECONNECT_DELAY};
 use crate::mqtt::{describe, mqtt_options};
+use crate::net_runtime::NetRuntime;
 use crate::queue::{Queue, QueueLimits};
 use crate::reader::{NodeMsg, ReaderTimings, spawn_serial_reader};
 use crate::snapshot::Fleet;
@@ -147,18 +150,16 @@ impl Service {
             commands_tx,
             commands_rx: mut front_rx,
         } = self;
+        let net = NetRuntime::start()?;
         // Modbus first: a taken port stops the start before anything else
         // is opened.
         let modbus = match &cfg.modbus {
             Some(m) => {
-                let listener = crate::modbus::server::bind(m).await?;
+                let listener = crate::modbus::server::bind(m)?;
                 info!("{}", m.describe());
                 let units =
                     crate::modbus::server::ModbusUnits::new(m.clone(), fleet.clone(), commands_tx);
-                Some(tokio::spawn(crate::modbus::server::serve(
-                    listener,
-                    Arc::new(units),
-                )))
+                Some(net.spawn(crate::modbus::server::serve(listener, Arc::new(units))))
             }
             None => {
                 drop(commands_tx);
@@ -184,7 +185,7 @@ impl Service {
         let (client, eventloop) = AsyncClient::new(opts, 1 << 16);
         let (ev_tx, mut ev_rx) = mpsc::unbounded_channel();
         let (resume_tx, resume_rx) = mpsc::unbounded_channel();
-        let broker = tokio::spawn(broker_task(eventloop, ev_tx, resume_rx));
+        let broker = net.spawn(broker_task(eventloop, ev_tx, resume_rx));
 
         let (node_tx, mut node_rx) = mpsc::channel::<NodeMsg>(8192);
         let readers_stop = Arc::new(AtomicBool::new(false));
@@ -390,3 +391,6 @@ impl Io {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

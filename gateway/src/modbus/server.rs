@@ -35,16 +35,26 @@ pub use super::units::{MAX_READ, ModbusUnits};
 use crate::config::ModbusConfig;
 
 /// Listen on the configured address (before the gateway runs: a taken
-/// port is an error at the start, not later).
-pub async fn bind(cfg: &ModbusConfig) -> anyhow::Result<TcpListener> {
-    TcpListener::bind(cfg.listen)
-        .await
+/// port is an error at the start, not later). A std listener, so that it
+/// can be bound on one thread and served on the network runtime's.
+pub fn bind(cfg: &ModbusConfig) -> anyhow::Result<std::net::TcpListener> {
+    std::net::TcpListener::bind(cfg.listen)
+        .and_then(|l| l.set_nonblocking(true).map(|()| l))
         .map_err(|e| anyhow::anyhow!("cannot listen for Modbus TCP on {}: {e}", cfg.listen))
 }
 
 /// Serve Modbus TCP on `listener` until the task is dropped; a failing
 /// `accept` (out of file descriptors) is logged and retried after a second.
-pub async fn serve(listener: TcpListener, units: Arc<ModbusUnits>) {
+/// Run it on a runtime that does no disk IO (the gateway's network
+/// runtime, [`crate::service`]).
+pub async fn serve(listener: std::net::TcpListener, units: Arc<ModbusUnits>) {
+    let listener = match TcpListener::from_std(listener) {
+        Ok(l) => l,
+        Err(e) => {
+            warn!("Modbus TCP: cannot serve the listening socket ({e})");
+            return;
+        }
+    };
     loop {
         let (stream, peer) = match listener.accept().await {
             Ok(c) => c,

@@ -41,6 +41,8 @@
 mod failure;
 mod segment;
 #[cfg(test)]
+pub(crate) mod stall;
+#[cfg(test)]
 mod tests;
 
 use std::collections::VecDeque;
@@ -473,6 +475,8 @@ impl Queue {
     /// when due; notice a removed directory; retry a failing disk. Call
     /// every 100 ms or so.
     pub fn tick(&mut self) {
+        #[cfg(test)]
+        stall::wait(&self.dir);
         if self.writer.is_some() && !self.dir.is_dir() {
             self.fail(format!("the directory {} was removed", self.dir.display()));
         }
