@@ -157,8 +157,12 @@ impl Service {
             Some(m) => {
                 let listener = crate::modbus::server::bind(m)?;
                 info!("{}", m.describe());
-                let units =
-                    crate::modbus::server::ModbusUnits::new(m.clone(), fleet.clone(), commands_tx);
+                let units = crate::modbus::server::ModbusUnits::new(
+                    m.clone(),
+                    fleet.clone(),
+                    commands_tx,
+                    cfg.command_min_interval,
+                );
                 Some(net.spawn(crate::modbus::server::serve(listener, Arc::new(units))))
             }
             None => {
@@ -242,7 +246,15 @@ impl Service {
                     }
                     None => readers_done = true,
                 },
-                Some(c) = front_rx.recv() => gw.front_end_command(c.node, c.command, Instant::now()),
+                Some(c) = front_rx.recv() => {
+                    // A waiter that gave up has answered its client already.
+                    if !c.reply.as_ref().is_some_and(|r| r.is_closed()) {
+                        let r = gw.front_end_command(c.node, c.command, Instant::now());
+                        if let Some(reply) = c.reply {
+                            let _ = reply.send(r);
+                        }
+                    }
+                }
                 _ = tick.tick() => {
                     let now = Instant::now();
                     gw.tick(now, limits.status_every);

@@ -1129,6 +1129,7 @@ fn another_front_end_reads_every_node_and_sends_commands_through_the_service() {
         .send(FrontEndCommand {
             node: 0,
             command: NodeCommand::AckAlarm,
+            reply: None,
         })
         .unwrap();
     let t0 = Instant::now();
@@ -1150,4 +1151,75 @@ fn another_front_end_reads_every_node_and_sends_commands_through_the_service() {
     let sum = run.join().unwrap().unwrap();
     assert_eq!(sum.broker_connects, 1);
     assert!(sum.frames > 20, "{sum:?}");
+}
+
+#[test]
+fn a_modbus_acknowledge_flood_gets_busy_answers_and_one_command_result() {
+    use std::io::{Read, Write};
+
+    let dir = tempfile::tempdir().unwrap();
+    let broker = Broker::start(dir.path(), "");
+    let sub = Subscriber::start(
+        broker.port,
+        "t-flood",
+        &["fois/gw/n1/state", "fois/gw/n1/command/result"],
+        SubOptions::default(),
+    );
+    let node = iced_node();
+    let modbus_port = free_port();
+    let cfg = gateway_config(
+        dir.path(),
+        "gw",
+        broker.port,
+        &[(&node.path, "n1")],
+        &format!(
+            "[modbus]\nenabled = true\ncommands = true\nlisten = \"127.0.0.1:{modbus_port}\"\n"
+        ),
+    );
+    let mut gw = GatewayProc::start(&cfg, &[], &dir.path().join("gw.log"));
+    wait_alarm(&sub);
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", modbus_port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
+    // Batches of 20 pipelined writes of 1 to alarm_ack (unit 1), for 3 s.
+    let (mut ok, mut busy, mut writes) = (0, 0, 0u32);
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(3) {
+        let mut batch = Vec::new();
+        for k in 0..20u16 {
+            let tid = (writes as u16).wrapping_add(k);
+            batch.extend(tid.to_be_bytes());
+            batch.extend([0, 0, 0, 6, 1, 0x06, 0, 23, 0, 1]);
+        }
+        s.write_all(&batch).unwrap();
+        for _ in 0..20 {
+            let mut h = [0u8; 7];
+            s.read_exact(&mut h).unwrap();
+            let mut pdu = vec![0u8; usize::from(h[5]) - 1];
+            s.read_exact(&mut pdu).unwrap();
+            match pdu.as_slice() {
+                [0x06, 0, 23, 0, 1] => ok += 1,
+                [0x86, 0x06] => busy += 1,
+                other => panic!("answer {other:02x?}"),
+            }
+        }
+        writes += 20;
+    }
+    let rate = f64::from(writes) / t0.elapsed().as_secs_f64();
+    println!("{writes} acknowledge writes at {rate:.0}/s: {ok} success, {busy} busy (06)");
+    assert!(writes >= 1_000, "{writes}");
+    // [commands] min_interval_ms 5 s: one write handed to the node.
+    assert_eq!((ok, busy), (1, writes - 1));
+    std::thread::sleep(Duration::from_secs(1));
+    let results = sub.on("fois/gw/n1/command/result");
+    assert_eq!(results.len(), 1, "{results:?}");
+    assert!(
+        results[0].text().contains("AlarmAcknowledged"),
+        "{}",
+        results[0].text()
+    );
+    assert_eq!(gw.interrupt(), 0);
+    let out = gw.output();
+    let refusal_lines = out.lines().filter(|l| l.contains("refused")).count();
+    println!("{refusal_lines} refusal log line(s)");
+    assert_eq!(refusal_lines, 1, "{out}");
 }

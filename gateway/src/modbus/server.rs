@@ -18,8 +18,10 @@
 //! | 01 illegal function | a function other than 03, 04, 06, 16 (codes ≥ 0x80 included); 06 and 16 while `commands = false` |
 //! | 02 illegal data address | registers beyond the table; a write to a register other than `alarm_ack` |
 //! | 03 illegal data value | a PDU too short or too long for its function; a quantity of 0 or over 125 (read) / 123 (write), or an FC 16 byte count that disagrees; a value other than 1 written to `alarm_ack` |
+//! | 04 server device failure | `alarm_ack` written while the gateway stops |
+//! | 06 server device busy | `alarm_ack` written sooner than `[commands] min_interval_ms` after the node's last command, or not taken by the gateway within 1 s |
 //! | 0A gateway path unavailable | a unit id no node has |
-//! | 0B gateway target device failed to respond | `alarm_ack` written while the node's link is down |
+//! | 0B gateway target device failed to respond | `alarm_ack` written while the node's link is down or it is offline |
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -81,6 +83,9 @@ pub async fn serve(listener: std::net::TcpListener, units: Arc<ModbusUnits>) {
                 );
             }
         }
+        // Answers go out at once (Nagle would hold an answer back until
+        // the previous one is acknowledged).
+        let _ = stream.set_nodelay(true);
         debug!("Modbus: {peer} connected");
         let task = tokio::spawn(connection(
             stream,
@@ -155,7 +160,10 @@ async fn connection(mut stream: TcpStream, peer: SocketAddr, place: Place) {
             continue; // broadcast: never answered
         }
         let function = request.first().copied().unwrap_or(0);
-        let answer = pdu::request(request).and_then(|r| units.answer(h.unit, &r, now, peer));
+        let answer = match pdu::request(request) {
+            Ok(r) => units.answer(h.unit, &r, now, peer).await,
+            Err(e) => Err(e),
+        };
         let out = pdu::frame(h.transaction, h.unit, &pdu::response(function, answer));
         if !matches!(timeout(frame, stream.write_all(&out)).await, Ok(Ok(()))) {
             debug!("Modbus: {peer} closed: the answer not taken within {frame:?}");
