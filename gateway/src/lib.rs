@@ -36,4 +36,6 @@ pub mod reader;
 pub mod service;
 pub mod snapshot;
 pub mod state_filter;
+#[cfg(test)]
+mod test_log;
 pub mod topics;

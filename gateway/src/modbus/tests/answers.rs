@@ -1,7 +1,6 @@
 //! [`ModbusUnits::answer`]: reads, and acknowledge writes with a stand-in
 //! for the state machine's reply.
 
-use std::io::Write;
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -14,6 +13,7 @@ use super::iced;
 use crate::command::{FrontEndCommand, NodeCommand, Refusal};
 use crate::config::ModbusConfig;
 use crate::snapshot::{Fleet, NodeSnapshot};
+use crate::test_log::Capture;
 
 /// `[commands] min_interval_ms` of these tests.
 const MIN_INTERVAL: Duration = Duration::from_secs(5);
@@ -205,33 +205,9 @@ async fn an_acknowledge_is_a_success_only_when_the_state_machine_handed_it_to_th
     );
 }
 
-/// Log lines written while it runs (a subscriber of this thread).
-#[derive(Clone, Default)]
-struct Lines(Arc<Mutex<Vec<u8>>>);
-
-impl Write for Lines {
-    fn write(&mut self, b: &[u8]) -> std::io::Result<usize> {
-        self.0.lock().unwrap().extend_from_slice(b);
-        Ok(b.len())
-    }
-    fn flush(&mut self) -> std::io::Result<()> {
-        Ok(())
-    }
-}
-
 #[tokio::test]
 async fn an_acknowledge_flood_is_refused_busy_with_bounded_logs_and_commands() {
-    let lines = Lines::default();
-    let sink = lines.clone();
-    let subscriber = tracing_subscriber::fmt()
-        .with_writer(move || sink.clone())
-        .with_ansi(false)
-        .finish();
-    let _guard = tracing::subscriber::set_default(subscriber);
-    // A second live dispatcher: with one, tracing decides whether a log
-    // line is wanted from the first thread that reaches it (another test's,
-    // with no subscriber: never); with two, from every dispatcher.
-    let _second = tracing::Dispatch::new(tracing_subscriber::registry());
+    let log = Capture::start();
     let (u, rx, t0) = units(true);
     let got = state_machine(rx, vec![Some(Ok(()))]);
     // 2 000 writes per second for 12 s.
@@ -252,10 +228,11 @@ async fn an_acknowledge_flood_is_refused_busy_with_bounded_logs_and_commands() {
     assert_eq!(ok, [0, 5, 10]);
     assert_eq!(busy, 24_000 - 3);
     assert_eq!(got.lock().unwrap().len(), 3);
-    let text = String::from_utf8(lines.0.lock().unwrap().clone()).unwrap();
-    let refusals: Vec<&str> = text.lines().filter(|l| l.contains("refused")).collect();
-    let handed: Vec<&str> = text
-        .lines()
+    let lines = log.lines();
+    let text = lines.join("\n");
+    let refusals: Vec<&String> = lines.iter().filter(|l| l.contains("refused")).collect();
+    let handed: Vec<&String> = lines
+        .iter()
         .filter(|l| l.contains("alarm acknowledge") && !l.contains("refused"))
         .collect();
     // Refusals logged at 0 s and 10 s (every 10 s), acknowledges at 0 and 10 s.
@@ -269,5 +246,5 @@ async fn an_acknowledge_flood_is_refused_busy_with_bounded_logs_and_commands() {
         refusals[1]
     );
     assert_eq!(handed.len(), 2, "{text}");
-    assert_eq!(text.lines().count(), 4, "{text}");
+    assert_eq!(lines.len(), 4, "{text}");
 }
