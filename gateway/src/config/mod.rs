@@ -18,6 +18,7 @@
 //! with `{:?}` or `--print-config` never shows them.
 
 pub mod file;
+pub mod located;
 pub mod modbus;
 pub mod resolve;
 
