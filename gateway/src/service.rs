@@ -290,9 +290,20 @@ impl Service {
         let conflict = gw.conflict().map(str::to_string);
         if let Some(why) = conflict {
             // No goodbye: the other gateway's nodes are not ours to mark
-            // offline. A clean DISCONNECT: no last will either.
+            // offline. A clean DISCONNECT: no last will either (waited
+            // for: a connection dropped without it publishes the will).
             let _ = io.client.try_disconnect();
-            tokio::time::sleep(Duration::from_millis(200)).await;
+            let wait = tokio::time::sleep(Duration::from_millis(500));
+            tokio::pin!(wait);
+            loop {
+                tokio::select! {
+                    _ = &mut wait => break,
+                    ev = ev_rx.recv() => match ev {
+                        Some(BrokerEvent::Mqtt(Event::Outgoing(Outgoing::Disconnect))) | None => break,
+                        Some(_) => {}
+                    }
+                }
+            }
             broker.abort();
             let sum = gw.finish();
             return Err(NameConflict { why, summary: sum }.into());

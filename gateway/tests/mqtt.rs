@@ -1223,3 +1223,72 @@ fn a_modbus_acknowledge_flood_gets_busy_answers_and_one_command_result() {
     println!("{refusal_lines} refusal log line(s)");
     assert_eq!(refusal_lines, 1, "{out}");
 }
+
+#[test]
+fn another_instances_last_will_leaves_no_phantom_offline_on_a_running_gateway() {
+    let dir = tempfile::tempdir().unwrap();
+    let broker = Broker::start(dir.path(), "");
+    let sub = Subscriber::start(
+        broker.port,
+        "t-phantom",
+        &["fois/gw/availability"],
+        SubOptions::default(),
+    );
+    let node = NodeProc::start(Scene::dry(5.0, 1));
+    let cfg = gateway_config(dir.path(), "gw", broker.port, &[(&node.path, "n1")], "");
+    let mut gw = GatewayProc::start(&cfg, &[], &dir.path().join("gw.out"));
+    gw.wait_output("node n1 on", Duration::from_secs(10));
+    // A second instance's connection with the gateway's last will (retained
+    // `offline` on its availability), killed: the broker publishes the will.
+    let mut intruder = std::process::Command::new(mosquitto_tool("mosquitto_sub"))
+        .args([
+            "-h",
+            "127.0.0.1",
+            "-p",
+            &broker.port.to_string(),
+            "-i",
+            "gw-second",
+        ])
+        .args(["-t", "fois/nothing", "--will-topic", "fois/gw/availability"])
+        .args([
+            "--will-payload",
+            "offline",
+            "--will-retain",
+            "--will-qos",
+            "1",
+        ])
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(700));
+    intruder.kill().unwrap();
+    intruder.wait().unwrap();
+    sub.wait_for("the will", Duration::from_secs(5), |m| {
+        m.iter().any(|m| m.text() == "offline")
+    });
+    std::thread::sleep(Duration::from_secs(2));
+    // What a newcomer (Home Assistant after a restart) finds retained.
+    let late = Subscriber::start(
+        broker.port,
+        "t-phantom-late",
+        &["fois/gw/availability"],
+        SubOptions::default(),
+    );
+    late.wait_for("the retained availability", Duration::from_secs(5), |m| {
+        !m.is_empty()
+    });
+    let m = late.messages();
+    assert!(m[0].retain);
+    assert_eq!(m[0].text(), "online", "a phantom offline stayed");
+    assert!(
+        gw.output()
+            .contains("`offline` appeared on fois/gw/availability"),
+        "{}",
+        gw.output()
+    );
+    assert_eq!(gw.interrupt(), 0);
+    // Its own goodbye stays: a clean stop leaves `offline`.
+    std::thread::sleep(Duration::from_millis(500));
+    let after = sub.messages();
+    assert_eq!(after.last().unwrap().text(), "offline", "{after:?}");
+}

@@ -73,6 +73,10 @@ impl Gateway {
             self.on_claim(payload, now);
             return;
         }
+        if topic == self.topics.gateway_availability() {
+            self.on_own_availability(payload, now);
+            return;
+        }
         if self.cfg.command_topic.is_none() {
             return;
         }
