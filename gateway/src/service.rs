@@ -299,7 +299,9 @@ impl Service {
                 tokio::select! {
                     _ = &mut wait => break,
                     ev = ev_rx.recv() => match ev {
-                        Some(BrokerEvent::Mqtt(Event::Outgoing(Outgoing::Disconnect))) | None => break,
+                        // The broker closes the connection once it has the
+                        // DISCONNECT (then no last will).
+                        Some(BrokerEvent::Down(_)) | None => break,
                         Some(_) => {}
                     }
                 }
@@ -312,14 +314,16 @@ impl Service {
             gw.goodbye(Instant::now());
             io.carry_out(&mut gw);
             let _ = io.client.try_disconnect();
-            // Let the event loop send the goodbye and the DISCONNECT.
+            // Let the event loop send the goodbye and the DISCONNECT, until
+            // the broker closes the connection (a connection dropped before
+            // the DISCONNECT went out publishes the last will).
             let wait = tokio::time::sleep(Duration::from_millis(500));
             tokio::pin!(wait);
             loop {
                 tokio::select! {
                     _ = &mut wait => break,
                     ev = ev_rx.recv() => match ev {
-                        Some(BrokerEvent::Mqtt(Event::Outgoing(Outgoing::Disconnect))) | None => break,
+                        Some(BrokerEvent::Down(_)) | None => break,
                         Some(ev) => io.broker_event(&mut gw, ev),
                     }
                 }

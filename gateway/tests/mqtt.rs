@@ -194,7 +194,20 @@ fn three_nodes_every_record_arrives_once_with_discovery_and_state() {
         .filter(|m| m.topic == "fois/gw/status" || m.topic == "fois/gw/availability")
         .map(|m| m.topic.as_str())
         .collect();
-    assert_eq!(order.last(), Some(&"fois/gw/availability"), "{order:?}");
+    let shown: Vec<String> = msgs
+        .iter()
+        .filter(|m| m.topic == "fois/gw/status" || m.topic == "fois/gw/availability")
+        .map(|m| {
+            format!(
+                "{} {} {:?}",
+                m.topic,
+                m.text().chars().take(12).collect::<String>(),
+                m.at
+            )
+        })
+        .collect();
+    assert_eq!(order.last(), Some(&"fois/gw/availability"), "{shown:?}");
+    assert_eq!(order[order.len() - 2], "fois/gw/status", "{shown:#?}");
     assert_eq!(order[order.len() - 2], "fois/gw/status", "{order:?}");
 
     // The log (the journal under systemd) says when a node ices or wets,
