@@ -112,6 +112,18 @@ pub fn check_config(cfg: &GatewayConfig) -> anyhow::Result<String> {
     if let Some(t) = &cfg.broker.tls {
         crate::mqtt::rustls_config(t).map_err(|e| UsageError(format!("{e:#}")))?;
     }
+    if let Some(m) = &cfg.modbus {
+        // The address, not the port: a running gateway may hold the port.
+        let ip = m.listen.ip();
+        if let Err(e) = std::net::TcpListener::bind((ip, 0)) {
+            return Err(UsageError(format!(
+                "key `modbus.listen`: the gateway cannot listen on {ip} ({e}): not an address \
+                 of this machine? (127.0.0.1 for this machine only, 0.0.0.0 for every \
+                 interface)"
+            ))
+            .into());
+        }
+    }
     Ok(format!(
         "config OK: gateway {}, {} node(s), broker {}, queue {} (at most {} bytes), \
          Home Assistant discovery {}, MQTT commands {}, {}, {}",

@@ -69,12 +69,26 @@ pub fn command_word(text: &str) -> String {
 
 /// A command for a node from a front end other than MQTT; its answer is
 /// published on `<node>/command/result` and logged like an MQTT command's.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug)]
 pub struct FrontEndCommand {
     /// The node's index in the config.
     pub node: usize,
     /// The command.
     pub command: NodeCommand,
+    /// Where the state machine says whether it handed the command to the
+    /// node (`None`: nobody waits). A command whose waiter has gone (it
+    /// answered the client already) is not carried out.
+    pub reply: Option<tokio::sync::oneshot::Sender<Result<(), Refusal>>>,
+}
+
+/// Why the state machine refused a command.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Refusal {
+    /// The node is offline (or not configured).
+    Offline,
+    /// The node's previous command was less than `[commands]
+    /// min_interval_ms` ago.
+    RateLimit,
 }
 
 #[cfg(test)]

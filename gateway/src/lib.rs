@@ -30,6 +30,7 @@ pub mod logging;
 pub mod machine;
 pub mod modbus;
 pub mod mqtt;
+pub mod net_runtime;
 pub mod payload;
 pub mod queue;
 pub mod reader;
@@ -37,4 +38,6 @@ pub mod season_log;
 pub mod service;
 pub mod snapshot;
 pub mod state_filter;
+#[cfg(test)]
+mod test_log;
 pub mod topics;

@@ -1,9 +1,12 @@
-//! The runtime wiring: one current-thread tokio runtime; a task drives
-//! rumqttc's event loop and forwards its events; one thread per node reads
-//! its serial port ([`crate::reader`]); the loop here feeds all of it to the
-//! state machine ([`crate::machine::Gateway`]) and carries out the actions
-//! it returns with the `AsyncClient`. With `[log] dir`, the nodes' rows go
-//! to the daily logs' own thread ([`crate::season_log`]).
+//! The runtime wiring: the network runtime ([`crate::net_runtime`], its
+//! own thread) drives rumqttc's event loop, forwarding its events, and
+//! serves Modbus TCP; one thread per node reads its serial port
+//! ([`crate::reader`]); the loop here, on the main current-thread runtime,
+//! feeds all of it to the state machine ([`crate::machine::Gateway`]),
+//! which owns the disk queue, and carries out the actions it returns with
+//! the `AsyncClient`. A stalled disk blocks this loop only.
+//! With `[log] dir`, the nodes' rows go to the daily logs' own thread
+//! ([`crate::season_log`]).
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -18,6 +21,7 @@ use crate::command::{FrontEndCommand, NodeCommand};
 use crate::config::GatewayConfig;
 use crate::machine::{Action, Gateway, GatewaySummary, RECONNECT_DELAY};
 use crate::mqtt::{describe, mqtt_options};
+use crate::net_runtime::NetRuntime;
 use crate::queue::{Queue, QueueLimits};
 use crate::reader::{NodeMsg, ReaderTimings, spawn_serial_reader};
 use crate::season_log::{SeasonLog, rows_of};
@@ -149,18 +153,20 @@ impl Service {
             commands_tx,
             commands_rx: mut front_rx,
         } = self;
+        let net = NetRuntime::start()?;
         // Modbus first: a taken port stops the start before anything else
         // is opened.
         let modbus = match &cfg.modbus {
             Some(m) => {
-                let listener = crate::modbus::server::bind(m).await?;
+                let listener = crate::modbus::server::bind(m)?;
                 info!("{}", m.describe());
-                let units =
-                    crate::modbus::server::ModbusUnits::new(m.clone(), fleet.clone(), commands_tx);
-                Some(tokio::spawn(crate::modbus::server::serve(
-                    listener,
-                    Arc::new(units),
-                )))
+                let units = crate::modbus::server::ModbusUnits::new(
+                    m.clone(),
+                    fleet.clone(),
+                    commands_tx,
+                    cfg.command_min_interval,
+                );
+                Some(net.spawn(crate::modbus::server::serve(listener, Arc::new(units))))
             }
             None => {
                 drop(commands_tx);
@@ -186,7 +192,7 @@ impl Service {
         let (client, eventloop) = AsyncClient::new(opts, 1 << 16);
         let (ev_tx, mut ev_rx) = mpsc::unbounded_channel();
         let (resume_tx, resume_rx) = mpsc::unbounded_channel();
-        let broker = tokio::spawn(broker_task(eventloop, ev_tx, resume_rx));
+        let broker = net.spawn(broker_task(eventloop, ev_tx, resume_rx));
 
         let (node_tx, mut node_rx) = mpsc::channel::<NodeMsg>(8192);
         let readers_stop = Arc::new(AtomicBool::new(false));
@@ -246,7 +252,15 @@ impl Service {
                     }
                     None => readers_done = true,
                 },
-                Some(c) = front_rx.recv() => gw.front_end_command(c.node, c.command, Instant::now()),
+                Some(c) = front_rx.recv() => {
+                    // A waiter that gave up has answered its client already.
+                    if !c.reply.as_ref().is_some_and(|r| r.is_closed()) {
+                        let r = gw.front_end_command(c.node, c.command, Instant::now());
+                        if let Some(reply) = c.reply {
+                            let _ = reply.send(r);
+                        }
+                    }
+                }
                 _ = tick.tick() => {
                     let now = Instant::now();
                     gw.tick(now, limits.status_every);
@@ -285,9 +299,22 @@ impl Service {
         let conflict = gw.conflict().map(str::to_string);
         if let Some(why) = conflict {
             // No goodbye: the other gateway's nodes are not ours to mark
-            // offline. A clean DISCONNECT: no last will either.
+            // offline. A clean DISCONNECT: no last will either (waited
+            // for: a connection dropped without it publishes the will).
             let _ = io.client.try_disconnect();
-            tokio::time::sleep(Duration::from_millis(200)).await;
+            let wait = tokio::time::sleep(Duration::from_millis(500));
+            tokio::pin!(wait);
+            loop {
+                tokio::select! {
+                    _ = &mut wait => break,
+                    ev = ev_rx.recv() => match ev {
+                        // The broker closes the connection once it has the
+                        // DISCONNECT (then no last will).
+                        Some(BrokerEvent::Down(_)) | None => break,
+                        Some(_) => {}
+                    }
+                }
+            }
             broker.abort();
             let sum = gw.finish();
             return Err(NameConflict { why, summary: sum }.into());
@@ -296,14 +323,16 @@ impl Service {
             gw.goodbye(Instant::now());
             io.carry_out(&mut gw);
             let _ = io.client.try_disconnect();
-            // Let the event loop send the goodbye and the DISCONNECT.
+            // Let the event loop send the goodbye and the DISCONNECT, until
+            // the broker closes the connection (a connection dropped before
+            // the DISCONNECT went out publishes the last will).
             let wait = tokio::time::sleep(Duration::from_millis(500));
             tokio::pin!(wait);
             loop {
                 tokio::select! {
                     _ = &mut wait => break,
                     ev = ev_rx.recv() => match ev {
-                        Some(BrokerEvent::Mqtt(Event::Outgoing(Outgoing::Disconnect))) | None => break,
+                        Some(BrokerEvent::Down(_)) | None => break,
                         Some(ev) => io.broker_event(&mut gw, ev),
                     }
                 }
@@ -411,3 +440,6 @@ impl Io {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

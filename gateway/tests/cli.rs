@@ -127,6 +127,109 @@ fn bad_configs_exit_2_with_the_reason() {
 }
 
 #[test]
+fn a_bad_value_is_named_by_key_and_line_and_what_the_start_refuses_check_config_refuses() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path().display();
+    let head = format!("name = \"gw\"\n[queue]\ndir = \"{d}/q\"\n");
+    let link = dir.path().join("by-id-link");
+    std::os::unix::fs::symlink("/dev/null", &link).unwrap();
+    let cases: Vec<(String, String)> = vec![
+        (
+            "[broker]\nport = 70000\n[[node]]\nport = \"/dev/x\"\n".into(),
+            "line 5, column 8, key `broker.port`: invalid value: integer `70000`, expected u16"
+                .into(),
+        ),
+        (
+            "[modbus]\nenabled = true\n[[node]]\nport = \"/dev/x\"\nmodbus_unit = 300\n".into(),
+            "line 8, column 15, key `node[0].modbus_unit`: invalid value: integer `300`, \
+             expected u8"
+                .into(),
+        ),
+        (
+            "[broker]\nport = 1883\nport = 1884\n[[node]]\nport = \"/dev/x\"\n".into(),
+            "line 6, column 1, key `broker.port`: duplicate key (first at line 5)".into(),
+        ),
+        (
+            "[broker]\nkeep_alive_s = \"5\"\n[[node]]\nport = \"/dev/x\"\n".into(),
+            "line 5, column 16, key `broker.keep_alive_s`: invalid type: string \"5\", \
+             expected u64"
+                .into(),
+        ),
+        (
+            "[modbus]\nenabled = true\nidle_timeout_s = 0.5\n[[node]]\nport = \"/dev/x\"\n".into(),
+            "line 6, key `modbus.idle_timeout_s`: [modbus] idle_timeout_s must be within \
+             1..=86400 (not 0.5)"
+                .into(),
+        ),
+        (
+            "[broker]\nport = 1883\n[modbus]\nenabled = true\nlisten = \"0.0.0.0:1883\"\n\
+             [[node]]\nport = \"/dev/x\"\n"
+                .into(),
+            "line 8, key `modbus.listen`: [modbus] listen 0.0.0.0:1883 is the broker's own \
+             address and port (127.0.0.1:1883)"
+                .into(),
+        ),
+        (
+            format!(
+                "[[node]]\nport = \"/dev/null\"\nname = \"a\"\n[[node]]\nport = \"{}\"\n\
+                 name = \"b\"\n",
+                link.display()
+            ),
+            format!(
+                "line 8, key `node[1].port`: one serial port listed twice: /dev/null and {} are \
+                 both /dev/null",
+                link.display()
+            ),
+        ),
+        (
+            "[[node]]\nport = \"/dev/x\"\nname = \"Tower\"\n[[node]]\nport = \"/dev/y\"\n\
+             name = \"tower\"\n"
+                .into(),
+            "line 9, key `node[1].name`: the node names `Tower` and `tower` differ only in case"
+                .into(),
+        ),
+    ];
+    for (k, (body, want)) in cases.iter().enumerate() {
+        let cfg = write(dir.path(), &format!("c{k}.toml"), &format!("{head}{body}"));
+        for check in [true, false] {
+            let mut args = vec!["--config", cfg.as_str(), "--duration", "1"];
+            if check {
+                args.push("--check-config");
+            }
+            let (code, out, err) = gateway(&args);
+            assert_eq!(code, Some(2), "{args:?}: {out}{err}");
+            assert!(
+                err.contains(want.as_str()),
+                "{args:?}: `{want}` not in {err}"
+            );
+        }
+    }
+    // Modbus on an address that is not this machine's: refused by the
+    // check (2) as by the start (1), each naming the address.
+    let far = write(
+        dir.path(),
+        "far.toml",
+        &format!(
+            "{head}[broker]\nport = {}\n[modbus]\nenabled = true\nlisten = \"192.0.2.7:5020\"\n\
+             [[node]]\nport = \"/dev/x\"\n",
+            support::free_port()
+        ),
+    );
+    let (code, _, err) = gateway(&["--config", &far, "--check-config"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("key `modbus.listen`: the gateway cannot listen on 192.0.2.7"),
+        "{err}"
+    );
+    let (code, _, err) = gateway(&["--config", &far, "--duration", "1"]);
+    assert_eq!(code, Some(1), "{err}");
+    assert!(
+        err.contains("cannot listen for Modbus TCP on 192.0.2.7:5020"),
+        "{err}"
+    );
+}
+
+#[test]
 fn check_config_validates_certificates_and_opens_nothing() {
     let dir = tempfile::tempdir().unwrap();
     support::pki::make_pki(dir.path());

@@ -470,6 +470,31 @@ fn silent_connections_at_max_clients_do_not_lock_out_a_new_master() {
 }
 
 #[test]
+fn sixty_four_silent_connections_do_not_lock_out_a_65th_master_at_the_defaults() {
+    let gw = Gateway::start(&[("/dev/does-not-exist", "n1")], "");
+    let mut silent: Vec<Raw> = (0..64).map(|_| Raw::connect(gw.port)).collect();
+    std::thread::sleep(Duration::from_millis(300));
+    let t0 = Instant::now();
+    let mut master = Raw::connect(gw.port);
+    master.request(65, 1, &READ_ALL);
+    let (tid, unit, pdu) = master.answer(Duration::from_secs(2)).unwrap();
+    println!(
+        "the 65th master answered {:?} after connecting",
+        t0.elapsed()
+    );
+    assert_eq!((tid, unit, pdu.len()), (65, 1, 2 + 48));
+    // The first silent one made room; the others keep their places.
+    assert!(silent[0].closed_after(t0, Duration::from_secs(1)).is_some());
+    let t1 = Instant::now();
+    assert_eq!(
+        silent[63].closed_after(t1, Duration::from_millis(200)),
+        None
+    );
+    silent[63].request(9, 1, &READ_ALL);
+    assert_eq!(silent[63].answer(Duration::from_secs(2)).unwrap().0, 9);
+}
+
+#[test]
 fn broadcasts_are_never_answered_and_malformed_requests_get_exceptions_not_a_closed_connection() {
     let gw = Gateway::start(&[("/dev/does-not-exist", "n1")], "commands = true\n");
     let mut c = Raw::connect(gw.port);

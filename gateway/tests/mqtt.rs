@@ -194,7 +194,20 @@ fn three_nodes_every_record_arrives_once_with_discovery_and_state() {
         .filter(|m| m.topic == "fois/gw/status" || m.topic == "fois/gw/availability")
         .map(|m| m.topic.as_str())
         .collect();
-    assert_eq!(order.last(), Some(&"fois/gw/availability"), "{order:?}");
+    let shown: Vec<String> = msgs
+        .iter()
+        .filter(|m| m.topic == "fois/gw/status" || m.topic == "fois/gw/availability")
+        .map(|m| {
+            format!(
+                "{} {} {:?}",
+                m.topic,
+                m.text().chars().take(12).collect::<String>(),
+                m.at
+            )
+        })
+        .collect();
+    assert_eq!(order.last(), Some(&"fois/gw/availability"), "{shown:?}");
+    assert_eq!(order[order.len() - 2], "fois/gw/status", "{shown:#?}");
     assert_eq!(order[order.len() - 2], "fois/gw/status", "{order:?}");
 
     // The log (the journal under systemd) says when a node ices or wets,
@@ -354,7 +367,13 @@ fn broker_stopped_for_30_s_and_restarted_nothing_is_lost() {
     gw.wait_output("broker 127.0.0.1", Duration::from_secs(5));
     std::thread::sleep(Duration::from_secs(30).saturating_sub(down_at.elapsed()));
     broker.restart();
-    gw.wait_output("sending", Duration::from_secs(10));
+    // The second connection (the first may say "sending" too, when a node
+    // was quicker than the broker at the start).
+    let t0 = Instant::now();
+    while gw.output().matches("connected to the broker").count() < 2 {
+        assert!(t0.elapsed() < Duration::from_secs(10), "{}", gw.output());
+        std::thread::sleep(Duration::from_millis(50));
+    }
     // The backlog drains, then a clean stop. The nodes keep sending
     // (100 records/s in all), so a status line may always count the one or
     // two records in flight: drained means a status line after the
@@ -1129,6 +1148,7 @@ fn another_front_end_reads_every_node_and_sends_commands_through_the_service() {
         .send(FrontEndCommand {
             node: 0,
             command: NodeCommand::AckAlarm,
+            reply: None,
         })
         .unwrap();
     let t0 = Instant::now();
@@ -1150,4 +1170,144 @@ fn another_front_end_reads_every_node_and_sends_commands_through_the_service() {
     let sum = run.join().unwrap().unwrap();
     assert_eq!(sum.broker_connects, 1);
     assert!(sum.frames > 20, "{sum:?}");
+}
+
+#[test]
+fn a_modbus_acknowledge_flood_gets_busy_answers_and_one_command_result() {
+    use std::io::{Read, Write};
+
+    let dir = tempfile::tempdir().unwrap();
+    let broker = Broker::start(dir.path(), "");
+    let sub = Subscriber::start(
+        broker.port,
+        "t-flood",
+        &["fois/gw/n1/state", "fois/gw/n1/command/result"],
+        SubOptions::default(),
+    );
+    let node = iced_node();
+    let modbus_port = free_port();
+    let cfg = gateway_config(
+        dir.path(),
+        "gw",
+        broker.port,
+        &[(&node.path, "n1")],
+        &format!(
+            "[modbus]\nenabled = true\ncommands = true\nlisten = \"127.0.0.1:{modbus_port}\"\n"
+        ),
+    );
+    let mut gw = GatewayProc::start(&cfg, &[], &dir.path().join("gw.log"));
+    wait_alarm(&sub);
+    let mut s = std::net::TcpStream::connect(("127.0.0.1", modbus_port)).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(3))).unwrap();
+    // Batches of 20 pipelined writes of 1 to alarm_ack (unit 1), for 3 s.
+    let (mut ok, mut busy, mut writes) = (0, 0, 0u32);
+    let t0 = Instant::now();
+    while t0.elapsed() < Duration::from_secs(3) {
+        let mut batch = Vec::new();
+        for k in 0..20u16 {
+            let tid = (writes as u16).wrapping_add(k);
+            batch.extend(tid.to_be_bytes());
+            batch.extend([0, 0, 0, 6, 1, 0x06, 0, 23, 0, 1]);
+        }
+        s.write_all(&batch).unwrap();
+        for _ in 0..20 {
+            let mut h = [0u8; 7];
+            s.read_exact(&mut h).unwrap();
+            let mut pdu = vec![0u8; usize::from(h[5]) - 1];
+            s.read_exact(&mut pdu).unwrap();
+            match pdu.as_slice() {
+                [0x06, 0, 23, 0, 1] => ok += 1,
+                [0x86, 0x06] => busy += 1,
+                other => panic!("answer {other:02x?}"),
+            }
+        }
+        writes += 20;
+    }
+    let rate = f64::from(writes) / t0.elapsed().as_secs_f64();
+    println!("{writes} acknowledge writes at {rate:.0}/s: {ok} success, {busy} busy (06)");
+    assert!(writes >= 1_000, "{writes}");
+    // [commands] min_interval_ms 5 s: one write handed to the node.
+    assert_eq!((ok, busy), (1, writes - 1));
+    std::thread::sleep(Duration::from_secs(1));
+    let results = sub.on("fois/gw/n1/command/result");
+    assert_eq!(results.len(), 1, "{results:?}");
+    assert!(
+        results[0].text().contains("AlarmAcknowledged"),
+        "{}",
+        results[0].text()
+    );
+    assert_eq!(gw.interrupt(), 0);
+    let out = gw.output();
+    let refusal_lines = out.lines().filter(|l| l.contains("refused")).count();
+    println!("{refusal_lines} refusal log line(s)");
+    assert_eq!(refusal_lines, 1, "{out}");
+}
+
+#[test]
+fn another_instances_last_will_leaves_no_phantom_offline_on_a_running_gateway() {
+    let dir = tempfile::tempdir().unwrap();
+    let broker = Broker::start(dir.path(), "");
+    let sub = Subscriber::start(
+        broker.port,
+        "t-phantom",
+        &["fois/gw/availability"],
+        SubOptions::default(),
+    );
+    let node = NodeProc::start(Scene::dry(5.0, 1));
+    let cfg = gateway_config(dir.path(), "gw", broker.port, &[(&node.path, "n1")], "");
+    let mut gw = GatewayProc::start(&cfg, &[], &dir.path().join("gw.out"));
+    gw.wait_output("node n1 on", Duration::from_secs(10));
+    // A second instance's connection with the gateway's last will (retained
+    // `offline` on its availability), killed: the broker publishes the will.
+    let mut intruder = std::process::Command::new(mosquitto_tool("mosquitto_sub"))
+        .args([
+            "-h",
+            "127.0.0.1",
+            "-p",
+            &broker.port.to_string(),
+            "-i",
+            "gw-second",
+        ])
+        .args(["-t", "fois/nothing", "--will-topic", "fois/gw/availability"])
+        .args([
+            "--will-payload",
+            "offline",
+            "--will-retain",
+            "--will-qos",
+            "1",
+        ])
+        .stdout(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(700));
+    intruder.kill().unwrap();
+    intruder.wait().unwrap();
+    sub.wait_for("the will", Duration::from_secs(5), |m| {
+        m.iter().any(|m| m.text() == "offline")
+    });
+    std::thread::sleep(Duration::from_secs(2));
+    // What a newcomer (Home Assistant after a restart) finds retained.
+    let late = Subscriber::start(
+        broker.port,
+        "t-phantom-late",
+        &["fois/gw/availability"],
+        SubOptions::default(),
+    );
+    late.wait_for("the retained availability", Duration::from_secs(5), |m| {
+        !m.is_empty()
+    });
+    let m = late.messages();
+    assert!(m[0].retain);
+    assert_eq!(m[0].text(), "online", "a phantom offline stayed");
+    assert!(
+        gw.output()
+            .contains("`offline` appeared on fois/gw/availability"),
+        "{}",
+        gw.output()
+    );
+    assert_eq!(gw.interrupt(), 0);
+    // Its own goodbye stays: a clean stop leaves `offline`.
+    std::thread::sleep(Duration::from_millis(500));
+    let after = sub.messages();
+    assert_eq!(after.last().unwrap().text(), "offline", "{after:?}");
 }

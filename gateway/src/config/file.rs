@@ -42,6 +42,9 @@ pub struct FileConfig {
     /// The nodes, one `[[node]]` table each.
     #[serde(default, rename = "node")]
     pub nodes: Vec<NodeFile>,
+    /// The text it was parsed from (to name the line of a bad value).
+    #[serde(skip)]
+    pub source: Option<super::located::Source>,
 }
 
 /// `[broker]`.
@@ -247,10 +250,13 @@ impl FileConfig {
         Self::parse(&text).map_err(|e| anyhow::anyhow!("config {}: {e}", path.display()))
     }
 
-    /// Parse config text.
+    /// Parse config text. An error names the line, column and key of the
+    /// bad value ([`super::located`]; never the line itself: it may hold
+    /// the password).
     pub fn parse(text: &str) -> anyhow::Result<FileConfig> {
-        // The toml error does not echo the password: it quotes only the
-        // offending key's line number and column.
-        toml::from_str(text).map_err(|e| anyhow::anyhow!("{}", e.message()))
+        let mut c: FileConfig =
+            toml::from_str(text).map_err(|e| super::located::parse_error(text, &e))?;
+        c.source = Some(super::located::Source(text.to_string()));
+        Ok(c)
     }
 }

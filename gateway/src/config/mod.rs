@@ -19,6 +19,7 @@
 //! with `{:?}` or `--print-config` never shows them.
 
 pub mod file;
+pub mod located;
 pub mod log;
 pub mod modbus;
 pub mod resolve;

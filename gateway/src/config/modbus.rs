@@ -8,6 +8,8 @@ use std::time::Duration;
 
 use serde::Deserialize;
 
+use super::located::KeyError;
+
 /// The listening address when `[modbus]` names none: loopback only (a
 /// SCADA on another machine needs `listen = "0.0.0.0:5020"` and a
 /// firewall), and port 5020, not Modbus's 502: a port under 1024 needs a
@@ -105,29 +107,47 @@ pub fn resolve_modbus(
 ) -> anyhow::Result<Option<ModbusConfig>> {
     let listen_text = m.listen.as_deref().unwrap_or(DEFAULT_LISTEN);
     let listen: SocketAddr = listen_text.parse().map_err(|_| {
-        anyhow::anyhow!(
-            "[modbus] listen `{listen_text}` is not an address and port (e.g. 127.0.0.1:5020, \
-             0.0.0.0:502, [::1]:5020)"
+        KeyError::at(
+            "modbus.listen",
+            format!(
+                "[modbus] listen `{listen_text}` is not an address and port (e.g. \
+                 127.0.0.1:5020, 0.0.0.0:502, [::1]:5020)"
+            ),
         )
     })?;
     if listen.port() == 0 {
-        anyhow::bail!("[modbus] listen `{listen_text}`: port 0 is not a port");
+        return Err(KeyError::at(
+            "modbus.listen",
+            format!("[modbus] listen `{listen_text}`: port 0 is not a port"),
+        ));
     }
     let stale_s = m.stale_after_s.unwrap_or(DEFAULT_STALE_AFTER_S);
     if !(0.1..=86_400.0).contains(&stale_s) {
-        anyhow::bail!("[modbus] stale_after_s must be within 0.1..=86400 (not {stale_s})");
+        return Err(KeyError::at(
+            "modbus.stale_after_s",
+            format!("[modbus] stale_after_s must be within 0.1..=86400 (not {stale_s})"),
+        ));
     }
     let max_clients = m.max_clients.unwrap_or(DEFAULT_MAX_CLIENTS);
     if !(1..=1024).contains(&max_clients) {
-        anyhow::bail!("[modbus] max_clients must be within 1..=1024 (not {max_clients})");
+        return Err(KeyError::at(
+            "modbus.max_clients",
+            format!("[modbus] max_clients must be within 1..=1024 (not {max_clients})"),
+        ));
     }
     let idle_s = m.idle_timeout_s.unwrap_or(DEFAULT_IDLE_TIMEOUT_S);
     if !(1.0..=86_400.0).contains(&idle_s) {
-        anyhow::bail!("[modbus] idle_timeout_s must be within 1..=86400 (not {idle_s})");
+        return Err(KeyError::at(
+            "modbus.idle_timeout_s",
+            format!("[modbus] idle_timeout_s must be within 1..=86400 (not {idle_s})"),
+        ));
     }
     let frame_s = m.frame_timeout_s.unwrap_or(DEFAULT_FRAME_TIMEOUT_S);
     if !(0.1..=60.0).contains(&frame_s) {
-        anyhow::bail!("[modbus] frame_timeout_s must be within 0.1..=60 (not {frame_s})");
+        return Err(KeyError::at(
+            "modbus.frame_timeout_s",
+            format!("[modbus] frame_timeout_s must be within 0.1..=60 (not {frame_s})"),
+        ));
     }
     if !m.enabled.unwrap_or(false) {
         return Ok(None);
@@ -139,28 +159,34 @@ pub fn resolve_modbus(
             None => u8::try_from(k + 1).unwrap_or(u8::MAX),
         };
         if !(1..=MAX_UNIT).contains(&unit) {
-            anyhow::bail!(
-                "node {}: Modbus unit {} is outside 1..={MAX_UNIT}{}",
-                k + 1,
-                if u.is_some() {
-                    unit.to_string()
-                } else {
-                    format!("{} (its position)", k + 1)
-                },
-                if u.is_none() {
-                    ": give the nodes after the 247th a modbus_unit"
-                } else {
-                    ""
-                }
-            );
+            return Err(KeyError::at(
+                format!("node[{k}].modbus_unit"),
+                format!(
+                    "node {}: Modbus unit {} is outside 1..={MAX_UNIT}{}",
+                    k + 1,
+                    if u.is_some() {
+                        unit.to_string()
+                    } else {
+                        format!("{} (its position)", k + 1)
+                    },
+                    if u.is_none() {
+                        ": give the nodes after the 247th a modbus_unit"
+                    } else {
+                        ""
+                    }
+                ),
+            ));
         }
         if let Some(other) = units.iter().position(|&x| x == unit) {
-            anyhow::bail!(
-                "nodes {} and {} both have Modbus unit {unit} (`modbus_unit`, by default the \
-                 node's position)",
-                other + 1,
-                k + 1
-            );
+            return Err(KeyError::at(
+                format!("node[{k}].modbus_unit"),
+                format!(
+                    "nodes {} and {} both have Modbus unit {unit} (`modbus_unit`, by default \
+                     the node's position)",
+                    other + 1,
+                    k + 1
+                ),
+            ));
         }
         units.push(unit);
     }

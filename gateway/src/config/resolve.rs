@@ -10,6 +10,7 @@ use super::file::{
     BrokerFile, CommandsFile, FileConfig, HomeAssistantFile, NodeFile, Overrides, PublishFile,
     QueueFile,
 };
+use super::located::KeyError;
 use super::{
     BrokerConfig, DEFAULT_COMMAND_MIN_INTERVAL_MS, DEFAULT_QUEUE_MAX_BYTES, GatewayConfig,
     MAX_INTERVAL_MS, MIN_QUEUE_MAX_BYTES, NodeSpec, Secret, TlsConfig, check_name, check_topic,
@@ -74,8 +75,15 @@ struct Commands {
 }
 
 impl FileConfig {
-    /// Apply the flags, fill in defaults, check everything.
-    pub fn resolve(self, o: &Overrides) -> anyhow::Result<GatewayConfig> {
+    /// Apply the flags, fill in defaults, check everything; an error of a
+    /// value from the file names its line and key.
+    pub fn resolve(mut self, o: &Overrides) -> anyhow::Result<GatewayConfig> {
+        let source = self.source.take();
+        self.resolve_values(o)
+            .map_err(|e| super::located::at_key(source.as_ref().map(|s| s.0.as_str()), e))
+    }
+
+    fn resolve_values(self, o: &Overrides) -> anyhow::Result<GatewayConfig> {
         let name = o
             .name
             .clone()
@@ -95,6 +103,18 @@ impl FileConfig {
         let nodes = resolve_nodes(self.nodes, o)?;
         units.resize(nodes.len(), None);
         let modbus = super::modbus::resolve_modbus(self.modbus, &units)?;
+        if let Some(m) = &modbus
+            && same_socket(m.listen, &broker.host, broker.port)
+        {
+            return Err(KeyError::at(
+                "modbus.listen",
+                format!(
+                    "[modbus] listen {} is the broker's own address and port ({}:{}): give \
+                     Modbus another port (e.g. 5020)",
+                    m.listen, broker.host, broker.port
+                ),
+            ));
+        }
         let log = super::log::resolve_log(self.log)?;
         Ok(GatewayConfig {
             name,
@@ -115,6 +135,42 @@ impl FileConfig {
             log,
         })
     }
+}
+
+/// The Modbus server listening on `listen` would take the socket of a
+/// broker on this machine at `host`:`port` (the same port, and the broker
+/// on loopback, on the listening address, or Modbus on every address and
+/// the broker on this machine's name).
+fn same_socket(listen: std::net::SocketAddr, host: &str, port: u16) -> bool {
+    if listen.port() != port {
+        return false;
+    }
+    let host = host.trim_start_matches('[').trim_end_matches(']');
+    match host.parse::<std::net::IpAddr>() {
+        Ok(ip) => {
+            ip.is_loopback()
+                || ip.is_unspecified()
+                || ip == listen.ip()
+                || listen.ip().is_unspecified() && local_ip(ip)
+        }
+        Err(_) => {
+            host.eq_ignore_ascii_case("localhost")
+                || listen.ip().is_unspecified() && host_is_this_machine(host)
+        }
+    }
+}
+
+/// `ip` is an address of this machine (a socket binds to it).
+fn local_ip(ip: std::net::IpAddr) -> bool {
+    std::net::UdpSocket::bind((ip, 0)).is_ok()
+}
+
+/// `host` names this machine (resolves to one of its addresses).
+fn host_is_this_machine(host: &str) -> bool {
+    use std::net::ToSocketAddrs;
+    (host, 0)
+        .to_socket_addrs()
+        .is_ok_and(|mut a| a.any(|a| a.ip().is_loopback() || local_ip(a.ip())))
 }
 
 /// `[broker]` and `[broker.tls]` with `--broker`, `--username`,
@@ -257,7 +313,10 @@ fn resolve_homeassistant(
 fn resolve_commands(c: CommandsFile, topic_prefix: &str, name: &str) -> anyhow::Result<Commands> {
     let min_interval_ms = c.min_interval_ms.unwrap_or(DEFAULT_COMMAND_MIN_INTERVAL_MS);
     if min_interval_ms > MAX_INTERVAL_MS {
-        anyhow::bail!("[commands] min_interval_ms must be at most one day ({MAX_INTERVAL_MS})");
+        return Err(KeyError::at(
+            "commands.min_interval_ms",
+            format!("[commands] min_interval_ms must be at most one day ({MAX_INTERVAL_MS})"),
+        ));
     }
     let topic = if c.enabled.unwrap_or(false) {
         let t = c
@@ -298,20 +357,44 @@ fn resolve_nodes(file: Vec<NodeFile>, o: &Overrides) -> anyhow::Result<Vec<NodeS
     if nodes.is_empty() {
         anyhow::bail!("no nodes: add [[node]] tables to the config or --node PATH[=NAME]");
     }
-    let mut seen_ports = std::collections::HashSet::new();
-    let mut seen_names = std::collections::HashSet::new();
-    for n in &nodes {
+    // Ports compared as the files they are (a /dev/serial/by-id link and
+    // its target are one port); names without case (Home Assistant's ids
+    // and many brokers' ACLs do not tell `Tower` from `tower`).
+    let mut seen_ports: Vec<(PathBuf, &str)> = Vec::new();
+    let mut seen_names: Vec<(String, &str)> = Vec::new();
+    for (k, n) in nodes.iter().enumerate() {
         if n.port.is_empty() {
             anyhow::bail!("a [[node]] has an empty port");
         }
-        if !seen_ports.insert(n.port.clone()) {
-            anyhow::bail!("the port {} is listed twice", n.port);
+        let real = std::fs::canonicalize(&n.port).unwrap_or_else(|_| PathBuf::from(&n.port));
+        if let Some((_, first)) = seen_ports.iter().find(|(p, _)| *p == real) {
+            let detail = if *first == n.port {
+                format!("the port {} is listed twice", n.port)
+            } else {
+                format!(
+                    "one serial port listed twice: {first} and {} are both {}",
+                    n.port,
+                    real.display()
+                )
+            };
+            return Err(KeyError::at(format!("node[{k}].port"), detail));
         }
+        seen_ports.push((real, &n.port));
         if let Some(name) = &n.name {
             check_name("node name", name)?;
-            if !seen_names.insert(name.clone()) {
-                anyhow::bail!("the node name `{name}` is used twice");
+            let folded = name.to_lowercase();
+            if let Some((_, first)) = seen_names.iter().find(|(f, _)| *f == folded) {
+                let detail = if first == name {
+                    format!("the node name `{name}` is used twice")
+                } else {
+                    format!(
+                        "the node names `{first}` and `{name}` differ only in case (Home \
+                         Assistant ids and topics would collide)"
+                    )
+                };
+                return Err(KeyError::at(format!("node[{k}].name"), detail));
             }
+            seen_names.push((folded, name));
         }
         if n.baud == 0 {
             anyhow::bail!("node {}: baud 0", n.port);

@@ -27,7 +27,7 @@ use tracing::{info, warn};
 
 use super::retained_check::{CHECK_TIMEOUT, Check, Verdict};
 use super::{Action, Gateway};
-use crate::command::{MAX_COMMAND_BYTES, NodeCommand, command_word};
+use crate::command::{MAX_COMMAND_BYTES, NodeCommand, Refusal, command_word};
 use crate::payload::CommandResultJson;
 
 impl Gateway {
@@ -71,6 +71,10 @@ impl Gateway {
     pub fn on_incoming(&mut self, topic: &str, payload: &[u8], retained: bool, now: Instant) {
         if topic == self.topics.owner() {
             self.on_claim(payload, now);
+            return;
+        }
+        if topic == self.topics.gateway_availability() {
+            self.on_own_availability(payload, now);
             return;
         }
         if self.cfg.command_topic.is_none() {
@@ -171,7 +175,8 @@ impl Gateway {
                 continue;
             };
             if verdict == Verdict::Passed {
-                self.request_command(k, &c.shown, c.command, "MQTT", now);
+                // Its refusal is published and logged there.
+                let _ = self.request_command(k, &c.shown, c.command, "MQTT", now);
             } else {
                 let name = self.node_name(k).unwrap_or_default();
                 self.refuse_command(
@@ -202,10 +207,16 @@ impl Gateway {
 
     /// A command from another front end (see
     /// [`crate::command::FrontEndCommand`]): the same checks as MQTT's.
-    pub fn front_end_command(&mut self, node: usize, cmd: NodeCommand, now: Instant) {
-        if node < self.nodes.len() {
-            self.request_command(node, cmd.name(), cmd, "a front end", now);
+    pub fn front_end_command(
+        &mut self,
+        node: usize,
+        cmd: NodeCommand,
+        now: Instant,
+    ) -> Result<(), Refusal> {
+        if node >= self.nodes.len() {
+            return Err(Refusal::Offline);
         }
+        self.request_command(node, cmd.name(), cmd, "a front end", now)
     }
 
     /// Hand `cmd` to node `k` unless it is offline or its last command was
@@ -217,11 +228,11 @@ impl Gateway {
         cmd: NodeCommand,
         from: &str,
         now: Instant,
-    ) {
+    ) -> Result<(), Refusal> {
         let name = self.node_name(k).unwrap_or_default();
         if !self.online(k) {
             self.refuse_command(&name, shown, "the node is offline".into());
-            return;
+            return Err(Refusal::Offline);
         }
         let min = self.cfg.command_min_interval;
         if let Some(last) = self.nodes[k].last_command {
@@ -236,7 +247,7 @@ impl Gateway {
                         since.as_secs_f64()
                     ),
                 );
-                return;
+                return Err(Refusal::RateLimit);
             }
         }
         self.nodes[k].last_command = Some(now);
@@ -245,5 +256,6 @@ impl Gateway {
             node: k,
             command: cmd,
         });
+        Ok(())
     }
 }

@@ -134,6 +134,11 @@ pub struct Gateway {
     instance: claim::Instance,
     conflict: Option<String>,
     reannounce_at: Option<Instant>,
+    /// The goodbye (`offline`) was published: an `offline` on the
+    /// availability topic is ours ([`owner`]).
+    said_goodbye: bool,
+    /// When a phantom `offline` was last logged ([`owner`]).
+    phantom_logged: Option<Instant>,
     /// Subscriptions handed to the client, in order (`Outgoing::Subscribe`
     /// gives their packet ids in the same order), and by packet id.
     sub_fifo: VecDeque<Option<usize>>,
@@ -166,6 +171,8 @@ impl Gateway {
             instance: claim::Instance::this_process(),
             conflict: None,
             reannounce_at: None,
+            said_goodbye: false,
+            phantom_logged: None,
             sub_fifo: VecDeque::new(),
             sub_pkids: HashMap::new(),
             journal: journal::Limiter::default(),
@@ -394,6 +401,7 @@ impl Gateway {
         );
         self.claim_name();
         self.announce_all(now);
+        self.watch_availability();
     }
 
     /// Every retained message: availability, discovery, each node's.
@@ -505,6 +513,7 @@ impl Gateway {
             }
         }
         self.publish_status(now);
+        self.said_goodbye = true;
         self.publish_now(
             self.topics.gateway_availability(),
             b"offline".to_vec(),

@@ -16,6 +16,17 @@
 //! A restart after a crash is no conflict: the crashed instance's claim
 //! was made before the new one started.
 //!
+//! **No phantom `offline`.** The second gateway's last will (retained
+//! `offline` on the gateway's availability topic) fires when its
+//! connection ends without a DISCONNECT — killed, or stopped while the
+//! broker had just evicted it — possibly after the first has published its
+//! retained messages again, and would then say `offline` for ever about a
+//! gateway that runs. So each gateway also subscribes to its own
+//! availability topic and, while it runs and before its goodbye, answers
+//! any `offline` there with `online` again (logged at most once per
+//! [`PHANTOM_LOG_INTERVAL`]). The payloads stay `online`/`offline`, as Home
+//! Assistant's availability expects.
+//!
 //! The claim's payload ([`Claim`], [`Instance`](super::claim::Instance))
 //! lives in [`super::claim`], which the gateway's record reads too.
 
@@ -32,12 +43,47 @@ use super::claim::Claim;
 /// retained messages again this long later (when the younger has stopped).
 pub const REANNOUNCE_AFTER: Duration = Duration::from_secs(3);
 
+/// A phantom `offline` corrected is logged at most once per this long.
+pub const PHANTOM_LOG_INTERVAL: Duration = Duration::from_secs(60);
+
 impl Gateway {
     /// Claim the name: subscribe to the owner topic, then publish the claim
     /// (our own echo is recognised by its instance id).
     pub(super) fn claim_name(&mut self) {
         self.subscribe(self.topics.owner(), None);
         self.publish_claim();
+    }
+
+    /// Watch the own availability topic (after `online` was published: the
+    /// retained message the subscription brings is then ours).
+    pub(super) fn watch_availability(&mut self) {
+        self.subscribe(self.topics.gateway_availability(), None);
+    }
+
+    /// A message on this gateway's own availability topic: an `offline`
+    /// while it runs (not ours: we have not said goodbye) is corrected.
+    pub(super) fn on_own_availability(&mut self, payload: &[u8], now: Instant) {
+        if payload != b"offline" || self.said_goodbye || !self.connected || self.conflict.is_some()
+        {
+            return;
+        }
+        if self
+            .phantom_logged
+            .is_none_or(|t| now.saturating_duration_since(t) >= PHANTOM_LOG_INTERVAL)
+        {
+            self.phantom_logged = Some(now);
+            warn!(
+                "`offline` appeared on {} while this gateway runs (another instance's last \
+                 will?): published `online` again",
+                self.topics.gateway_availability()
+            );
+        }
+        self.publish_now(
+            self.topics.gateway_availability(),
+            b"online".to_vec(),
+            true,
+            QoS::AtLeastOnce,
+        );
     }
 
     fn publish_claim(&mut self) {

@@ -137,6 +137,9 @@ fn nothing_goes_out_before_the_broker_and_everything_after_it() {
             "fois/gw/availability"
         ]
     );
+    // Its own availability watched after `online` went out.
+    let at = |x: &str| t.iter().position(|y| y == x).unwrap();
+    assert!(at("SUBSCRIBE fois/gw/availability") > at("fois/gw/availability"));
     assert!(t.contains(&"homeassistant/binary_sensor/fois_gw/connectivity/config".into()));
     assert!(t.contains(&"fois/gw/a/availability".into()));
     assert!(t.contains(&"fois/gw/a/state".into()));
@@ -460,6 +463,34 @@ fn the_older_of_two_gateways_claims_again_and_publishes_everything_again() {
     ] {
         assert!(t.contains(&topic.to_string()), "{topic} not in {t:?}");
     }
+}
+
+#[test]
+fn a_phantom_offline_of_a_running_gateway_is_answered_online_but_not_its_own_goodbye() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut gw = gateway(dir.path(), "");
+    let t0 = Instant::now();
+    gw.on_connected(t0);
+    let _ = gw.actions();
+    // Its own `online` (the subscription's retained copy): nothing.
+    gw.on_incoming("fois/gw/availability", b"online", true, t0);
+    assert!(gw.actions().is_empty());
+    // Another instance's last will, retained or live: `online` again.
+    for retained in [false, true] {
+        gw.on_incoming("fois/gw/availability", b"offline", retained, t0);
+        let a = gw.actions();
+        assert_eq!(topics(&a), ["fois/gw/availability"]);
+        assert!(matches!(
+            &a[0],
+            Action::Publish { payload, retain: true, qos: QoS::AtLeastOnce, .. }
+                if payload.as_slice() == b"online"
+        ));
+    }
+    // After its goodbye the `offline` is its own.
+    gw.goodbye(t0);
+    let _ = gw.actions();
+    gw.on_incoming("fois/gw/availability", b"offline", false, t0);
+    assert!(gw.actions().is_empty());
 }
 
 /// The node ids (`fois_node_<key>`) in the discovery topics of `actions`.

@@ -18,8 +18,10 @@
 //! | 01 illegal function | a function other than 03, 04, 06, 16 (codes ≥ 0x80 included); 06 and 16 while `commands = false` |
 //! | 02 illegal data address | registers beyond the table; a write to a register other than `alarm_ack` |
 //! | 03 illegal data value | a PDU too short or too long for its function; a quantity of 0 or over 125 (read) / 123 (write), or an FC 16 byte count that disagrees; a value other than 1 written to `alarm_ack` |
+//! | 04 server device failure | `alarm_ack` written while the gateway stops |
+//! | 06 server device busy | `alarm_ack` written sooner than `[commands] min_interval_ms` after the node's last command, or not taken by the gateway within 1 s |
 //! | 0A gateway path unavailable | a unit id no node has |
-//! | 0B gateway target device failed to respond | `alarm_ack` written while the node's link is down |
+//! | 0B gateway target device failed to respond | `alarm_ack` written while the node's link is down or it is offline |
 
 use std::net::SocketAddr;
 use std::sync::Arc;
@@ -35,16 +37,26 @@ pub use super::units::{MAX_READ, ModbusUnits};
 use crate::config::ModbusConfig;
 
 /// Listen on the configured address (before the gateway runs: a taken
-/// port is an error at the start, not later).
-pub async fn bind(cfg: &ModbusConfig) -> anyhow::Result<TcpListener> {
-    TcpListener::bind(cfg.listen)
-        .await
+/// port is an error at the start, not later). A std listener, so that it
+/// can be bound on one thread and served on the network runtime's.
+pub fn bind(cfg: &ModbusConfig) -> anyhow::Result<std::net::TcpListener> {
+    std::net::TcpListener::bind(cfg.listen)
+        .and_then(|l| l.set_nonblocking(true).map(|()| l))
         .map_err(|e| anyhow::anyhow!("cannot listen for Modbus TCP on {}: {e}", cfg.listen))
 }
 
 /// Serve Modbus TCP on `listener` until the task is dropped; a failing
 /// `accept` (out of file descriptors) is logged and retried after a second.
-pub async fn serve(listener: TcpListener, units: Arc<ModbusUnits>) {
+/// Run it on a runtime that does no disk IO (the gateway's network
+/// runtime, [`crate::service`]).
+pub async fn serve(listener: std::net::TcpListener, units: Arc<ModbusUnits>) {
+    let listener = match TcpListener::from_std(listener) {
+        Ok(l) => l,
+        Err(e) => {
+            warn!("Modbus TCP: cannot serve the listening socket ({e})");
+            return;
+        }
+    };
     loop {
         let (stream, peer) = match listener.accept().await {
             Ok(c) => c,
@@ -71,6 +83,9 @@ pub async fn serve(listener: TcpListener, units: Arc<ModbusUnits>) {
                 );
             }
         }
+        // Answers go out at once (Nagle would hold an answer back until
+        // the previous one is acknowledged).
+        let _ = stream.set_nodelay(true);
         debug!("Modbus: {peer} connected");
         let task = tokio::spawn(connection(
             stream,
@@ -145,7 +160,10 @@ async fn connection(mut stream: TcpStream, peer: SocketAddr, place: Place) {
             continue; // broadcast: never answered
         }
         let function = request.first().copied().unwrap_or(0);
-        let answer = pdu::request(request).and_then(|r| units.answer(h.unit, &r, now, peer));
+        let answer = match pdu::request(request) {
+            Ok(r) => units.answer(h.unit, &r, now, peer).await,
+            Err(e) => Err(e),
+        };
         let out = pdu::frame(h.transaction, h.unit, &pdu::response(function, answer));
         if !matches!(timeout(frame, stream.write_all(&out)).await, Ok(Ok(()))) {
             debug!("Modbus: {peer} closed: the answer not taken within {frame:?}");

@@ -38,8 +38,11 @@
 //! A second gateway on the same directory is refused at start (the
 //! directory's `lock`).
 
+mod drop_log;
 mod failure;
 mod segment;
+#[cfg(test)]
+pub(crate) mod stall;
 #[cfg(test)]
 mod tests;
 
@@ -50,6 +53,9 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
+use tracing::{info, warn};
+
+use drop_log::{DropLine, DropLog};
 
 pub use segment::{MAX_RECORD_BYTES, Record};
 use segment::{SegReader, Segment, read_record, seg_path};
@@ -128,6 +134,8 @@ pub struct Queue {
     /// Memory of the records not on disk (index ≥ `on_disk`).
     held_bytes: usize,
     reader: Option<SegReader>,
+    /// The drops told in the log.
+    drop_log: DropLog,
     _lock: File,
 }
 
@@ -207,6 +215,7 @@ impl Queue {
             mem_bytes: 0,
             held_bytes: 0,
             reader: None,
+            drop_log: DropLog::new(dropped),
             _lock: lock,
         };
         q.write_ack()?;
@@ -470,9 +479,47 @@ impl Queue {
     }
 
     /// Hand appended records to the kernel; sync and write the `ack` file
-    /// when due; notice a removed directory; retry a failing disk. Call
-    /// every 100 ms or so.
+    /// when due; notice a removed directory; retry a failing disk; log when
+    /// records are being dropped ([`drop_log`]). Call every 100 ms or so.
     pub fn tick(&mut self) {
+        #[cfg(test)]
+        stall::wait(&self.dir);
+        self.tick_disk();
+        self.log_drops(Instant::now());
+    }
+
+    /// Tell the log, once per episode, that records are being dropped.
+    fn log_drops(&mut self, now: Instant) {
+        let cause = match &self.failing {
+            Some((why, _)) => format!(
+                "the disk fails ({why}) and the records held in memory reached {} bytes",
+                self.limits.unsaved_bytes
+            ),
+            None => format!(
+                "the queue reached its bound of {} bytes (the broker away too long)",
+                self.limits.max_bytes
+            ),
+        };
+        match self.drop_log.observe(self.dropped, now) {
+            Some(DropLine::Started { dropped }) => warn!(
+                "queue {}: dropping the oldest measurements: {cause}; {dropped} dropped \
+                 (events are kept)",
+                self.dir.display()
+            ),
+            Some(DropLine::Continuing { since, episode }) => warn!(
+                "queue {}: still dropping measurements ({cause}): {since} since the last \
+                 such line, {episode} since it began",
+                self.dir.display()
+            ),
+            Some(DropLine::Ended { episode }) => info!(
+                "queue {}: no longer dropping measurements; {episode} were lost",
+                self.dir.display()
+            ),
+            None => {}
+        }
+    }
+
+    fn tick_disk(&mut self) {
         if self.writer.is_some() && !self.dir.is_dir() {
             self.fail(format!("the directory {} was removed", self.dir.display()));
         }

@@ -202,6 +202,48 @@ fn the_bound_drops_the_oldest_measurements_counts_them_and_keeps_every_event() {
 }
 
 #[test]
+fn dropping_is_told_in_the_log_once_then_at_most_once_a_minute() {
+    let log = crate::test_log::Capture::start();
+    let dir = tempfile::tempdir().unwrap();
+    let limits = small(64 * 1024);
+    let (mut q, _) = Queue::open(dir.path(), limits).unwrap();
+    let dropping = |log: &crate::test_log::Capture| {
+        log.lines()
+            .iter()
+            .filter(|l| l.contains("dropping"))
+            .cloned()
+            .collect::<Vec<_>>()
+    };
+    for i in 0..500 {
+        q.push(rec(i));
+    }
+    q.tick();
+    assert_eq!(q.dropped(), 0);
+    assert!(dropping(&log).is_empty());
+    // Past the bound: one warning, with the count and the cause; the
+    // ticks of the next seconds, dropping on, say nothing more.
+    let mut lines = Vec::new();
+    for i in 500..3_000 {
+        q.push(rec(i));
+        if i % 100 == 0 {
+            q.tick();
+            lines = dropping(&log);
+        }
+    }
+    q.tick();
+    assert!(q.dropped() > 2_000, "{}", q.dropped());
+    assert_eq!(lines.len(), 1, "{lines:?}");
+    assert!(
+        lines[0].contains("WARN")
+            && lines[0].contains("dropping the oldest measurements")
+            && lines[0].contains("bound of 65536 bytes"),
+        "{}",
+        lines[0]
+    );
+    assert_eq!(dropping(&log).len(), 1);
+}
+
+#[test]
 fn a_second_queue_on_the_same_directory_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let (q, _) = Queue::open(dir.path(), small(1 << 20)).unwrap();
@@ -291,6 +333,7 @@ fn full_disk_child(dir: &Path) {
         mem_bytes: 4096,
         unsaved_bytes: 16 * 1024,
     };
+    let log = crate::test_log::Capture::start();
     let (mut q, _) = Queue::open(dir, limits).unwrap();
     file_size_limit(Some(8 * 1024));
     let n = 600;
@@ -302,6 +345,17 @@ fn full_disk_child(dir: &Path) {
     }
     assert!(q.failing().is_some(), "the limit was hit");
     assert!(q.dropped() > 0, "16 KiB of held records overflowed");
+    let told: Vec<String> = log
+        .lines()
+        .into_iter()
+        .filter(|l| l.contains("dropping"))
+        .collect();
+    assert_eq!(told.len(), 1, "{told:?}");
+    assert!(
+        told[0].contains("the disk fails") && told[0].contains("reached 16384 bytes"),
+        "{}",
+        told[0]
+    );
     let got = drain(&mut q);
     check_losses(&got, n, q.dropped());
     // The disk takes writes again: everything held goes to disk.
