@@ -6,12 +6,14 @@
 //! - [`config`]: the node's configuration and its one validation rule.
 //! - [`framing`]: COBS + CRC-32 frames, the streaming decoder.
 //! - [`seq`]: the sequence-gap rule (lost frames, restarts) every host reader uses.
+//! - [`registers`]: the Modbus register map the node (RTU) and the gateway (TCP) serve.
 
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
 
 pub mod config;
 pub mod framing;
 pub mod messages;
+pub mod registers;
 pub mod seq;
 
 pub use config::{Config, ConfigError, ConfigField, ConfigV1, FIELDS, FieldSpec, LOAD_R_MAX_OHM};
