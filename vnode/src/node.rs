@@ -247,6 +247,7 @@ pub fn factory_record(gain: f64, rel_sd: f64) -> fois_firmware::storage::record:
         baseline: None,
         gain: Some(estimate),
         gain_calibration: Some(estimate),
+        link: fois_protocol::LinkSettings::default(),
     }
 }
 
@@ -337,6 +338,7 @@ impl VirtualNode {
                     baseline: None,
                     gain: None,
                     gain_calibration: None,
+                    link: fois_protocol::LinkSettings::default(),
                 },
             };
             if let Some(c) = &opts.config {
