@@ -11,11 +11,14 @@
 //! - [`saving`]: when the record is written (coalescing, rate limit,
 //!   retries);
 //! - [`gain_keeping`]: the learned optical gain — the estimator's prior, the
-//!   out-of-band flag, when it is worth keeping.
+//!   out-of-band flag, when it is worth keeping;
+//! - [`modbus_view`]: the node as its Modbus registers show it, and a
+//!   Modbus write's actions carried out.
 
 pub mod dispatch;
 pub mod frame;
 pub mod gain_keeping;
+pub mod modbus_view;
 pub mod saving;
 
 use embedded_hal::delay::DelayNs;
