@@ -292,7 +292,15 @@ fn a_modbus_write_and_the_button_at_power_up_switch_back_to_framed_and_it_surviv
         node.command(Command::SetLinkSettings(modbus), t),
         Ok(AckResult::LinkSettings(modbus))
     );
-    run_until_saved(&mut node, &w);
+    // Saved at once, and a reset asked for: the board sets its UART up
+    // from the record.
+    assert!(!node.save_pending());
+    assert!(node.take_reset_request());
+    assert_eq!(
+        node.command(Command::SetLinkSettings(modbus), t),
+        Ok(AckResult::LinkSettings(modbus))
+    );
+    assert!(!node.take_reset_request(), "no change, no reset");
     // A reset: the record brings the Modbus link back.
     let storage = node.into_parts().5;
     let mut node = fois_firmware::sim_board::sim_node(w.clone(), storage, "sim");
@@ -309,9 +317,14 @@ fn a_modbus_write_and_the_button_at_power_up_switch_back_to_framed_and_it_surviv
     assert_eq!(node.link_settings(), modbus.framed());
     // Back to Modbus; the button held at power-up returns to framed.
     node.command(Command::SetLinkSettings(modbus), t).unwrap();
+    assert!(node.take_reset_request());
     assert!(node.button_held_at_boot(t));
     assert!(!node.button_held_at_boot(t), "already framed");
     assert_eq!(node.link_settings().protocol, LinkProtocol::Framed);
+    assert!(!node.save_pending(), "saved at once");
+    let storage = node.into_parts().5;
+    let mut node = fois_firmware::sim_board::sim_node(w.clone(), storage, "sim");
+    assert_eq!(node.link_settings(), modbus.framed());
     // An address of 0 is refused by the framed command too.
     let bad = LinkSettings {
         modbus_address: 0,

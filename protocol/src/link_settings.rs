@@ -140,7 +140,13 @@ mod tests {
         let d = LinkSettings::default();
         assert_eq!(d.protocol, LinkProtocol::Framed);
         assert_eq!(d.parity, Parity::Even8E1);
-        for (a, ok) in [(0, false), (1, true), (247, true), (248, false), (255, false)] {
+        for (a, ok) in [
+            (0, false),
+            (1, true),
+            (247, true),
+            (248, false),
+            (255, false),
+        ] {
             let s = LinkSettings {
                 modbus_address: a,
                 ..d

@@ -594,8 +594,14 @@ const GOLDEN: &[(&str, &str)] = &[
     // Version 5 additions.
     ("cmd_get_link_settings", "07 0e 0d cc 43 eb a1 00"),
     ("cmd_set_link_settings", "0a 0f 0e 01 11 01 4e 6e b1 81 00"),
-    ("ack_link_settings", "0c 1b 03 0f 0b 01 11 01 85 0c 6c 0e 00"),
-    ("error_invalid_link_settings", "06 1c 04 01 10 0b 05 5d d8 38 77 00"),
+    (
+        "ack_link_settings",
+        "0c 1b 03 0f 0b 01 11 01 85 0c 6c 0e 00",
+    ),
+    (
+        "error_invalid_link_settings",
+        "06 1c 04 01 10 0b 05 5d d8 38 77 00",
+    ),
 ];
 
 fn hex(bytes: &[u8]) -> String {

@@ -171,10 +171,20 @@ where
                 Ok(AckResult::Resetting)
             }
             Command::GetLinkSettings => Ok(AckResult::LinkSettings(self.link)),
+            // A change of the link is saved at once and applied by a reset
+            // after the answer (which goes out in the old protocol): the
+            // board sets its UART up from the record at boot.
             Command::SetLinkSettings(link) => {
                 link.validate().map_err(ErrorCode::InvalidLinkSettings)?;
+                let changed = link != self.link;
                 self.link = link;
                 self.changed(now_ms);
+                if changed {
+                    if self.pending_save.is_some() {
+                        self.save(now_ms);
+                    }
+                    self.reset_request = true;
+                }
                 Ok(AckResult::LinkSettings(self.link))
             }
         }

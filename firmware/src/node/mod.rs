@@ -327,14 +327,18 @@ where
     }
 
     /// The button was held at power-up: the host link goes back to the
-    /// framed protocol (saved like a config change), the way back when
-    /// the host no longer speaks Modbus. Returns true if it changed.
+    /// framed protocol (saved at once), the way back when the host no
+    /// longer speaks Modbus. Returns true if it changed (the board then
+    /// sets its link up framed).
     pub fn button_held_at_boot(&mut self, now_ms: u64) -> bool {
         if self.link.protocol == fois_protocol::LinkProtocol::Framed {
             return false;
         }
         self.link = self.link.framed();
         self.changed(now_ms);
+        if self.pending_save.is_some() {
+            self.save(now_ms);
+        }
         true
     }
 
