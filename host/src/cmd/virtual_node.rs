@@ -50,7 +50,7 @@ pub struct VirtualNodeArgs {
     pub baud: u32,
     /// Append the node's own frames (as it would stream them framed) to
     /// this file while it speaks Modbus: the log to check registers against.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", requires = "modbus_rtu")]
     pub frame_log: Option<PathBuf>,
 }
 
