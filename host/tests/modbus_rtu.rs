@@ -39,7 +39,8 @@ fn python() -> PathBuf {
     let python = std::env::var_os("FOIS_PYMODBUS_PYTHON")
         .map(PathBuf::from)
         .unwrap_or_else(|| root().join("target/pymodbus-venv/bin/python"));
-    let req = std::fs::read_to_string(root().join("gateway/tests/modbus/requirements.txt")).unwrap();
+    let req =
+        std::fs::read_to_string(root().join("gateway/tests/modbus/requirements.txt")).unwrap();
     let want: Vec<&str> = req.lines().filter(|l| l.contains("==")).collect();
     let out = Command::new(&python)
         .args([
@@ -78,7 +79,11 @@ fn mbpoll() -> &'static str {
 /// One pymodbus command's JSON answer.
 fn pymodbus(args: &[&str]) -> serde_json::Value {
     let script = root().join("host/tests/modbus/rtu_client.py");
-    let out = Command::new(python()).arg(script).args(args).output().unwrap();
+    let out = Command::new(python())
+        .arg(script)
+        .args(args)
+        .output()
+        .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
     serde_json::from_str(text.trim()).unwrap_or_else(|e| {
         panic!(
@@ -154,7 +159,11 @@ fn expected(seq: u32, m: &MeasurementV3) -> Vec<u16> {
     w[11] = int(e.medium_probability, "medium_probability") as u16;
     let g = r.gain.unwrap();
     put32(&mut w, reg::GAIN, int(g.gain, "gain") as u32);
-    put32(&mut w, reg::GAIN_SIGMA, int(g.gain_sigma, "gain_sigma") as u32);
+    put32(
+        &mut w,
+        reg::GAIN_SIGMA,
+        int(g.gain_sigma, "gain_sigma") as u32,
+    );
     put32(&mut w, reg::DATA_AGE, reg::NA_U32); // gateway only
     put32(&mut w, reg::SEQ, seq);
     w[20] = r.vdda_mv;
@@ -183,12 +192,25 @@ fn check_against_log(regs: &[u16], log: &std::path::Path, who: &str) -> Measurem
 /// `mbpoll` reading the 27 registers once: the values it prints.
 fn mbpoll_read(port: &str, baud: u32, table: &str) -> Vec<u16> {
     let out = Command::new(mbpoll())
-        .args(["-m", "rtu", "-b", &baud.to_string(), "-P", "even", "-a", "7"])
+        .args([
+            "-m",
+            "rtu",
+            "-b",
+            &baud.to_string(),
+            "-P",
+            "even",
+            "-a",
+            "7",
+        ])
         .args(["-t", table, "-r", "1", "-c", "27", "-o", "1", "-1", port])
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success(), "mbpoll: {text} {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "mbpoll: {text} {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     text.lines()
         .filter(|l| l.starts_with('['))
         .map(|l| l.split_whitespace().nth(1).unwrap().parse::<u16>().unwrap())
@@ -250,7 +272,10 @@ fn pymodbus_and_mbpoll_read_every_register_as_the_frame_log_says_and_ack_the_ala
     assert_eq!(read("4", "27", "1")["exception"], 2);
     assert_eq!(read("4", "20", "10")["exception"], 2);
     assert_eq!(write("23", "1")["exception"], 4);
-    assert_eq!(registers_of(&read("3", "0", "1"))[0] & status::ALARM_ACKED, 0);
+    assert_eq!(
+        registers_of(&read("3", "0", "1"))[0] & status::ALARM_ACKED,
+        0
+    );
     // Enable, then acknowledge: answered, then carried out by the node.
     assert_eq!(write("100", "22341")["ok"], true);
     assert_eq!(write("23", "2")["exception"], 3);
@@ -264,13 +289,27 @@ fn pymodbus_and_mbpoll_read_every_register_as_the_frame_log_says_and_ack_the_ala
             assert_ne!(r[0] & status::ALARM, 0, "the output stays on while iced");
             break;
         }
-        assert!(t0.elapsed() < Duration::from_secs(10), "not acknowledged: {r:?}");
+        assert!(
+            t0.elapsed() < Duration::from_secs(10),
+            "not acknowledged: {r:?}"
+        );
     }
-    assert_eq!(registers_of(&read("3", "102", "1")), [1], "last_result: done");
+    assert_eq!(
+        registers_of(&read("3", "102", "1")),
+        [1],
+        "last_result: done"
+    );
     // A flood of 200 reads: every one answered.
     let f = pymodbus(&["flood", p, "19200", "7", "200"]);
-    assert_eq!((f["answers"].as_u64(), f["failed"].as_u64()), (Some(200), Some(0)), "{f}");
-    eprintln!("pymodbus: 200 reads of 27 registers in {:.2} s", f["seconds"]);
+    assert_eq!(
+        (f["answers"].as_u64(), f["failed"].as_u64()),
+        (Some(200), Some(0)),
+        "{f}"
+    );
+    eprintln!(
+        "pymodbus: 200 reads of 27 registers in {:.2} s",
+        f["seconds"]
+    );
     let _ = std::fs::remove_file(&log);
 }
 
@@ -293,7 +332,12 @@ impl Raw {
     }
 
     /// Bytes received within `wait`, and when the first came after `since`.
-    fn collect(&mut self, wait: Duration, want: usize, since: Instant) -> (Vec<u8>, Option<Duration>) {
+    fn collect(
+        &mut self,
+        wait: Duration,
+        want: usize,
+        since: Instant,
+    ) -> (Vec<u8>, Option<Duration>) {
         let end = Instant::now() + wait;
         let mut got = Vec::new();
         let mut first = None;
@@ -358,7 +402,10 @@ fn malformed_frames_are_not_answered_and_answers_come_within_20_ms_at_19200() {
     // A read of 126 registers, an FC 16 saying 124 registers (whose 248
     // bytes would not fit the 256-byte frame): exception 03.
     let fc16 = [7, 16, 0, 100, 0, 124, 2, 0x57, 0x45];
-    for (req, fc) in [(with_crc(&[7, 4, 0, 0, 0, 126]), 4u8), (with_crc(&fc16), 16)] {
+    for (req, fc) in [
+        (with_crc(&[7, 4, 0, 0, 0, 126]), 4u8),
+        (with_crc(&fc16), 16),
+    ] {
         raw.send(&req);
         let (got, _) = raw.collect(Duration::from_millis(200), 5, Instant::now());
         assert_eq!(got, with_crc(&[7, fc | 0x80, 3]), "{got:02x?}");
@@ -396,7 +443,10 @@ fn malformed_frames_are_not_answered_and_answers_come_within_20_ms_at_19200() {
         "answer time at 19 200 Bd 8E1 (t3.5 = 2.006 ms), 200 requests: median {median:?}, \
          99th percentile {p99:?}, max {max:?}"
     );
-    assert!(times[0] >= Duration::from_micros(2_006), "answered before the silence: {times:?}");
+    assert!(
+        times[0] >= Duration::from_micros(2_006),
+        "answered before the silence: {times:?}"
+    );
     assert!(p99 <= Duration::from_millis(20), "{p99:?}");
     drop(raw);
     // mbpoll at 19 200 Bd 8E1 reads the block (values checked above).
