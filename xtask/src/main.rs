@@ -64,9 +64,10 @@ const BUDGET: measured::Budget = measured::Budget {
 };
 const THUMB: &str = "thumbv7em-none-eabihf";
 /// The cargo-fuzz crates (each its own workspace) and their targets.
-const FUZZ_TARGETS: [(&str, &str); 3] = [
+const FUZZ_TARGETS: [(&str, &str); 4] = [
     ("protocol/fuzz", "decode"),
     ("firmware/fuzz", "node_commands"),
+    ("firmware/fuzz", "modbus_rtu"),
     ("host/fuzz", "link_reader"),
 ];
 /// Executions per fuzz target by default.
