@@ -1,5 +1,5 @@
 //! The embassy application for the NUCLEO-F446RE. Only this file and its
-//! board modules (`board`, `safety`, `link`) touch the HAL; all the logic is
+//! board modules (`board`, `safety`, `link`, `rtu`) touch the HAL; all the logic is
 //! `fois_firmware::node::Node` and the library's pure modules.
 //!
 //! Boot: the watchdog first, the HSE probe, `embassy_stm32::init`, the
@@ -11,7 +11,8 @@
 //! → `Node::handle_rx`, one host frame at a time, yielding between them),
 //! `uart_tx` (frame bytes → the link; on the field link with the
 //! transceiver's driver enable around each burst) and `button` (B1 →
-//! `Node::button_pressed`). The node sits in one mutex; frames go to the
+//! `Node::button_pressed`); on Modbus RTU (the node's link settings) the
+//! `rtu` module's task replaces `uart_rx` and `uart_tx`. The node sits in one mutex; frames go to the
 //! transmitter through a byte pipe, and a frame that does not fit is dropped
 //! whole (the host sees the gap in the sequence numbers) rather than
 //! blocking the measurement.
@@ -24,6 +25,9 @@ mod board;
 #[cfg(target_os = "none")]
 #[path = "fois-node/link.rs"]
 mod link;
+#[cfg(target_os = "none")]
+#[path = "fois-node/rtu.rs"]
+mod rtu;
 #[cfg(target_os = "none")]
 #[path = "fois-node/safety.rs"]
 mod safety;
@@ -56,6 +60,7 @@ mod app {
 
     use crate::board::{self, BoardAdc, BoardFlash};
     use crate::link;
+    use crate::rtu;
     use crate::safety::{self, Watchdog};
 
     bind_interrupts!(struct Irqs {
@@ -83,10 +88,13 @@ mod app {
     /// has: the field link's transmitter waits for a quiet line.
     static LAST_RX_US: AtomicU32 = AtomicU32::new(0);
     static RX_SEEN: AtomicBool = AtomicBool::new(false);
+    /// The link speaks Modbus RTU (set at boot from the node's link settings).
+    static MODBUS: AtomicBool = AtomicBool::new(false);
 
     /// Queue one whole frame for the UART, or drop it whole if there is no room.
     fn queue(frame: &[u8]) {
-        if TX.free_capacity() < frame.len() {
+        // On Modbus RTU the node's own frames stay off the link.
+        if MODBUS.load(Ordering::Relaxed) || TX.free_capacity() < frame.len() {
             return;
         }
         let mut rest = frame;
@@ -170,6 +178,18 @@ mod app {
         // After a watchdog, software, pin or panic reset: the alarm (and its
         // acknowledgement) as before the reset, at once.
         node.resume_rule(RuleSnapshot::resume(safety::rule_words(), power_on));
+        // B1 held at power-up: back to the framed protocol (the way back
+        // when the host no longer speaks Modbus).
+        let button = ExtiInput::new(p.PC13, p.EXTI13, Pull::None, Irqs);
+        if button.is_low() && node.button_held_at_boot(now_ms()) {
+            defmt::info!("button held at power-up: the link is framed again");
+        }
+        let link_settings = node.link_settings();
+        let modbus = link_settings.protocol == fois_protocol::LinkProtocol::ModbusRtu;
+        MODBUS.store(modbus, Ordering::Relaxed);
+        if modbus {
+            rtu::publish(node.modbus_view());
+        }
         // Moved in without an await: a node held across one would live in
         // this task's future as well as in NODE (7 KiB of static RAM twice).
         match NODE.try_lock() {
@@ -177,15 +197,26 @@ mod app {
             Err(_) => defmt::panic!("the node's mutex is taken before the node exists"),
         }
 
+        let parity = modbus.then_some(link_settings.parity);
         #[cfg(not(feature = "field-link"))]
-        let link = link::bench(p.USART2, p.PA3, p.PA2);
+        let link = link::bench(p.USART2, p.PA3, p.PA2, parity);
         #[cfg(feature = "field-link")]
-        let link = link::field(p.USART6, p.PC7, p.PC6, p.PA8, p.PC8);
-        defmt::info!("link at {=u32} Bd", link.baud);
-        let button = ExtiInput::new(p.PC13, p.EXTI13, Pull::None, Irqs);
+        let link = link::field(p.USART6, p.PC7, p.PC6, p.PA8, p.PC8, parity);
+        defmt::info!(
+            "link at {=u32} Bd, {=str}",
+            link.baud,
+            if modbus { "Modbus RTU" } else { "framed" }
+        );
 
-        spawn(&spawner, uart_tx(link.tx, link.de, link.baud));
-        spawn(&spawner, uart_rx(link.rx));
+        if modbus {
+            spawn(
+                &spawner,
+                rtu::link_task(link.rx, link.tx, link.de, link.baud, link_settings, &COMMANDED),
+            );
+        } else {
+            spawn(&spawner, uart_tx(link.tx, link.de, link.baud));
+            spawn(&spawner, uart_rx(link.rx));
+        }
         spawn(&spawner, button_task(button));
         measure(wdg).await
     }
@@ -218,6 +249,13 @@ mod app {
                     defmt::panic!("node missing")
                 };
                 let now = now_ms();
+                let modbus = MODBUS.load(Ordering::Relaxed);
+                // A Modbus write's actions, after their answer went out.
+                let mut acted = false;
+                while let Some(action) = modbus.then(rtu::next_action).flatten() {
+                    rtu::set_result(node.modbus_action(action, now));
+                    acted = true;
+                }
                 node.set_supply_low(safety::supply_low());
                 if safety::clock_failed() {
                     node.set_clock_fallback(true);
@@ -235,6 +273,9 @@ mod app {
                     }
                 } else {
                     node.poll_storage(now);
+                }
+                if modbus && (due.frame || acted) {
+                    rtu::publish(node.modbus_view());
                 }
                 let snapshot = node.rule_snapshot();
                 if kept != Some(snapshot) {
