@@ -366,3 +366,25 @@ proptest! {
         }
     }
 }
+
+/// firmware/README.md shows both blocks of the map as
+/// `fois_protocol::registers` defines them (and prints them when not).
+#[test]
+fn the_readme_shows_the_register_map() {
+    let readme = include_str!("../README.md");
+    for (name, table) in [
+        (
+            "measurement block",
+            registers::markdown_table(&registers::TABLE),
+        ),
+        (
+            "node block",
+            registers::markdown_table(&registers::NODE_TABLE),
+        ),
+    ] {
+        assert!(
+            readme.contains(&table),
+            "firmware/README.md's {name} differs from fois_protocol::registers; it is:\n\n{table}"
+        );
+    }
+}

@@ -211,7 +211,14 @@ mod app {
         if modbus {
             spawn(
                 &spawner,
-                rtu::link_task(link.rx, link.tx, link.de, link.baud, link_settings, &COMMANDED),
+                rtu::link_task(
+                    link.rx,
+                    link.tx,
+                    link.de,
+                    link.baud,
+                    link_settings,
+                    &COMMANDED,
+                ),
             );
         } else {
             spawn(&spawner, uart_tx(link.tx, link.de, link.baud));

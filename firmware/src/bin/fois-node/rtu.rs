@@ -22,8 +22,8 @@ use embassy_time::{Instant, Timer};
 use embedded_io_async::{Read, Write};
 use fois_firmware::modbus::{Action, ModbusView, RtuServer, SilenceFramer, Silences};
 use fois_firmware::platform::field_link;
-use fois_protocol::registers::CommandResult;
 use fois_protocol::LinkSettings;
+use fois_protocol::registers::CommandResult;
 
 /// The view the answers read (published by the measure loop).
 static VIEW: BlockingMutex<ThreadModeRawMutex, RefCell<Option<ModbusView>>> =
