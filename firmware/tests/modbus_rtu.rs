@@ -388,3 +388,40 @@ fn the_readme_shows_the_register_map() {
         );
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 2_000, rng_seed: proptest::test_runner::RngSeed::Fixed(35), ..ProptestConfig::default() })]
+
+    /// Any bytes at any gaps: the framer never panics, never gives a frame
+    /// over 256 bytes, and every frame it gives is exactly a run of bytes
+    /// without a gap over t1.5, ended by t3.5 of silence.
+    #[test]
+    fn the_silence_framer_gives_exactly_the_unbroken_runs(
+        input in proptest::collection::vec((0u16..5_000, any::<u8>()), 0..600),
+    ) {
+        use fois_firmware::modbus::{SilenceFramer, Silences};
+        let s = Silences::at(19_200, Parity::Even8E1);
+        let mut f = SilenceFramer::new(s);
+        let mut t = 0u64;
+        let mut got = Vec::new();
+        // The model: runs split at gaps ≥ t3.5; a run with a gap > t1.5
+        // or over 256 bytes is dropped.
+        let mut want = Vec::new();
+        let (mut run, mut broken) = (Vec::new(), false);
+        for (i, &(gap, b)) in input.iter().enumerate() {
+            t += u64::from(gap);
+            if i > 0 && u32::from(gap) >= s.t35_us {
+                if !broken && run.len() <= 256 { want.push(run.clone()); }
+                run.clear();
+                broken = false;
+            } else if i > 0 && u32::from(gap) > s.t15_us {
+                broken = true;
+            }
+            run.push(b);
+            if let Some(fr) = f.push(b, t) { got.push(fr.to_vec()); }
+        }
+        if !input.is_empty() && !broken && run.len() <= 256 { want.push(run); }
+        if let Some(fr) = f.poll(t + u64::from(s.t35_us)) { got.push(fr.to_vec()); }
+        prop_assert_eq!(got, want);
+    }
+}
