@@ -4,10 +4,12 @@
 //! (`fois_firmware::modbus::server`) over a node's register view, writes
 //! enabled or not, the actions carried into node commands.
 //!
-//! Input: byte 0 picks the address (1–247) and whether writes start
-//! enabled; then pairs (gap, byte): the gap in units of 100 µs before the
-//! byte (so frames, 1.5-character breaks and 3.5-character silences all
-//! occur at 19 200 Bd).
+//! Input: byte 0 picks the address (1–247), whether writes start enabled
+//! (bit 7) and whether each frame's last two bytes are replaced by its
+//! correct CRC (bit 6: so the server's paths past the CRC check are
+//! reached, not only the drop of a bad CRC); then pairs (gap, byte): the
+//! gap in units of 100 µs before the byte (so frames, 1.5-character breaks
+//! and 3.5-character silences all occur at 19 200 Bd).
 //!
 //! It must never panic; an answer goes only to a frame with a good CRC
 //! addressed to this node (never to a broadcast), carries a good CRC and
@@ -38,7 +40,15 @@ fuzz_target!(|data: &[u8]| {
     }
     let mut framer = SilenceFramer::new(Silences::at(19_200, Parity::Even8E1));
     let mut t_us = 0u64;
+    let fix_crc = head & 0x40 != 0;
     let check = |frame: &[u8], server: &mut RtuServer, now_ms: u64| {
+        let mut fixed = frame.to_vec();
+        if fix_crc && fixed.len() >= 4 {
+            let n = fixed.len() - 2;
+            let crc = fois_firmware::modbus::server::CRC16.checksum(&fixed[..n]);
+            fixed[n..].copy_from_slice(&crc.to_le_bytes());
+        }
+        let frame = &fixed[..];
         let a = server.answer(frame, &view, now_ms);
         if let Some(r) = &a.reply {
             assert!(crc_ok(frame), "answered a bad CRC");
