@@ -40,6 +40,7 @@ pub mod estimator;
 pub mod hal;
 pub mod ice_rule;
 pub mod measure;
+pub mod modbus;
 pub mod node;
 pub mod platform;
 #[cfg(feature = "sim-board")]

@@ -62,6 +62,7 @@ fn record(k: u32) -> Record {
         }),
         gain: None,
         gain_calibration: None,
+        link: fois_protocol::LinkSettings::default(),
     }
 }
 
@@ -92,6 +93,7 @@ fn save_through_node<const P: usize>(
         baseline: node.baseline(),
         gain: node.gain_kept(),
         gain_calibration: None,
+        link: fois_protocol::LinkSettings::default(),
     };
     // Straight to the due time: one poll, one save.
     if let Some(due) = node.save_due_ms() {
@@ -186,6 +188,7 @@ fn a_damaged_store_is_defaults_with_the_flag() {
                 baseline: None,
                 gain: None,
                 gain_calibration: None,
+                link: fois_protocol::LinkSettings::default(),
             };
             encoded(&bad)
         },

@@ -264,7 +264,7 @@ fn scada_reads_fresh_values_then_a_stale_node_and_bad_requests_get_exceptions_an
         Err(2),
         "20..29 crosses the end (23)"
     );
-    assert_eq!(client.read(1, 3, 24, 1), Err(2));
+    assert_eq!(client.read(1, 3, 27, 1), Err(2));
     assert_eq!(client.read(1, 4, 1000, 2), Err(2));
     assert_eq!(client.read(9, 4, 0, 1), Err(0x0A), "no node has unit 9");
     assert_eq!(

@@ -60,6 +60,12 @@ pub fn ack_text(a: &Ack) -> String {
         AckResult::GainCalibrated(g) => format!("GainCalibrated {}", gain_text(g)),
         AckResult::GainReset => "GainReset".into(),
         AckResult::NoAlarm => "NoAlarm (no alarm to acknowledge)".into(),
+        AckResult::LinkSettings(l) => format!(
+            "LinkSettings protocol={:?} modbus_address={} parity={}",
+            l.protocol,
+            l.modbus_address,
+            l.parity.name()
+        ),
     };
     format!("id={} {what}", a.id)
 }

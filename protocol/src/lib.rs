@@ -6,12 +6,16 @@
 //! - [`config`]: the node's configuration and its one validation rule.
 //! - [`framing`]: COBS + CRC-32 frames, the streaming decoder.
 //! - [`seq`]: the sequence-gap rule (lost frames, restarts) every host reader uses.
+//! - [`link_settings`]: version 5, the host link's protocol (framed or Modbus RTU) and its Modbus settings.
+//! - [`registers`]: the Modbus register map the node (RTU) and the gateway (TCP) serve.
 
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
 
 pub mod config;
 pub mod framing;
+pub mod link_settings;
 pub mod messages;
+pub mod registers;
 pub mod seq;
 
 pub use config::{Config, ConfigError, ConfigField, ConfigV1, FIELDS, FieldSpec, LOAD_R_MAX_OHM};
@@ -20,12 +24,13 @@ pub use framing::encode_to_vec;
 pub use framing::{
     DecodeStats, EncodeError, FrameDecoder, FrameError, MAX_FRAME, MAX_PAYLOAD, encode,
 };
+pub use link_settings::{LinkProtocol, LinkSettings, LinkSettingsError, Parity};
 pub use messages::*;
 pub use seq::{SeqEvent, SeqTracker};
 
 /// The protocol version this crate speaks (in [`Hello::protocol_version`]).
 /// Bump it on any breaking change (see `protocol/README.md`, Compatibility).
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 
 /// The oldest protocol version a host built from this crate still reads.
 /// Every version only adds variants at the end of its enums, so a frame of

@@ -478,6 +478,10 @@ pub enum AckResult {
     /// Version 4: answer to [`Command::AckAlarmV4`] when no alarm is on:
     /// there was nothing to acknowledge and nothing changed.
     NoAlarm,
+    /// Version 5: answer to [`Command::GetLinkSettings`] and
+    /// [`Command::SetLinkSettings`]: the link settings now stored (a
+    /// change of protocol takes effect after this answer).
+    LinkSettings(crate::LinkSettings),
 }
 
 /// Dark (dry-face) baseline of both channels, subtracted by the ice rule.
@@ -532,6 +536,8 @@ pub enum ErrorCode {
     /// Version 4: [`Command::CalibrateDarkV4`] refused because the detector
     /// is not `Dry`, with what it sees (the old command gets `NotDry`).
     FaceNotDry(FaceReading),
+    /// Version 5: [`Command::SetLinkSettings`] refused; nothing changed.
+    InvalidLinkSettings(crate::LinkSettingsError),
 }
 
 /// Version 4: a dark calibration that would move the baseline too far.
@@ -660,6 +666,12 @@ pub enum Command {
     /// Version 4: acknowledge the ice alarm; answered `NoAlarm` when none
     /// is on.
     AckAlarmV4,
+    /// Version 5: answer with the link settings ([`AckResult::LinkSettings`]).
+    GetLinkSettings,
+    /// Version 5: validate, store and apply the link settings: the protocol
+    /// (framed or Modbus RTU), the Modbus address and parity. The answer
+    /// goes out in the old protocol; the new one is in force after it.
+    SetLinkSettings(crate::LinkSettings),
 }
 
 #[cfg(test)]

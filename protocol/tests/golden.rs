@@ -452,7 +452,41 @@ fn cases() -> Vec<(&'static str, Vec<u8>)> {
             host(12, Command::CalibrateDarkV4 { force: true }),
         ),
         ("cmd_ack_alarm_v4", host(13, Command::AckAlarmV4)),
+        // Version 5 additions: the host link's protocol and Modbus settings.
+        ("cmd_get_link_settings", host(14, Command::GetLinkSettings)),
+        (
+            "cmd_set_link_settings",
+            host(15, Command::SetLinkSettings(modbus_link())),
+        ),
+        (
+            "ack_link_settings",
+            device(
+                27,
+                DeviceMsg::Ack(Ack {
+                    id: 15,
+                    result: AckResult::LinkSettings(modbus_link()),
+                }),
+            ),
+        ),
+        (
+            "error_invalid_link_settings",
+            device(
+                28,
+                DeviceMsg::Error(ErrorReply {
+                    id: Some(16),
+                    code: ErrorCode::InvalidLinkSettings(LinkSettingsError::AddressOutOfRange),
+                }),
+            ),
+        ),
     ]
+}
+
+fn modbus_link() -> LinkSettings {
+    LinkSettings {
+        protocol: LinkProtocol::ModbusRtu,
+        modbus_address: 17,
+        parity: Parity::None8N2,
+    }
 }
 
 const GOLDEN: &[(&str, &str)] = &[
@@ -557,6 +591,17 @@ const GOLDEN: &[(&str, &str)] = &[
     ),
     ("cmd_calibrate_dark_v4", "08 0c 0b 01 2b c9 a8 62 00"),
     ("cmd_ack_alarm_v4", "07 0d 0c 99 20 c1 fd 00"),
+    // Version 5 additions.
+    ("cmd_get_link_settings", "07 0e 0d cc 43 eb a1 00"),
+    ("cmd_set_link_settings", "0a 0f 0e 01 11 01 4e 6e b1 81 00"),
+    (
+        "ack_link_settings",
+        "0c 1b 03 0f 0b 01 11 01 85 0c 6c 0e 00",
+    ),
+    (
+        "error_invalid_link_settings",
+        "06 1c 04 01 10 0b 05 5d d8 38 77 00",
+    ),
 ];
 
 fn hex(bytes: &[u8]) -> String {
@@ -585,11 +630,11 @@ fn wire_format_matches_golden_bytes() {
 
 #[test]
 fn protocol_version_is_frozen_with_these_bytes() {
-    // The snapshots above belong to version 4: the 21 of version 1 and the 3
+    // The snapshots above belong to version 5: the 21 of version 1 and the 3
     // of version 2 (unchanged: each version only added variants at the ends
     // of its enums and froze the old config shape as `ConfigV1`, so older
-    // streams decode with these types), the version-3 and the version-4
-    // additions. A new version gets new snapshots.
-    assert_eq!(PROTOCOL_VERSION, 4);
+    // streams decode with these types), the version-3, version-4 and
+    // version-5 additions. A new version gets new snapshots.
+    assert_eq!(PROTOCOL_VERSION, 5);
     assert_eq!(OLDEST_READABLE_VERSION, 1);
 }

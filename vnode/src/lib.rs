@@ -12,12 +12,14 @@
 //! - [`scenario`]: the TOML scenario format.
 //! - [`overlay`]: a scenario's temporary changes laid over its segments.
 //! - `pty` (feature `pty`): a virtual node served on a pseudo-terminal.
+//! - [`modbus_link`]: the node's Modbus RTU link (the firmware's framer and server) between a link's bytes and the node.
 
 pub mod adc;
 pub mod clock;
 pub mod environment;
 pub mod flash;
 pub mod frontend;
+pub mod modbus_link;
 pub mod node;
 pub mod optics;
 pub mod overlay;

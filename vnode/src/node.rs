@@ -247,6 +247,7 @@ pub fn factory_record(gain: f64, rel_sd: f64) -> fois_firmware::storage::record:
         baseline: None,
         gain: Some(estimate),
         gain_calibration: Some(estimate),
+        link: fois_protocol::LinkSettings::default(),
     }
 }
 
@@ -337,6 +338,7 @@ impl VirtualNode {
                     baseline: None,
                     gain: None,
                     gain_calibration: None,
+                    link: fois_protocol::LinkSettings::default(),
                 },
             };
             if let Some(c) = &opts.config {
@@ -469,6 +471,34 @@ impl VirtualNode {
             self.node_mut().handle_rx(piece, now, tx);
             self.after_commands(tx);
         }
+    }
+
+    /// Carry out one command as the host link would (its answer is not
+    /// sent), then run what came due (a reset it asked for included).
+    pub fn command(
+        &mut self,
+        cmd: fois_protocol::Command,
+        tx: &mut impl FnMut(&[u8]),
+    ) -> Result<fois_protocol::AckResult, fois_protocol::ErrorCode> {
+        let now = self.clock.now_ms();
+        let r = self.node_mut().command(cmd, now);
+        self.after_commands(tx);
+        r
+    }
+
+    /// Carry out a Modbus write's action (after its answer went out), as
+    /// the board's main loop does, then run what came due (a reset the
+    /// action asked for included). Returns the `last_result` register's
+    /// value.
+    pub fn modbus_action(
+        &mut self,
+        action: fois_firmware::modbus::Action,
+        tx: &mut impl FnMut(&[u8]),
+    ) -> fois_protocol::registers::CommandResult {
+        let now = self.clock.now_ms();
+        let r = self.node_mut().modbus_action(action, now);
+        self.after_commands(tx);
+        r
     }
 
     /// The user button (then the main loop polls again, as on the board).

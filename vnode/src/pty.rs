@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::VirtualNode;
+use crate::modbus_link::ModbusLink;
 
 /// How to serve a virtual node on a pseudo-terminal.
 #[derive(Debug, Clone)]
@@ -95,14 +96,69 @@ fn write_frame(master: &mut serialport::TTYPort, bytes: &[u8], stats: &mut Serve
     }
 }
 
+/// The Modbus RTU side of a served node (used while its link settings say
+/// Modbus RTU).
+#[derive(Debug, Clone)]
+pub struct ModbusOptions {
+    /// The emulated link rate, Bd: it sets the silences that end a frame
+    /// (`fois_firmware::modbus::Silences`).
+    pub baud: u32,
+    /// Append the node's own frames (COBS frames, as it would stream them
+    /// on the framed link) to this file: the log to check the registers
+    /// against. Without it they are dropped.
+    pub frame_log: Option<PathBuf>,
+}
+
+impl Default for ModbusOptions {
+    /// 19 200 Bd (the field link's long-cable rate), no log.
+    fn default() -> Self {
+        ModbusOptions {
+            baud: 19_200,
+            frame_log: None,
+        }
+    }
+}
+
 /// Serve `node` on `pty` until `stop` is set or the duration ends. Virtual
-/// time runs `speed` times faster than real time.
+/// time runs `speed` times faster than real time. The framed protocol, or
+/// Modbus RTU (with the default [`ModbusOptions`]) while the node's link
+/// settings say so.
 pub fn serve(
     node: &mut VirtualNode,
     pty: &mut Pty,
     opts: &ServeOptions,
     stop: &AtomicBool,
 ) -> anyhow::Result<ServeStats> {
+    serve_with(node, pty, opts, &ModbusOptions::default(), stop)
+}
+
+/// [`serve`] with these Modbus options. The protocol follows the node's
+/// link settings at every pass (a `SetLinkSettings` or a Modbus write
+/// switches it after its answer, as the board's reset does).
+pub fn serve_with(
+    node: &mut VirtualNode,
+    pty: &mut Pty,
+    opts: &ServeOptions,
+    modbus: &ModbusOptions,
+    stop: &AtomicBool,
+) -> anyhow::Result<ServeStats> {
+    use anyhow::Context;
+    let mut log = match &modbus.frame_log {
+        Some(p) => Some(
+            std::fs::OpenOptions::new()
+                .create(true)
+                .append(true)
+                .open(p)
+                .with_context(|| format!("cannot open the frame log {}", p.display()))?,
+        ),
+        None => None,
+    };
+    let mut to_log = |b: &[u8]| {
+        if let Some(f) = log.as_mut() {
+            let _ = f.write_all(b);
+        }
+    };
+    let mut rtu: Option<ModbusLink> = None;
     let mut stats = ServeStats::default();
     let start = Instant::now();
     let t0 = node.clock().now_ns();
@@ -118,6 +174,13 @@ pub fn serve(
             break;
         }
         let target = t0 + (elapsed.as_secs_f64() * speed * 1e9) as u64;
+        if ModbusLink::active(node) {
+            if rtu.is_none() {
+                rtu = Some(ModbusLink::new(modbus.baud, node.node().link_settings()));
+            }
+        } else {
+            rtu = None;
+        }
         let master = &mut pty.master;
         // Host → node.
         loop {
@@ -125,20 +188,39 @@ pub fn serve(
                 Ok(0) => break,
                 Ok(n) => {
                     stats.bytes_received += n as u64;
+                    let now_us = start.elapsed().as_micros() as u64;
                     let mut tx = |b: &[u8]| write_frame(master, b, &mut stats);
-                    node.handle_rx(&buf[..n], &mut tx);
+                    match rtu.as_mut() {
+                        Some(link) => link.receive(node, &buf[..n], now_us, &mut tx, &mut to_log),
+                        None => node.handle_rx(&buf[..n], &mut tx),
+                    }
                 }
                 Err(_) => break,
             }
         }
         let master = &mut pty.master;
         let mut tx = |b: &[u8]| write_frame(master, b, &mut stats);
-        node.advance_to(target, &mut tx);
+        match rtu.as_mut() {
+            Some(link) => {
+                let now_us = start.elapsed().as_micros() as u64;
+                link.poll(node, now_us, &mut tx, &mut to_log);
+                node.advance_to(target, &mut to_log);
+            }
+            None => node.advance_to(target, &mut tx),
+        }
         // Sleep until the next frame is due in real time (≤ 5 ms, so
-        // commands are answered promptly).
+        // commands are answered promptly), or until a Modbus frame's
+        // silence ends.
+        let now_s = start.elapsed().as_secs_f64();
         let due = node.next_due_ns().saturating_sub(t0) as f64 / speed / 1e9;
-        let wait = (due - start.elapsed().as_secs_f64()).clamp(0.0, 0.005);
-        std::thread::sleep(Duration::from_secs_f64(wait.max(0.0005)));
+        let mut wait = (due - now_s).clamp(0.0, 0.005).max(0.0005);
+        if let Some(link) = &rtu {
+            wait = wait.min(0.000_2);
+            if let Some(d) = link.deadline_us() {
+                wait = wait.min((d as f64 * 1e-6 - now_s).max(0.000_05));
+            }
+        }
+        std::thread::sleep(Duration::from_secs_f64(wait));
     }
     Ok(stats)
 }

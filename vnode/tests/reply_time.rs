@@ -41,6 +41,7 @@ fn record_bytes(config: &Config) -> Vec<u8> {
             baseline: None,
             gain: None,
             gain_calibration: None,
+            link: fois_protocol::LinkSettings::default(),
         },
         &mut out,
     );

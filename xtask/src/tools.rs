@@ -10,6 +10,7 @@
 //! | `systemd-analyze` | `systemd` | `systemd-analyze verify` of the gateway's unit file |
 //! | `dpkg-deb` | `dpkg` | reading the gateway's Debian package back |
 //! | `python3` (3.11 or 3.12, with `venv`) | `python3-venv` | the Home Assistant check's virtualenvs ([`crate::ha_check`]); the gateway's Modbus tests' client |
+//! | `mbpoll` | `mbpoll` | the virtual node's Modbus RTU tests (`host/tests/modbus_rtu.rs`): a second, independent RTU master |
 //!
 //! Then the virtualenv of the gateway's Modbus tests ([`ensure_pymodbus`]):
 //! `target/pymodbus-venv` with the pymodbus of
@@ -38,7 +39,7 @@ pub struct Tool {
 const SBIN: &[&str] = &["/usr/sbin", "/usr/local/sbin", "/sbin"];
 
 /// Every system tool `cargo xtask ci` needs.
-pub const TOOLS: [Tool; 6] = [
+pub const TOOLS: [Tool; 7] = [
     Tool {
         name: "mosquitto",
         package: "mosquitto",
@@ -67,6 +68,11 @@ pub const TOOLS: [Tool; 6] = [
     Tool {
         name: "python3",
         package: "python3-venv",
+        dirs: &[],
+    },
+    Tool {
+        name: "mbpoll",
+        package: "mbpoll",
         dirs: &[],
     },
 ];
@@ -244,12 +250,18 @@ mod tests {
         let missing = missing_packages(&TOOLS, |t| t.name == "dpkg-deb");
         assert_eq!(
             missing,
-            vec!["mosquitto", "qemu-system-arm", "systemd", "python3-venv"]
+            vec![
+                "mosquitto",
+                "qemu-system-arm",
+                "systemd",
+                "python3-venv",
+                "mbpoll"
+            ]
         );
         assert_eq!(
             install_command(&missing),
             "sudo apt-get update && sudo apt-get install -y --no-install-recommends \
-             mosquitto qemu-system-arm systemd python3-venv"
+             mosquitto qemu-system-arm systemd python3-venv mbpoll"
         );
         assert!(missing_packages(&TOOLS, |_| true).is_empty());
     }

@@ -193,6 +193,7 @@ fn t_persist() -> TestResult {
             sigma_ppm: 26_100,
         }),
         gain_calibration: None,
+        link: fois_protocol::LinkSettings::default(),
     };
     let mut buf = [0u8; record::MAX_RECORD];
     let n = record::encode(&rec, &mut buf);
@@ -240,6 +241,7 @@ fn t_flash_store() -> TestResult {
             baseline: None,
             gain: None,
             gain_calibration: None,
+            link: fois_protocol::LinkSettings::default(),
         };
         let mut b = [0u8; record::MAX_RECORD];
         let n = record::encode(&rec, &mut b);

@@ -1,5 +1,5 @@
 //! The embassy application for the NUCLEO-F446RE. Only this file and its
-//! board modules (`board`, `safety`, `link`) touch the HAL; all the logic is
+//! board modules (`board`, `safety`, `link`, `rtu`) touch the HAL; all the logic is
 //! `fois_firmware::node::Node` and the library's pure modules.
 //!
 //! Boot: the watchdog first; the reset's cause and the rule's state from
@@ -17,7 +17,9 @@
 //! transceiver's driver enable around each burst; on a higher-priority
 //! executor, so DE drops at transmission complete even while the
 //! measure loop runs a frame or a calibration) and `button` (B1 →
-//! `Node::button_pressed`). The node sits in one mutex; frames go to the
+//! `Node::button_pressed`); on Modbus RTU (the node's link settings) the
+//! `rtu` module's task replaces `uart_rx` and `uart_tx`, on the same
+//! higher-priority executor. The node sits in one mutex; frames go to the
 //! transmitter through a byte pipe, and a frame that does not fit is dropped
 //! whole (the host sees the gap in the sequence numbers) rather than
 //! blocking the measurement.
@@ -30,6 +32,9 @@ mod board;
 #[cfg(target_os = "none")]
 #[path = "fois-node/link.rs"]
 mod link;
+#[cfg(target_os = "none")]
+#[path = "fois-node/rtu.rs"]
+mod rtu;
 #[cfg(target_os = "none")]
 #[path = "fois-node/safety.rs"]
 mod safety;
@@ -67,6 +72,7 @@ mod app {
 
     use crate::board::{self, BoardAdc, BoardFlash, HeldOutput};
     use crate::link;
+    use crate::rtu;
     use crate::safety::{self, Watchdog};
 
     bind_interrupts!(struct Irqs {
@@ -90,11 +96,13 @@ mod app {
     /// measurement loop polls the schedule again at once, so a new stream
     /// period, a `StopStream`'s first `Hello`, a `Reset` and a save come
     /// due from now, not from the wake-up planned before the command.
-    static COMMANDED: Signal<ThreadModeRawMutex, ()> = Signal::new();
+    static COMMANDED: Signal<CriticalSectionRawMutex, ()> = Signal::new();
     /// When the last byte came in, µs of uptime (wrapping), and whether one
     /// has: the field link's transmitter waits for a quiet line.
     static LAST_RX_US: AtomicU32 = AtomicU32::new(0);
     static RX_SEEN: AtomicBool = AtomicBool::new(false);
+    /// The link speaks Modbus RTU (set at boot from the node's link settings).
+    static MODBUS: AtomicBool = AtomicBool::new(false);
 
     /// The executor of the transmit task, above thread mode and below the
     /// USART's interrupt, on an interrupt nothing else uses (UART5).
@@ -109,7 +117,8 @@ mod app {
 
     /// Queue one whole frame for the UART, or drop it whole if there is no room.
     fn queue(frame: &[u8]) {
-        if TX.free_capacity() < frame.len() {
+        // On Modbus RTU the node's own frames stay off the link.
+        if MODBUS.load(Ordering::Relaxed) || TX.free_capacity() < frame.len() {
             return;
         }
         let mut rest = frame;
@@ -239,6 +248,18 @@ mod app {
         // node drives them from here, at the same level.
         board::release_outputs();
         node.resume_rule(snapshot);
+        // B1 held at power-up: back to the framed protocol (the way back
+        // when the host no longer speaks Modbus).
+        let button = ExtiInput::new(p.PC13, p.EXTI13, Pull::None, Irqs);
+        if button.is_low() && node.button_held_at_boot(now_ms()) {
+            defmt::info!("button held at power-up: the link is framed again");
+        }
+        let link_settings = node.link_settings();
+        let modbus = link_settings.protocol == fois_protocol::LinkProtocol::ModbusRtu;
+        MODBUS.store(modbus, Ordering::Relaxed);
+        if modbus {
+            rtu::publish(node.modbus_view());
+        }
         // Moved in without an await: a node held across one would live in
         // this task's future as well as in NODE (7 KiB of static RAM twice).
         match NODE.try_lock() {
@@ -246,20 +267,40 @@ mod app {
             Err(_) => defmt::panic!("the node's mutex is taken before the node exists"),
         }
 
+        let parity = modbus.then_some(link_settings.parity);
         #[cfg(not(feature = "field-link"))]
-        let link = link::bench(p.USART2, p.PA3, p.PA2);
+        let link = link::bench(p.USART2, p.PA3, p.PA2, parity);
         #[cfg(feature = "field-link")]
-        let link = link::field(p.USART6, p.PC7, p.PC6, p.PA8, p.PC8);
-        defmt::info!("link at {=u32} Bd", link.baud);
-        let button = ExtiInput::new(p.PC13, p.EXTI13, Pull::None, Irqs);
+        let link = link::field(p.USART6, p.PC7, p.PC6, p.PA8, p.PC8, parity);
+        defmt::info!(
+            "link at {=u32} Bd, {=str}",
+            link.baud,
+            if modbus { "Modbus RTU" } else { "framed" }
+        );
 
         interrupt::UART5.set_priority(Priority::P6);
         let link_spawner = LINK_EXECUTOR.start(interrupt::UART5);
-        match uart_tx(link.tx, link.de, link.baud) {
-            Ok(t) => link_spawner.spawn(t),
-            Err(e) => defmt::panic!("spawn: {}", e),
+        if modbus {
+            // On the link's executor too: an answer (and its DE drop) does
+            // not wait behind a frame or a calibration in the measure loop.
+            match rtu::link_task(
+                link.rx,
+                link.tx,
+                link.de,
+                link.baud,
+                link_settings,
+                &COMMANDED,
+            ) {
+                Ok(t) => link_spawner.spawn(t),
+                Err(e) => defmt::panic!("spawn: {}", e),
+            }
+        } else {
+            match uart_tx(link.tx, link.de, link.baud) {
+                Ok(t) => link_spawner.spawn(t),
+                Err(e) => defmt::panic!("spawn: {}", e),
+            }
+            spawn(&spawner, uart_rx(link.rx));
         }
-        spawn(&spawner, uart_rx(link.rx));
         spawn(&spawner, button_task(button));
         measure(
             wdg,
@@ -328,6 +369,13 @@ mod app {
                 // for a dark calibration meanwhile.
                 let raw = Instant::now().as_ticks();
                 let now = uptime.now_ms(raw);
+                let modbus = MODBUS.load(Ordering::Relaxed);
+                // A Modbus write's actions, after their answer went out.
+                let mut acted = false;
+                while let Some(action) = modbus.then(rtu::next_action).flatten() {
+                    rtu::set_result(node.modbus_action(action, now));
+                    acted = true;
+                }
                 node.set_supply_low(safety::supply_low());
                 node.set_clock_fallback(safety::on_hsi());
                 let streaming = node.is_streaming();
@@ -346,6 +394,9 @@ mod app {
                     node.poll_storage(now);
                 }
                 let on_track = schedule.on_track(now, period_ms);
+                if modbus && (due.frame || acted) {
+                    rtu::publish(node.modbus_view());
+                }
                 let snapshot = node.rule_snapshot();
                 if kept != Some(snapshot) {
                     safety::set_rule_words(snapshot.encode());

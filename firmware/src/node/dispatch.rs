@@ -105,8 +105,15 @@ where
     }
 
     fn execute(&mut self, frame: HostFrame, now_ms: u64, tx: &mut impl FnMut(&[u8])) {
-        let id = frame.id;
-        let result = match frame.cmd {
+        let result = self.command(frame.cmd, now_ms);
+        self.reply(frame.id, result, tx);
+    }
+
+    /// Carry out one command and give its result (what the framed link
+    /// answers in an `Ack` or `Error`; the Modbus link's writes come here
+    /// too, `crate::modbus`).
+    pub fn command(&mut self, cmd: Command, now_ms: u64) -> Result<AckResult, ErrorCode> {
+        match cmd {
             Command::GetInfo => Ok(AckResult::Info(self.hello())),
             Command::GetConfig => Ok(AckResult::ConfigV3(self.config.clone())),
             // An older host's config: its twelve fields over the node's gain fields.
@@ -163,8 +170,24 @@ where
                 self.reset_request = true;
                 Ok(AckResult::Resetting)
             }
-        };
-        self.reply(id, result, tx);
+            Command::GetLinkSettings => Ok(AckResult::LinkSettings(self.link)),
+            // A change of the link is saved at once and applied by a reset
+            // after the answer (which goes out in the old protocol): the
+            // board sets its UART up from the record at boot.
+            Command::SetLinkSettings(link) => {
+                link.validate().map_err(ErrorCode::InvalidLinkSettings)?;
+                let changed = link != self.link;
+                self.link = link;
+                self.changed(now_ms);
+                if changed {
+                    if self.pending_save.is_some() {
+                        self.save(now_ms);
+                    }
+                    self.reset_request = true;
+                }
+                Ok(AckResult::LinkSettings(self.link))
+            }
+        }
     }
 
     fn set_config(&mut self, cfg: Config, now_ms: u64) -> Result<(), ErrorCode> {

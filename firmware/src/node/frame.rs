@@ -7,7 +7,7 @@ use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use fois_protocol::{DeviceMsg, Event, EventKind, IceEstimate, Measurement, MeasurementV3, flags};
 
-use super::Node;
+use super::{Node, Report};
 use crate::hal::PhotoAdc;
 use crate::ice_rule::RuleInput;
 use crate::measure::ntc::{self, NtcReading};
@@ -74,11 +74,17 @@ where
             flags,
             state: self.rule.state(),
         };
+        let gain = self.gain_estimate();
+        self.last_report = Some(Report {
+            seq: self.seq,
+            estimate,
+            gain,
+        });
         if self.streaming {
             let msg = MeasurementV3 {
                 measurement: m.clone(),
                 estimate,
-                gain: self.gain_estimate(),
+                gain,
             };
             self.send(DeviceMsg::MeasurementV3(msg), tx);
         }

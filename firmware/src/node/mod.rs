@@ -11,18 +11,21 @@
 //! - [`saving`]: when the record is written (coalescing, rate limit,
 //!   retries);
 //! - [`gain_keeping`]: the learned optical gain — the estimator's prior, the
-//!   out-of-band flag, when it is worth keeping.
+//!   out-of-band flag, when it is worth keeping;
+//! - [`modbus_view`]: the node as its Modbus registers show it, and a
+//!   Modbus write's actions carried out.
 
 pub mod dispatch;
 pub mod frame;
 pub mod gain_keeping;
+pub mod modbus_view;
 pub mod saving;
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use fois_protocol::{
     Baseline, Config, DetectorState, DeviceFrame, DeviceMsg, FrameDecoder, GainEstimate, Hello,
-    MAX_FRAME, Measurement, PROTOCOL_VERSION, encode, flags,
+    LinkSettings, MAX_FRAME, Measurement, PROTOCOL_VERSION, encode, flags,
 };
 
 use crate::estimator::{Estimator, EstimatorParams};
@@ -56,6 +59,19 @@ const fn parse_u8(s: &str) -> u8 {
 struct PendingSave {
     first_ms: u64,
     last_ms: u64,
+}
+
+/// What the last frame reported beside its [`Measurement`]: the registers
+/// of the Modbus link show them together.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Report {
+    /// The frame's sequence number (the one its measurement frame carries
+    /// when streaming).
+    pub seq: u32,
+    /// The ice estimate after the frame.
+    pub estimate: Option<fois_protocol::IceEstimate>,
+    /// The optical gain estimate.
+    pub gain: Option<GainEstimate>,
 }
 
 /// The node. Type parameters: ADC, LED (PB0), alarm output (PA9), indicator
@@ -111,6 +127,11 @@ where
     gain_out_of_band: bool,
     /// When the learned gain was last considered for a save, ms.
     gain_checked_ms: u64,
+    /// The host link's protocol and Modbus settings (stored in the record).
+    link: LinkSettings,
+    /// The last measurement frame's estimate, gain and sequence number
+    /// (what the Modbus registers show with [`Node::last_measurement`]).
+    last_report: Option<Report>,
 }
 
 impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
@@ -145,9 +166,15 @@ where
             Err(LoadError::Empty) => (None, false),
             Err(_) => (None, true),
         };
-        let (config, baseline, gain_kept, gain_calibration) = match &stored {
-            Some(r) => (r.config.clone(), r.baseline, r.gain, r.gain_calibration),
-            None => (Config::default(), None, None, None),
+        let (config, baseline, gain_kept, gain_calibration, link) = match &stored {
+            Some(r) => (
+                r.config.clone(),
+                r.baseline,
+                r.gain,
+                r.gain_calibration,
+                r.link,
+            ),
+            None => (Config::default(), None, None, None, LinkSettings::default()),
         };
         let info = BoardInfo {
             cal: info.cal.or_typical(),
@@ -187,6 +214,8 @@ where
             gain_calibration,
             gain_out_of_band: false,
             gain_checked_ms: 0,
+            link,
+            last_report: None,
         };
         node.start_estimator();
         let _ = node.led.set_low();
@@ -288,6 +317,32 @@ where
     /// The last frame's measurement (also when not streaming).
     pub fn last_measurement(&self) -> Option<&Measurement> {
         self.last.as_ref()
+    }
+
+    /// The last frame's sequence number, estimate and gain.
+    pub fn last_report(&self) -> Option<&Report> {
+        self.last_report.as_ref()
+    }
+
+    /// The host link's protocol and Modbus settings in force.
+    pub fn link_settings(&self) -> LinkSettings {
+        self.link
+    }
+
+    /// The button was held at power-up: the host link goes back to the
+    /// framed protocol (saved at once), the way back when the host no
+    /// longer speaks Modbus. Returns true if it changed (the board then
+    /// sets its link up framed).
+    pub fn button_held_at_boot(&mut self, now_ms: u64) -> bool {
+        if self.link.protocol == fois_protocol::LinkProtocol::Framed {
+            return false;
+        }
+        self.link = self.link.framed();
+        self.changed(now_ms);
+        if self.pending_save.is_some() {
+            self.save(now_ms);
+        }
+        true
     }
 
     /// The ice estimator (its posterior, its settings).

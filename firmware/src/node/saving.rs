@@ -89,6 +89,7 @@ where
             baseline: self.baseline,
             gain: self.gain_kept,
             gain_calibration: self.gain_calibration,
+            link: self.link,
         }
     }
 

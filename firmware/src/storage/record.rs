@@ -1,5 +1,6 @@
-//! The persisted record: config, dark baseline and the optical gain (the
-//! learned estimate and the last calibration), with a version and a CRC.
+//! The persisted record: config, dark baseline, the optical gain (the
+//! learned estimate and the last calibration) and the host link's settings
+//! (framed or Modbus RTU), with a version and a CRC.
 //!
 //! ```text
 //! | magic "FOIS" 4 B | version u16 LE | length u16 LE | postcard(Record) | CRC-32 u32 LE |
@@ -10,16 +11,17 @@
 //! [`Config::validate`] is *corrupt*: defaults and `CONFIG_DEFAULTED`.
 
 use fois_protocol::framing::CRC;
-use fois_protocol::{Baseline, Config, ConfigV1, GainEstimate};
+use fois_protocol::{Baseline, Config, ConfigV1, GainEstimate, LinkSettings};
 use postcard::experimental::max_size::MaxSize;
 use serde::{Deserialize, Serialize};
 
 /// First four bytes of a record.
 pub const MAGIC: [u8; 4] = *b"FOIS";
 /// Record layout version; bump when [`Record`] changes shape. A record of
-/// a version this firmware knows ([`RecordV1`], [`RecordV2`]) is read and
-/// upgraded; any other is refused (defaults + fault), never misread.
-pub const RECORD_VERSION: u16 = 3;
+/// a version this firmware knows ([`RecordV1`], [`RecordV2`], [`RecordV3`])
+/// is read and upgraded; any other is refused (defaults + fault), never
+/// misread.
+pub const RECORD_VERSION: u16 = 4;
 const HEADER: usize = 8;
 const CRC_LEN: usize = 4;
 /// The largest record, bytes.
@@ -37,6 +39,23 @@ pub struct Record {
     pub gain: Option<GainEstimate>,
     /// Layout 3: the last gain calibration against a target (same form);
     /// a dark calibration returns the learned gain to it.
+    pub gain_calibration: Option<GainEstimate>,
+    /// Layout 4: the host link's protocol (framed or Modbus RTU) and its
+    /// Modbus address and parity.
+    pub link: LinkSettings,
+}
+
+/// The record of layout version 3 (firmware of protocol versions 3 and 4):
+/// config, baseline and the gain. Read and upgraded (the framed link).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RecordV3 {
+    /// The config in force.
+    pub config: Config,
+    /// The dark baseline, once calibrated.
+    pub baseline: Option<Baseline>,
+    /// The learned gain.
+    pub gain: Option<GainEstimate>,
+    /// The last gain calibration.
     pub gain_calibration: Option<GainEstimate>,
 }
 
@@ -116,12 +135,23 @@ pub fn decode(bytes: &[u8]) -> Result<Record, LoadError> {
             Ok((r, [])) => r,
             _ => return Err(LoadError::Corrupt),
         },
+        3 => match postcard::take_from_bytes::<RecordV3>(body) {
+            Ok((r, [])) => Record {
+                config: r.config,
+                baseline: r.baseline,
+                gain: r.gain,
+                gain_calibration: r.gain_calibration,
+                link: LinkSettings::default(),
+            },
+            _ => return Err(LoadError::Corrupt),
+        },
         2 => match postcard::take_from_bytes::<RecordV2>(body) {
             Ok((r, [])) => Record {
                 config: r.config,
                 baseline: r.baseline,
                 gain: None,
                 gain_calibration: None,
+                link: LinkSettings::default(),
             },
             _ => return Err(LoadError::Corrupt),
         },
@@ -131,12 +161,14 @@ pub fn decode(bytes: &[u8]) -> Result<Record, LoadError> {
                 baseline: r.baseline,
                 gain: None,
                 gain_calibration: None,
+                link: LinkSettings::default(),
             },
             _ => return Err(LoadError::Corrupt),
         },
         _ => return Err(LoadError::OldVersion),
     };
     record.config.validate().map_err(|_| LoadError::Corrupt)?;
+    record.link.validate().map_err(|_| LoadError::Corrupt)?;
     Ok(record)
 }
 
@@ -176,6 +208,7 @@ mod tests {
                 gain_ppm: 850_000,
                 sigma_ppm: 17_000,
             }),
+            link: LinkSettings::default(),
         }
     }
 
@@ -222,6 +255,7 @@ mod tests {
             baseline: None,
             gain: None,
             gain_calibration: None,
+            link: LinkSettings::default(),
         };
         let n = encode(&bad, &mut buf);
         assert_eq!(decode(&buf[..n]), Err(LoadError::Corrupt));
@@ -287,6 +321,61 @@ mod tests {
         assert_eq!(read.baseline, old.baseline);
         assert_eq!((read.gain, read.gain_calibration), (None, None));
     }
+
+    /// A record of layout 3 (config, baseline, learned and calibrated gain,
+    /// protocol 3 and 4 firmware) is read and upgraded: the link stays
+    /// framed.
+    #[test]
+    fn layout_version_3_is_upgraded() {
+        let gain = GainEstimate {
+            gain_ppm: 1_050_000,
+            sigma_ppm: 20_000,
+        };
+        let old = RecordV3 {
+            config: Config::default(),
+            baseline: Some(Baseline {
+                i1_na: 310,
+                i2_na: -7,
+            }),
+            gain: Some(gain),
+            gain_calibration: None,
+        };
+        let (buf, end) = framed(3, &old);
+        // The bytes of a version-3 record, as that firmware wrote them.
+        let golden: &[u8] = &GOLDEN_V3;
+        assert_eq!(&buf[..end + CRC_LEN], golden);
+        let read = decode(&buf).unwrap();
+        assert_eq!(read.config, old.config);
+        assert_eq!(read.baseline, old.baseline);
+        assert_eq!((read.gain, read.gain_calibration), (Some(gain), None));
+        assert_eq!(read.link, LinkSettings::default());
+    }
+
+    /// Layout 4 keeps the link settings; an address outside 1–247 is a
+    /// corrupt record (defaults and the fault), never a node that cannot be
+    /// addressed.
+    #[test]
+    fn layout_version_4_keeps_the_link_and_refuses_a_bad_address() {
+        let mut r = sample();
+        r.link = LinkSettings {
+            protocol: fois_protocol::LinkProtocol::ModbusRtu,
+            modbus_address: 17,
+            parity: fois_protocol::Parity::None8N1,
+        };
+        let mut out = [0xFFu8; MAX_RECORD];
+        let n = encode(&r, &mut out);
+        assert_eq!(decode(&out[..n]), Ok(r.clone()));
+        r.link.modbus_address = 0;
+        let n = encode(&r, &mut out);
+        assert_eq!(decode(&out[..n]), Err(LoadError::Corrupt));
+    }
+
+    const GOLDEN_V3: [u8; 50] = [
+        0x46, 0x4f, 0x49, 0x53, 0x03, 0x00, 0x26, 0x00, 0x64, 0x08, 0xc8, 0x01, 0x90, 0x4e, 0x90,
+        0x4e, 0xe8, 0x07, 0x1e, 0xc8, 0x01, 0xac, 0x02, 0x64, 0xf4, 0x03, 0x01, 0x00, 0xa0, 0x1f,
+        0xd8, 0x04, 0xdc, 0x0b, 0x01, 0xec, 0x04, 0x0d, 0x01, 0x90, 0x8b, 0x40, 0xa0, 0x9c, 0x01,
+        0x00, 0x96, 0x38, 0x2b, 0x2f,
+    ];
 
     const GOLDEN_V2: [u8; 43] = [
         0x46, 0x4f, 0x49, 0x53, 0x02, 0x00, 0x1f, 0x00, 0x64, 0x08, 0xc8, 0x01, 0x90, 0x4e, 0x90,

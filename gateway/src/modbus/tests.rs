@@ -49,8 +49,11 @@ fn a_node_not_heard_from_is_stale_and_every_value_not_available() {
             0xFFFF, // seq
             0xFFFF, // vdda
             0,
-            0, // frames lost
-            0, // ack
+            0,      // frames lost
+            0,      // ack
+            0x8000, // icing rate
+            0xFFFF,
+            0xFFFF, // its sigma, P(accreting)
         ]
     );
 }

@@ -10,6 +10,7 @@ pub mod config;
 pub mod demo;
 pub mod estimate;
 pub mod icing_report;
+pub mod modbus;
 pub mod monitor;
 pub mod plot;
 pub mod request;
@@ -64,6 +65,11 @@ pub enum Cmd {
     /// Says so, with its own exit code, when there is no alarm.
     #[command(after_help = exit::ACK_TABLE)]
     Ack(request::RequestArgs),
+    /// A node on Modbus RTU (protocol 5): switch one to it (`enable`, over
+    /// the framed link), read and write its registers, or switch it back
+    /// (`framed`).
+    #[command(after_help = exit::TABLE)]
+    Modbus(modbus::ModbusArgs),
     /// Run the firmware's own logic on simulated hardware (ray-traced ice
     /// accretion, analog front end, ambient light) and serve it on a
     /// pseudo-terminal. Prints the pty path on the first line of stdout; talk
@@ -138,6 +144,7 @@ impl Cli {
             Cmd::CalibrateGain(a) => request::calibrate_gain(&a),
             Cmd::ResetGain(a) => request::reset_gain(&a),
             Cmd::Ack(a) => request::ack(&a),
+            Cmd::Modbus(a) => modbus::run(a),
             Cmd::VirtualNode(a) => {
                 install_ctrlc();
                 virtual_node::run(a, &STOP)

@@ -11,6 +11,11 @@
 //!   versions), so the transmit task raises PA8 before a burst and drops it
 //!   once the USART reports transmission complete (TC).
 //!
+//! Either speaks the framed protocol (8N1) or, when the node's link
+//! settings say so, Modbus RTU with their parity (8E1, 8N2, 8N1): a byte
+//! wakes the receive task at once (`eager_reads`), so the RTU task's
+//! silence timing sees each byte's arrival.
+//!
 //! The rate is never a `Config` field: a wrong value sent over the link
 //! would cut the only link to a node on a tower (`fois_firmware::platform::field_link`
 //! states each rate's error against the node's clock).
@@ -47,15 +52,36 @@ bind_interrupts!(struct Irqs {
     USART2 => usart::BufferedInterruptHandler<peripherals::USART2>;
 });
 
+/// The UART's settings: the rate, and Modbus RTU's parity and stop bits
+/// (`None`: the framed protocol's 8N1).
+fn uart_config(baud: u32, modbus: Option<fois_protocol::Parity>) -> usart::Config {
+    use embassy_stm32::usart::{DataBits, Parity, StopBits};
+    let mut config = usart::Config::default();
+    config.baudrate = baud;
+    config.data_bits = DataBits::DataBits8;
+    if let Some(p) = modbus {
+        // 8 data bits + parity: embassy sets the 9-bit word with PCE.
+        let (parity, stop) = match p {
+            fois_protocol::Parity::Even8E1 => (Parity::ParityEven, StopBits::STOP1),
+            fois_protocol::Parity::None8N2 => (Parity::ParityNone, StopBits::STOP2),
+            fois_protocol::Parity::None8N1 => (Parity::ParityNone, StopBits::STOP1),
+        };
+        config.parity = parity;
+        config.stop_bits = stop;
+        config.eager_reads = Some(1);
+    }
+    config
+}
+
 /// The bench link: USART2 to the ST-LINK's virtual COM port.
 #[cfg(not(feature = "field-link"))]
 pub fn bench(
     usart: Peri<'static, peripherals::USART2>,
     rx: Peri<'static, peripherals::PA3>,
     tx: Peri<'static, peripherals::PA2>,
+    modbus: Option<fois_protocol::Parity>,
 ) -> Link {
-    let mut config = usart::Config::default();
-    config.baudrate = fois_protocol::BAUD_RATE;
+    let config = uart_config(fois_protocol::BAUD_RATE, modbus);
     let (tx_buf, rx_buf) = buffers();
     let uart = match BufferedUart::new(usart, rx, tx, tx_buf, rx_buf, Irqs, config) {
         Ok(u) => u,
@@ -84,6 +110,7 @@ pub fn field(
     tx: Peri<'static, peripherals::PC6>,
     de: Peri<'static, peripherals::PA8>,
     strap: Peri<'static, peripherals::PC8>,
+    modbus: Option<fois_protocol::Parity>,
 ) -> Link {
     use embassy_stm32::gpio::{Input, Level, Pull, Speed};
     use fois_firmware::platform::field_link::LONG_CABLE_BAUD;
@@ -100,8 +127,7 @@ pub fn field(
             fois_protocol::BAUD_RATE
         }
     };
-    let mut config = usart::Config::default();
-    config.baudrate = baud;
+    let mut config = uart_config(baud, modbus);
     config.rx_pull = Pull::Up;
     let (tx_buf, rx_buf) = buffers();
     let uart = match BufferedUart::new(usart, rx, tx, tx_buf, rx_buf, Irqs, config) {

@@ -108,7 +108,7 @@ async fn reads_of_either_function_give_the_same_registers_and_bad_ones_the_modbu
     );
     use ExceptionCode::*;
     for (unit, r, want) in [
-        (5, Request::ReadInputRegisters(23, 2), IllegalDataAddress),
+        (5, Request::ReadInputRegisters(26, 2), IllegalDataAddress),
         (5, Request::ReadHoldingRegisters(100, 1), IllegalDataAddress),
         (5, Request::ReadInputRegisters(0, 0), IllegalDataValue),
         (5, Request::ReadInputRegisters(0, 126), IllegalDataValue),
