@@ -11,6 +11,7 @@ use fois_protocol::IceEstimate;
 use super::fast_math;
 use super::gain_bank::{GAINS, Gain, GainBank, UNKNOWN_GAIN_SD};
 use super::grid::{self, Grid, Moments, Shared};
+use super::history::{self, History, LEVELS, Rate};
 use super::params::{EstimatorParams, within};
 use super::posterior::{Posterior, Update};
 use super::response::{ROWS, STEP_MM, row_mm};
@@ -24,6 +25,12 @@ const MAX_DT_S: f32 = 86_400.0;
 /// Largest |current| that counts as a measurement, µA (far beyond the
 /// 330 µA full scale of the default front end).
 const MAX_CURRENT_UA: f32 = 10_000.0;
+
+/// P(accreting) above which an icing period starts.
+pub const ACCRETING_ON: f32 = 0.7;
+
+/// P(accreting) below which an icing period ends.
+pub const ACCRETING_OFF: f32 = 0.3;
 
 /// Most frames averaged into one update.
 pub const MAX_PENDING: usize = 16;
@@ -58,6 +65,16 @@ pub struct Estimator {
     pending_dt_s: f32,
     update: Update,
     posterior: Option<Posterior>,
+    /// The growth history beside the bank.
+    history: History,
+    /// The bank's thickness marginal of the last summary (sums to 1).
+    bank_marginal: [f32; LEVELS],
+    /// The bank's P(rime) of the last summary.
+    bank_p_rime: f32,
+    /// The growth rate after the last step.
+    rate: Option<Rate>,
+    /// The icing-period flag (P(accreting) with hysteresis).
+    accreting: bool,
 }
 
 impl Default for Estimator {
@@ -88,6 +105,15 @@ impl Estimator {
             pending_dt_s: 0.0,
             update: Update::Waiting,
             posterior: None,
+            history: {
+                let mut h = History::new();
+                h.set_output_weight(params.history.output_weight);
+                h
+            },
+            bank_marginal: [0.0; LEVELS],
+            bank_p_rime: 0.0,
+            rate: None,
+            accreting: false,
         }
     }
 
@@ -107,6 +133,11 @@ impl Estimator {
         self.clear_pending();
         self.update = Update::Waiting;
         self.posterior = None;
+        self.history = History::new();
+        self.history
+            .set_output_weight(self.params.history.output_weight);
+        self.rate = None;
+        self.accreting = false;
     }
 
     /// The face is known to be clean and dry (a dark calibration has just
@@ -119,6 +150,7 @@ impl Estimator {
             g.set_dry();
         }
         self.clear_pending();
+        self.history.set_dry();
         self.update = Update::Initialised;
         self.summarise();
     }
@@ -143,6 +175,18 @@ impl Estimator {
     /// The posterior after the last step (`None` before the first valid frame).
     pub fn posterior(&self) -> Option<Posterior> {
         self.posterior
+    }
+
+    /// The growth rate and P(accreting) after the last step (`None` before
+    /// the first valid frame, or with the history off).
+    pub fn rate(&self) -> Option<Rate> {
+        self.rate
+    }
+
+    /// Meteorological icing now: P(accreting) with hysteresis — set above
+    /// [`ACCRETING_ON`], cleared below [`ACCRETING_OFF`].
+    pub fn accreting(&self) -> bool {
+        self.accreting
     }
 
     /// The estimate as the protocol carries it.
@@ -291,6 +335,11 @@ impl Estimator {
                 ice_row * fast_math::exp(ln_ice_t),
             ],
             row_ratio: [fast_math::exp(-STEP_MM / p.water_scale_mm), 1.0, 1.0],
+            temp_factor: [
+                fast_math::exp(ln_water_t),
+                fast_math::exp(ln_ice_t),
+                fast_math::exp(ln_ice_t),
+            ],
         }
     }
 
@@ -316,6 +365,11 @@ impl Estimator {
         self.learn_gain(0.0, &ln_z);
         self.update = Update::Initialised;
         self.summarise();
+        if !self.history.initialised {
+            // The first look at full weight: the output after it is the
+            // bank's (one look, not two).
+            self.history.initialise_from(&self.bank_marginal, 0.05);
+        }
         self.estimate()
     }
 
@@ -327,6 +381,21 @@ impl Estimator {
         let x = self.pending_mean();
         let negative = x.is_none() && self.pending_negative > 0;
         self.clear_pending();
+        // The history predicts to now before the output is formed; it
+        // measures the bank at a later update (at 10 Hz the next second:
+        // the two halves of its cost fall in different seconds), or at once
+        // when the updates are slow (a replay of sparse frames).
+        let hp = self.params.history;
+        let mut measure_now = false;
+        if hp.enabled && self.history.initialised {
+            let was_predicted = self.history.predicted();
+            if self.history.gather(dt_s, hp.period_s) {
+                self.history.predict(&hp);
+                measure_now = dt_s >= 1.5;
+            } else {
+                measure_now = was_predicted;
+            }
+        }
         let shared = self.shared();
         let gains = self.bank.gains_now();
         if negative {
@@ -377,6 +446,10 @@ impl Estimator {
             self.learn_gain(dt_s, &ln_z);
         }
         self.summarise();
+        if measure_now && self.update == Update::Measured {
+            self.history
+                .measure(&self.bank_marginal, self.bank_p_rime, &hp);
+        }
     }
 
     /// The bank learns the gain from each hypothesis' ln predictive
@@ -388,27 +461,89 @@ impl Estimator {
         }
     }
 
-    /// The output posterior: the weighted mixture of the grids'.
+    /// The output posterior: the weighted mixture of the grids', each
+    /// weighted by the history's thickness marginal (mixed with a flat
+    /// share, the history's `escape`); the bank's own marginal is kept for
+    /// the history's next measurement, and the rate is the history's,
+    /// widened towards its prior as far as the bank's evidence falls
+    /// outside what the history foresaw.
     fn summarise(&mut self) {
         let shared = self.shared();
-        let mut parts = [None; GAINS];
-        for (p, g) in parts.iter_mut().zip(self.grids.iter()) {
-            *p = g.summarise(&shared);
+        let hp = self.params.history;
+        let use_history = hp.enabled && self.history.initialised;
+        let mut h = [1.0 / LEVELS as f32; LEVELS];
+        if use_history {
+            let flat = hp.escape / LEVELS as f32;
+            for (a, m) in h.iter_mut().zip(self.history.weight()) {
+                *a = (1.0 - hp.escape) * m + flat;
+            }
         }
-        let post = Moments::mixture(
-            parts
-                .iter()
-                .zip(*self.bank.weights())
-                .filter_map(|(m, w)| m.map(|m| (w, m))),
-        );
+        let mut parts = [None; GAINS];
+        let mut lik = [0.0f32; LEVELS];
+        let mut p_rime = 0.0f32;
+        for ((p, g), w) in parts
+            .iter_mut()
+            .zip(self.grids.iter())
+            .zip(*self.bank.weights())
+        {
+            *p = g
+                .summarise_weighted(&shared, &h, w, &mut lik, &mut p_rime)
+                .map(|(m, ratio)| (w * ratio, m));
+        }
+        let post = Moments::mixture(parts.iter().filter_map(|m| *m));
         if post.is_none() {
             // A state that cannot be normalised (never expected) restarts
             // the filter rather than report nonsense.
             let update = self.update;
             self.reset();
             self.update = update;
+            self.posterior = None;
+            return;
         }
+        let s: f32 = lik.iter().sum();
+        if s > 0.0 {
+            for l in lik.iter_mut() {
+                *l /= s;
+            }
+        }
+        self.bank_marginal = lik;
+        self.bank_p_rime = p_rime;
         self.posterior = post;
+        self.rate = if use_history {
+            // Credibility of the history: how well it foresaw the bank's
+            // evidence against a flat guess.
+            let mut o = 0.0f32;
+            for (l, m) in lik.iter().zip(self.history.marginal()) {
+                o += l * m;
+            }
+            let a = (1.0 - hp.escape) * o;
+            let b = hp.escape / LEVELS as f32;
+            let w = if a + b > 0.0 { a / (a + b) } else { 0.0 };
+            let (hr, pr) = (self.history.rate(), history::prior_rate());
+            let mean = w * hr.mean_mm_per_h + (1.0 - w) * pr.mean_mm_per_h;
+            let m2 = w
+                * (hr.sigma_mm_per_h * hr.sigma_mm_per_h + hr.mean_mm_per_h * hr.mean_mm_per_h)
+                + (1.0 - w)
+                    * (pr.sigma_mm_per_h * pr.sigma_mm_per_h + pr.mean_mm_per_h * pr.mean_mm_per_h);
+            let p_water = post.map(|p| p.p_medium[1]).unwrap_or(0.0);
+            let p_acc = w * hr.p_accreting + (1.0 - w) * pr.p_accreting;
+            Some(Rate {
+                mean_mm_per_h: mean,
+                sigma_mm_per_h: fast_math::sqrt((m2 - mean * mean).max(0.0)),
+                p_accreting: (p_acc * (1.0 - p_water)).clamp(0.0, 1.0),
+            })
+        } else {
+            None
+        };
+        if let Some(r) = self.rate {
+            if r.p_accreting >= ACCRETING_ON {
+                self.accreting = true;
+            } else if r.p_accreting <= ACCRETING_OFF {
+                self.accreting = false;
+            }
+        } else {
+            self.accreting = false;
+        }
     }
 
     /// Set the gain's prior: `gain` relative to the table (at

@@ -68,6 +68,7 @@ pub(crate) mod fast_math;
 pub mod filter;
 pub mod gain_bank;
 mod grid;
+pub mod history;
 pub mod params;
 pub mod posterior;
 pub mod response;
@@ -75,8 +76,9 @@ pub mod response;
 pub mod table;
 pub mod table_entry;
 
-pub use filter::{Estimator, MAX_PENDING};
+pub use filter::{ACCRETING_OFF, ACCRETING_ON, Estimator, MAX_PENDING};
 pub use gain_bank::{GAIN_REF_TEMP_C, GAINS, Gain, UNKNOWN_GAIN_SD};
+pub use history::{HistoryParams, RATE_BINS, RATE_MAX_MM_PER_H, RATE_MIN_MM_PER_H, Rate};
 pub use params::EstimatorParams;
 pub use posterior::{Posterior, Update};
 pub use response::{MEDIA, ROWS, STEP_MM};

@@ -2,6 +2,8 @@
 //! documented defaults (the board and the virtual node pass them), not part
 //! of the protocol `Config`; out-of-range values take their defaults.
 
+use super::history::HistoryParams;
+
 /// The estimator's settings. Library settings with documented defaults (the
 /// board and the virtual node pass them); they are not part of the protocol
 /// `Config`.
@@ -54,6 +56,8 @@ pub struct EstimatorParams {
     /// table's narrowest states sit (thick rime reads like 2 mm of rime at
     /// a few per cent more gain).
     pub gain_within_min: f32,
+    /// The growth history beside the bank (`history.rs`).
+    pub history: HistoryParams,
 }
 
 impl Default for EstimatorParams {
@@ -74,6 +78,7 @@ impl Default for EstimatorParams {
             update_period_s: 1.0,
             gain_memory_s: 3600.0,
             gain_within_min: 0.02,
+            history: HistoryParams::default(),
         }
     }
 }
@@ -121,6 +126,7 @@ impl EstimatorParams {
             update_period_s: within(self.update_period_s, 0.0, 60.0, d.update_period_s),
             gain_memory_s: within(self.gain_memory_s, 1.0, 1.0e7, d.gain_memory_s),
             gain_within_min: within(self.gain_within_min, 0.0, 0.5, d.gain_within_min),
+            history: self.history.sanitized(),
         }
     }
 }
