@@ -675,7 +675,9 @@ fn main() -> ! {
     }
     let mut worst = 0u32;
     let mut alive = 0usize;
-    for _ in 0..5 {
+    // 24 seconds: more than two periods of the growth history, whose parts
+    // fall in different seconds.
+    for _ in 0..24 {
         // One second of 10 Hz frames: nine gathered, one update of the bank.
         let t0 = ticks();
         for _ in 0..10 {

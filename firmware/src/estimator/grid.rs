@@ -444,41 +444,35 @@ impl Grid {
 impl Grid {
     /// The grid's posterior (as [`Self::summarise`]) weighted per level by
     /// `h` (the history's prediction; level 0 the dry face, level i + 1 row
-    /// i), with the plain thickness marginal (normalised, times `w`) added
-    /// to `lik` and `w` · P(rime) to `p_rime`. Returns the weighted moments
-    /// and the ratio of the weighted normaliser to the plain one.
+    /// i), and `w` · its unweighted P(medium) added to `p_medium_plain`.
+    /// Returns the weighted moments and the ratio of the weighted
+    /// normaliser to the plain one.
     #[inline(never)]
     pub fn summarise_weighted(
         &self,
         s: &Shared,
         h: &[f32; LEVELS],
         w: f32,
-        lik: &mut [f32; LEVELS],
-        p_rime: &mut f32,
+        p_medium_plain: &mut [f32; 4],
     ) -> Option<(Moments, f32)> {
         if !self.initialised {
             return None;
         }
-        let mut plain = [0.0f32; LEVELS];
-        let mut plain_total = self.dry;
-        plain[0] = self.dry;
+        let (h0, h_rows) = h.split_first()?;
         let dry = self.dry * s.dry_factor;
-        let h0 = h[0];
         let mut total = dry;
         let mut total_w = dry * h0;
         let mut p_medium = [dry * h0, 0.0, 0.0, 0.0];
-        let mut rime = 0.0f32;
+        let mut plain_medium = [dry, 0.0, 0.0, 0.0];
         let (mut m1, mut m2) = (0.0f32, 0.0f32);
         for (k, cells) in self.cells.iter().enumerate() {
             let ratio = s.row_ratio[k];
             let mut f = s.factor[k] * ratio;
-            let t = s.temp_factor[k];
             let (mut pk, mut pk_plain, mut s1, mut s2) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
             let mut d = STEP_MM;
-            for ((&c, pl), &hj) in cells.iter().zip(plain[1..].iter_mut()).zip(h[1..].iter()) {
+            for (&c, &hj) in cells.iter().zip(h_rows) {
                 let q = c * f;
                 f *= ratio;
-                *pl += c * t;
                 pk_plain += q;
                 let qw = q * hj;
                 pk += qw;
@@ -489,10 +483,9 @@ impl Grid {
             if let Some(slot) = p_medium.get_mut(k + 1) {
                 *slot = pk;
             }
-            if k == 2 {
-                rime = pk_plain;
+            if let Some(slot) = plain_medium.get_mut(k + 1) {
+                *slot = pk_plain;
             }
-            plain_total += cells.iter().sum::<f32>() * t;
             total += pk_plain;
             total_w += pk;
             m1 += s1;
@@ -502,13 +495,9 @@ impl Grid {
             return None;
         }
         let inv = 1.0 / total;
-        if plain_total > 0.0 {
-            let inv_plain = 1.0 / plain_total;
-            for (l, p) in lik.iter_mut().zip(plain) {
-                *l += w * p * inv_plain;
-            }
+        for (a, b) in p_medium_plain.iter_mut().zip(plain_medium) {
+            *a += w * b * inv;
         }
-        *p_rime += w * rime * inv;
         let inv_w = 1.0 / total_w;
         for pm in p_medium.iter_mut() {
             *pm *= inv_w;
@@ -521,6 +510,36 @@ impl Grid {
             },
             total_w * inv,
         ))
+    }
+
+    /// The grid's thickness likelihood (the filtered evidence times the
+    /// temperature's factor, without the prior, which would count once per
+    /// look of the history), normalised, times `w`, added to `lik`.
+    #[inline(never)]
+    pub fn add_likelihood(&self, s: &Shared, w: f32, lik: &mut [f32; LEVELS]) {
+        if !self.initialised {
+            return;
+        }
+        let mut plain = [0.0f32; LEVELS];
+        let (p0, rows) = plain.split_at_mut(1);
+        if let Some(p) = p0.first_mut() {
+            *p = self.dry;
+        }
+        let mut total = self.dry;
+        for (k, cells) in self.cells.iter().enumerate() {
+            let t = s.temp_factor[k];
+            for (pl, &c) in rows.iter_mut().zip(cells) {
+                let v = c * t;
+                *pl += v;
+                total += v;
+            }
+        }
+        if total.is_finite() && total > 0.0 {
+            let a = w / total;
+            for (l, p) in lik.iter_mut().zip(plain) {
+                *l += a * p;
+            }
+        }
     }
 }
 

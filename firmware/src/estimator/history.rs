@@ -34,6 +34,9 @@ pub const RATE_MIN_MM_PER_H: f32 = 0.3;
 /// See [`RATE_MIN_MM_PER_H`].
 pub const RATE_MAX_MM_PER_H: f32 = 13.0;
 
+/// The stage at which the prediction is done and waits for its look.
+pub const READY_TO_LOOK: u8 = 7;
+
 /// A level's probability below this (relative to the sum) is set to zero.
 const FLOOR: f32 = 1e-20;
 
@@ -42,7 +45,7 @@ const FLOOR: f32 = 1e-20;
 pub struct HistoryParams {
     /// Off: the estimator's output is the bank's alone (the design before).
     pub enabled: bool,
-    /// The history updates once per this period, s (default 5).
+    /// The history updates once per this period, s (default 10: its seven parts run one a second).
     pub period_s: f32,
     /// Rate of a step of the rate to a neighbouring bin, per hour (default 1).
     pub rate_walk_per_h: f32,
@@ -73,7 +76,7 @@ pub struct HistoryParams {
     /// where the bank's evidence falls outside what the history foresaw,
     /// the output is the bank's.
     pub escape: f32,
-    /// Exponent of the history's marginal in the output (default 0.5): the
+    /// Exponent of the history's marginal in the output (default 0.35): the
     /// history is itself built of tempered looks at the same bank; at full
     /// weight its product with the bank's narrow, wrong branches (rime read
     /// as glaze at 1–3 mm) was confident.
@@ -84,7 +87,7 @@ impl Default for HistoryParams {
     fn default() -> Self {
         HistoryParams {
             enabled: true,
-            period_s: 5.0,
+            period_s: 10.0,
             rate_walk_per_h: 1.0,
             pause_per_h: 0.2,
             resume_per_h: 1.0,
@@ -95,7 +98,7 @@ impl Default for HistoryParams {
             early_mm: 1.5,
             looks_per_h: 1.0,
             escape: 0.05,
-            output_weight: 0.5,
+            output_weight: 0.35,
         }
     }
 }
@@ -161,14 +164,28 @@ pub(crate) struct History {
     weight: [f32; LEVELS],
     /// `output_weight` in force.
     gamma: f32,
+    /// How well the prediction foresaw the bank's last look against the
+    /// flat escape: the weight of the history's rate in the output.
+    credibility: f32,
     /// Expected growth since the last measurement, mm.
     growth_mm: f32,
     /// Time since the last measurement, s.
     since_measure_s: f32,
     /// Time gathered towards the next prediction, s.
     pending_s: f32,
-    /// A prediction waits for its measurement.
-    predicted: bool,
+    /// Where the update stands: 0 gathering, 1 growth, pause and shed
+    /// predicted, 2 the rate walk too (the measurement is next).
+    stage: u8,
+    /// Probability of a step to each neighbouring rate bin over the
+    /// prediction (for its later parts).
+    walk: f32,
+    /// Pause, resume, shed, restart probabilities and the restart's share
+    /// per state, over the prediction.
+    switch: [f32; 5],
+    /// The look's factor per level.
+    factor: [f32; LEVELS],
+    /// The levels' sums being gathered over parts.
+    scratch: [f32; LEVELS],
     /// The history has its first state.
     pub initialised: bool,
 }
@@ -183,10 +200,15 @@ impl History {
             marginal: [0.0; LEVELS],
             weight: [0.0; LEVELS],
             gamma: 1.0,
+            credibility: 1.0,
             growth_mm: 0.0,
             since_measure_s: 0.0,
             pending_s: 0.0,
-            predicted: false,
+            stage: 0,
+            walk: 0.0,
+            switch: [0.0; 5],
+            factor: [1.0; LEVELS],
+            scratch: [0.0; LEVELS],
             initialised: false,
         }
     }
@@ -248,14 +270,10 @@ impl History {
         self.growth_mm = 0.0;
         self.since_measure_s = 0.0;
         self.pending_s = 0.0;
-        self.predicted = false;
+        self.stage = 0;
+        self.scratch = [0.0; LEVELS];
         self.initialised = true;
         self.update_marginal();
-    }
-
-    /// The thickness marginal (sums to 1).
-    pub fn marginal(&self) -> &[f32; LEVELS] {
-        &self.marginal
     }
 
     /// The output's weight per level (the marginal to `output_weight`,
@@ -274,29 +292,80 @@ impl History {
     pub fn gather(&mut self, dt_s: f32, period_s: f32) -> bool {
         self.pending_s += dt_s;
         self.since_measure_s += dt_s;
-        !self.predicted && self.pending_s + 1e-4 >= period_s
+        self.stage == 0 && self.pending_s + 1e-4 >= period_s
     }
 
-    /// A prediction waits for its measurement.
-    pub fn predicted(&self) -> bool {
-        self.predicted
+    /// The update's stage: 0 gathering, else the part done last (see
+    /// [`Self::advance`]).
+    pub fn stage(&self) -> u8 {
+        self.stage
     }
 
-    /// The transitions over the gathered time.
-    pub fn predict(&mut self, p: &HistoryParams) {
+    /// The next part of the update; at 10 Hz one part per second, so that
+    /// no second carries more than one (the budget's worst second). The
+    /// prediction: 1 growth; 2, 3 pause, resume, shed and restarts (half
+    /// the rate bins each); 4, 5 the rate walk (growing, paused); 6, 7 the
+    /// prediction's marginal ([`READY_TO_LOOK`]: the caller looks with
+    /// [`Self::look`]). The look applied: 9 every state times its level's
+    /// factor, 10 normalised, 0 the marginal. Returns the stage reached.
+    pub fn advance(&mut self, p: &HistoryParams) -> u8 {
+        match self.stage {
+            0 => self.predict_growth(p),
+            1 => self.predict_switches(0),
+            2 => self.predict_switches(1),
+            3 => self.predict_rate(0),
+            4 => self.predict_rate(1),
+            5 => {
+                self.sum_levels(0);
+                self.stage = 6;
+            }
+            6 => {
+                self.sum_levels(1);
+                let m = self.scratch;
+                let s: f32 = m.iter().sum();
+                self.scratch = [0.0; LEVELS];
+                let inv = if s > 0.0 { 1.0 / s } else { 0.0 };
+                self.set_marginal(m.map(|a| a * inv));
+                self.stage = READY_TO_LOOK;
+            }
+            8 => self.apply_factor(),
+            9 => self.normalise_applied(),
+            10 => {
+                let m = self.scratch;
+                self.scratch = [0.0; LEVELS];
+                self.set_marginal(m);
+                self.stage = 0;
+            }
+            _ => {}
+        }
+        self.stage
+    }
+
+    /// Add the levels of the growing (`mode` 0) or paused states to the
+    /// scratch.
+    fn sum_levels(&mut self, mode: usize) {
+        let rows = if mode == 0 { &self.grow } else { &self.pause };
+        for row in rows.iter() {
+            for (a, v) in self.scratch.iter_mut().zip(row) {
+                *a += v;
+            }
+        }
+    }
+
+    /// Growth over the gathered time: whole rows per bin, the phase keeps
+    /// the rest; the transition probabilities of the later parts.
+    fn predict_growth(&mut self, p: &HistoryParams) {
         let dt_h = self.pending_s / 3600.0;
         self.pending_s = 0.0;
-        self.predicted = true;
-        if dt_h <= 0.0 {
-            return;
-        }
-        let prob = |per_h: f32| fast_math::one_minus_exp_neg(per_h * dt_h);
-        let walk = 0.5 * prob(p.rate_walk_per_h);
-        let pause = prob(p.pause_per_h);
-        let resume = prob(p.resume_per_h);
-        let shed = prob(p.shed_per_h);
-        let restart = prob(p.restart_per_h);
-        // Growth: whole rows per bin, the phase keeps the rest.
+        self.stage = 1;
+        let prob = |per_h: f32| {
+            if dt_h > 0.0 {
+                fast_math::one_minus_exp_neg(per_h * dt_h)
+            } else {
+                0.0
+            }
+        };
+        self.walk = 0.5 * prob(p.rate_walk_per_h);
         let mut growth = 0.0f32;
         let mut total = 0.0f32;
         for b in 0..RATE_BINS {
@@ -323,60 +392,85 @@ impl History {
         }
         let norm = if total > 0.0 { 1.0 / total } else { 1.0 };
         self.growth_mm += growth * norm;
-        // Pause / resume, shed, restart: level by level.
-        let restart_each = restart * (total / (2 * RATE_BINS * LEVELS) as f32);
-        let mut shed_sum = [[0.0f32; 2]; RATE_BINS];
-        for b in 0..RATE_BINS {
+        let restart = prob(p.restart_per_h);
+        self.switch = [
+            prob(p.pause_per_h),
+            prob(p.resume_per_h),
+            prob(p.shed_per_h),
+            restart,
+            restart * (total / (2 * RATE_BINS * LEVELS) as f32),
+        ];
+    }
+
+    /// Pause / resume, shed, restart, level by level, over half `half` of
+    /// the rate bins.
+    fn predict_switches(&mut self, half: usize) {
+        self.stage = 2 + half as u8;
+        let [pause, resume, shed, restart, restart_each] = self.switch;
+        let bins = if half == 0 {
+            0..RATE_BINS / 2
+        } else {
+            RATE_BINS / 2..RATE_BINS
+        };
+        for b in bins {
             let (g, q) = (&mut self.grow[b], &mut self.pause[b]);
+            let mut shed_sum = 0.0f32;
             for (j, (gv, qv)) in g.iter_mut().zip(q.iter_mut()).enumerate() {
                 let (a, c) = (*gv, *qv);
                 let mut ng = a * (1.0 - pause) + c * resume;
                 let mut nq = c * (1.0 - resume) + a * pause;
                 if j > 0 {
-                    shed_sum[b][0] += ng * shed;
-                    shed_sum[b][1] += nq * shed;
+                    shed_sum += (ng + nq) * shed;
                     ng *= 1.0 - shed;
                     nq *= 1.0 - shed;
                 }
                 *gv = ng * (1.0 - restart) + restart_each;
                 *qv = nq * (1.0 - restart) + restart_each;
             }
-        }
-        for b in 0..RATE_BINS {
             // Shed: a dry face, paused (growth starts again by a resume).
-            if let Some(q0) = self.pause[b].get_mut(0) {
-                *q0 += shed_sum[b][0] + shed_sum[b][1];
-            }
-        }
-        // The rate walks to the neighbouring bins (both modes).
-        for mode in 0..2 {
-            let rows = if mode == 0 {
-                &mut self.grow
-            } else {
-                &mut self.pause
-            };
-            for j in 0..LEVELS {
-                let mut prev = 0.0f32;
-                for b in 0..RATE_BINS {
-                    let here = rows[b][j];
-                    let next = if b + 1 < RATE_BINS {
-                        rows[b + 1][j]
-                    } else {
-                        here
-                    };
-                    let below = if b == 0 { here } else { prev };
-                    prev = here;
-                    rows[b][j] = here * (1.0 - 2.0 * walk) + walk * (below + next);
-                }
-            }
+            q[0] += shed_sum;
         }
     }
 
-    /// The measurement: the bank's thickness marginal `lik` (sums to 1),
-    /// tempered by the looks it is worth; `p_rime` the bank's probability
-    /// of rime. Then the marginal and the rate.
-    pub fn measure(&mut self, lik: &[f32; LEVELS], p_rime: f32, p: &HistoryParams) {
-        self.predicted = false;
+    /// The rate walks to the neighbouring bins (`mode` 0 growing, 1
+    /// paused); after the paused ones, the prediction's marginal.
+    fn predict_rate(&mut self, mode: usize) {
+        self.stage = 4 + mode as u8;
+        let walk = self.walk;
+        let keep = 1.0 - 2.0 * walk;
+        let rows = if mode == 0 {
+            &mut self.grow
+        } else {
+            &mut self.pause
+        };
+        let mut prev = rows[0];
+        for b in 0..RATE_BINS {
+            let cur = rows[b];
+            let next = match rows.get(b + 1) {
+                Some(n) => *n,
+                None => cur,
+            };
+            let below = if b == 0 { cur } else { prev };
+            for (((o, c), lo), hi) in rows[b].iter_mut().zip(&cur).zip(&below).zip(&next) {
+                *o = c * keep + walk * (lo + hi);
+            }
+            prev = cur;
+        }
+    }
+
+    /// The look (at [`READY_TO_LOOK`], → 8): the bank's thickness likelihood `lik` (sums to
+    /// 1), tempered by the looks it is worth; `p_rime` the bank's
+    /// probability of rime (the early trust). Also how well the
+    /// prediction foresaw it (the history's credibility).
+    pub fn look(&mut self, lik: &[f32; LEVELS], p_rime: f32, p: &HistoryParams) {
+        self.stage = 8;
+        let mut o = 0.0f32;
+        for (l, m) in lik.iter().zip(self.marginal.iter()) {
+            o += l * m;
+        }
+        let a = (1.0 - p.escape) * o;
+        let b = p.escape / LEVELS as f32;
+        self.credibility = if a + b > 0.0 { a / (a + b) } else { 0.0 };
         let mean_mm = self.mean_mm();
         let mut per_mm = p.looks_per_mm;
         if mean_mm < p.early_mm {
@@ -386,28 +480,75 @@ impl History {
             .clamp(0.0, 1.0);
         self.growth_mm = 0.0;
         self.since_measure_s = 0.0;
-        if beta > 0.0 {
-            let mut max = 0.0f32;
-            for &l in lik {
-                max = max.max(l);
+        let mut max = 0.0f32;
+        for &l in lik {
+            max = max.max(l);
+        }
+        if beta <= 0.0 || max <= 0.0 {
+            self.factor = [1.0; LEVELS];
+            return;
+        }
+        for (f, &l) in self.factor.iter_mut().zip(lik) {
+            let r = l / max;
+            // A level the bank rules out keeps e^−40 of a look.
+            let ln = if r > 1e-17 { fast_math::ln(r) } else { -40.0 };
+            *f = fast_math::exp(beta * ln);
+        }
+    }
+
+    /// The look applied (stage 8 → 9): every state times its level's
+    /// factor, the levels' sums in the scratch.
+    fn apply_factor(&mut self) {
+        self.stage = 9;
+        let mut m = [0.0f32; LEVELS];
+        for row in self.grow.iter_mut().chain(self.pause.iter_mut()) {
+            for ((v, f), a) in row.iter_mut().zip(self.factor.iter()).zip(m.iter_mut()) {
+                *v *= f;
+                *a += *v;
             }
-            if max > 0.0 {
-                let mut factor = [0.0f32; LEVELS];
-                for (f, &l) in factor.iter_mut().zip(lik) {
-                    let r = l / max;
-                    // A level the bank rules out keeps e^−40 of a look.
-                    let ln = if r > 1e-17 { fast_math::ln(r) } else { -40.0 };
-                    *f = fast_math::exp(beta * ln);
-                }
-                for row in self.grow.iter_mut().chain(self.pause.iter_mut()) {
-                    for (v, f) in row.iter_mut().zip(factor.iter()) {
-                        *v *= f;
-                    }
+        }
+        self.scratch = m;
+    }
+
+    /// Normalised (stage 9 → 10); the scratch holds the marginal.
+    fn normalise_applied(&mut self) {
+        self.stage = 10;
+        let total: f32 = self.scratch.iter().sum();
+        if !(total.is_finite() && total > 0.0) {
+            self.reset_flat();
+            return;
+        }
+        let inv = 1.0 / total;
+        for row in self.grow.iter_mut().chain(self.pause.iter_mut()) {
+            for v in row.iter_mut() {
+                *v *= inv;
+                if *v < FLOOR {
+                    *v = 0.0;
                 }
             }
         }
-        self.normalise();
-        self.update_marginal();
+        for a in self.scratch.iter_mut() {
+            *a *= inv;
+        }
+    }
+
+    /// All the parts left, at once (slow updates).
+    pub fn finish(&mut self, p: &HistoryParams) {
+        while self.stage != 0 && self.stage != READY_TO_LOOK {
+            self.advance(p);
+        }
+    }
+
+    /// No look this time (no currents): the growth and the time wait for
+    /// the next one.
+    pub fn skip_measure(&mut self) {
+        self.stage = 0;
+        self.scratch = [0.0; LEVELS];
+    }
+
+    /// The weight of the history's rate in the output (against its prior).
+    pub fn credibility(&self) -> f32 {
+        self.credibility
     }
 
     fn mean_mm(&self) -> f32 {
@@ -451,6 +592,11 @@ impl History {
                 *a /= s;
             }
         }
+        self.set_marginal(m);
+    }
+
+    /// The marginal `m` (sums to 1), and the output's weight from it.
+    fn set_marginal(&mut self, m: [f32; LEVELS]) {
         self.marginal = m;
         let mut w = m;
         if self.gamma != 1.0 {
