@@ -105,7 +105,8 @@ impl Observer {
             DeviceMsg::Hello(_) => o.hellos += 1,
             DeviceMsg::Measurement(m)
             | DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 { measurement: m, .. })
-            | DeviceMsg::MeasurementV3(fois_protocol::MeasurementV3 { measurement: m, .. }) => {
+            | DeviceMsg::MeasurementV3(fois_protocol::MeasurementV3 { measurement: m, .. })
+            | DeviceMsg::MeasurementV5(fois_protocol::MeasurementV5 { measurement: m, .. }) => {
                 o.measurements += 1;
                 if !m.is_valid() {
                     o.saturated += 1;

@@ -25,7 +25,7 @@ pub use seq::{SeqEvent, SeqTracker};
 
 /// The protocol version this crate speaks (in [`Hello::protocol_version`]).
 /// Bump it on any breaking change (see `protocol/README.md`, Compatibility).
-pub const PROTOCOL_VERSION: u16 = 4;
+pub const PROTOCOL_VERSION: u16 = 5;
 
 /// The oldest protocol version a host built from this crate still reads.
 /// Every version only adds variants at the end of its enums, so a frame of

@@ -452,6 +452,74 @@ fn cases() -> Vec<(&'static str, Vec<u8>)> {
             host(12, Command::CalibrateDarkV4 { force: true }),
         ),
         ("cmd_ack_alarm_v4", host(13, Command::AckAlarmV4)),
+        // Version 5 additions: the icing rate.
+        (
+            "measurement_v5_icing",
+            device(
+                26,
+                DeviceMsg::MeasurementV5(MeasurementV5 {
+                    measurement: measurement(),
+                    estimate: Some(IceEstimate {
+                        thickness_um: 4_200,
+                        sigma_um: 380,
+                        medium: Medium::Rime,
+                        probability_permille: 970,
+                    }),
+                    gain: Some(GainEstimate {
+                        gain_ppm: 1_080_000,
+                        sigma_ppm: 40_000,
+                    }),
+                    icing: Some(IcingEstimate {
+                        rate_um_per_h: 2_150,
+                        sigma_um_per_h: 600,
+                        accreting_permille: 940,
+                        accreting: true,
+                    }),
+                }),
+            ),
+        ),
+        (
+            "measurement_v5_no_icing",
+            device(
+                27,
+                DeviceMsg::MeasurementV5(MeasurementV5 {
+                    measurement: measurement(),
+                    estimate: None,
+                    gain: None,
+                    icing: None,
+                }),
+            ),
+        ),
+        (
+            "event_icing_started",
+            device(
+                28,
+                DeviceMsg::Event(Event {
+                    uptime_ms: 600_000,
+                    kind: EventKind::IcingStarted,
+                    i1_na: 12_000,
+                    i2_na: 4_000,
+                    rise1_na: 11_900,
+                    temperature_centi_c: -800,
+                    frames: 0,
+                }),
+            ),
+        ),
+        (
+            "event_icing_ended",
+            device(
+                29,
+                DeviceMsg::Event(Event {
+                    uptime_ms: 900_000,
+                    kind: EventKind::IcingEnded,
+                    i1_na: 30_000,
+                    i2_na: 9_000,
+                    rise1_na: 29_900,
+                    temperature_centi_c: -750,
+                    frames: 0,
+                }),
+            ),
+        ),
     ]
 }
 
@@ -557,6 +625,23 @@ const GOLDEN: &[(&str, &str)] = &[
     ),
     ("cmd_calibrate_dark_v4", "08 0c 0b 01 2b c9 a8 62 00"),
     ("cmd_ack_alarm_v4", "07 0d 0c 99 20 c1 fd 00"),
+    // Version 5 additions.
+    (
+        "measurement_v5_icing",
+        "30 1a 07 e8 07 d0 86 03 17 c0 b8 02 ac 02 ff 07 e4 19 c0 40 02 01 e8 20 fc 02 03 ca 07 01 c0 f5 41 c0 b8 02 01 e6 10 d8 04 ac 07 01 cc 3e 7c 72 00",
+    ),
+    (
+        "measurement_v5_no_icing",
+        "15 1b 07 e8 07 d0 86 03 17 c0 b8 02 ac 02 ff 07 e4 19 c0 40 02 01 01 05 bd 79 d7 90 00",
+    ),
+    (
+        "event_icing_started",
+        "11 1c 02 c0 cf 24 07 c0 bb 01 c0 3e f8 b9 01 bf 0c 05 ad 7b 58 a7 00",
+    ),
+    (
+        "event_icing_ended",
+        "12 1d 02 a0 f7 36 08 e0 d4 03 d0 8c 01 98 d3 03 db 0b 05 0b 67 1d 1a 00",
+    ),
 ];
 
 fn hex(bytes: &[u8]) -> String {
@@ -585,11 +670,11 @@ fn wire_format_matches_golden_bytes() {
 
 #[test]
 fn protocol_version_is_frozen_with_these_bytes() {
-    // The snapshots above belong to version 4: the 21 of version 1 and the 3
+    // The snapshots above belong to version 5: the 21 of version 1 and the 3
     // of version 2 (unchanged: each version only added variants at the ends
     // of its enums and froze the old config shape as `ConfigV1`, so older
-    // streams decode with these types), the version-3 and the version-4
-    // additions. A new version gets new snapshots.
-    assert_eq!(PROTOCOL_VERSION, 4);
+    // streams decode with these types), the version-3, version-4 and
+    // version-5 additions. A new version gets new snapshots.
+    assert_eq!(PROTOCOL_VERSION, 5);
     assert_eq!(OLDEST_READABLE_VERSION, 1);
 }

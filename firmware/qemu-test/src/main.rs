@@ -135,7 +135,7 @@ fn step(node: &mut SimNode<'_>, w: &SimBoard, sink: &mut Sink) {
 
 fn measurement(sink: &mut Sink) -> Option<fois_protocol::Measurement> {
     sink.take().find_map(|m| match m {
-        DeviceMsg::MeasurementV3(m) => Some(m.measurement),
+        DeviceMsg::MeasurementV5(m) => Some(m.measurement),
         _ => None,
     })
 }

@@ -6,14 +6,14 @@
 //! learns the gain and the output posterior is the weighted mixture of the
 //! grids'.
 
-use fois_protocol::IceEstimate;
+use fois_protocol::{IceEstimate, IcingEstimate};
 
 use super::fast_math;
 use super::gain_bank::{GAINS, Gain, GainBank, UNKNOWN_GAIN_SD};
 use super::grid::{self, Grid, Moments, Shared};
 use super::history::{self, History, LEVELS, READY_TO_LOOK, Rate};
 use super::params::{EstimatorParams, within};
-use super::posterior::{Posterior, Update};
+use super::posterior::{Posterior, Update, to_u16};
 use super::response::{ROWS, STEP_MM, row_mm};
 
 /// Prior probability of the dry face; the three media share the rest.
@@ -201,6 +201,18 @@ impl Estimator {
     /// [`ACCRETING_ON`], cleared below [`ACCRETING_OFF`].
     pub fn accreting(&self) -> bool {
         self.accreting
+    }
+
+    /// The icing rate as the protocol carries it (µm/h, ‰, the icing
+    /// period's flag); `None` before the first valid frame or with the
+    /// history off.
+    pub fn icing_estimate(&self) -> Option<IcingEstimate> {
+        self.rate.map(|r| IcingEstimate {
+            rate_um_per_h: to_u16(r.mean_mm_per_h * 1000.0),
+            sigma_um_per_h: to_u16(r.sigma_mm_per_h * 1000.0),
+            accreting_permille: to_u16(r.p_accreting * 1000.0).min(1000),
+            accreting: self.accreting,
+        })
     }
 
     /// The estimate as the protocol carries it.

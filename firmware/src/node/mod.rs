@@ -97,6 +97,9 @@ where
     stream_period_ms: Option<u32>,
     decoder: FrameDecoder<MAX_FRAME>,
     reported_faults: u16,
+    /// The icing period the node last reported (`IcingStarted` /
+    /// `IcingEnded`).
+    reported_icing: bool,
     reset_request: bool,
     last: Option<Measurement>,
     estimator: Estimator,
@@ -176,6 +179,7 @@ where
             stream_period_ms: None,
             decoder: FrameDecoder::new(),
             reported_faults: 0,
+            reported_icing: false,
             reset_request: false,
             last: None,
             estimator: Estimator::default(),
