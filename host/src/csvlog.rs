@@ -31,6 +31,9 @@
 //! | `est_p` | 0–1 | posterior probability of that medium |
 //! | `est_gain` | 1 = table | the node's estimate of its optical gain (protocol v3 nodes; empty for older) |
 //! | `est_gain_sigma` | | its standard deviation |
+//! | `est_rate_mm_per_h` | mm/h | the node's icing rate: posterior mean growth rate now, 0 while nothing grows (protocol v5 nodes; empty for older) |
+//! | `est_rate_sigma_mm_per_h` | mm/h | its standard deviation |
+//! | `est_accreting` | 0/1 | meteorological icing: an icing period is on (the node's P(accreting) with hysteresis) |
 
 use std::fs::{File, OpenOptions};
 use std::io::{Read, Seek, SeekFrom};
@@ -45,7 +48,7 @@ use fois_link::timefmt::{iso_utc, unix_ms_now};
 use fois_protocol::{DeviceMsg, Event};
 
 /// The header line (without newline).
-pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,faults,frames_lost,detail,est_thickness_mm,est_sigma_mm,est_kind,est_p,est_gain,est_gain_sigma";
+pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,faults,frames_lost,detail,est_thickness_mm,est_sigma_mm,est_kind,est_p,est_gain,est_gain_sigma,est_rate_mm_per_h,est_rate_sigma_mm_per_h,est_accreting";
 
 /// Rows reach the kernel at least this often (kill -9 loses at most this).
 pub const FLUSH_INTERVAL: Duration = Duration::from_millis(250);
@@ -141,7 +144,8 @@ impl Row {
         match msg {
             DeviceMsg::Measurement(_)
             | DeviceMsg::MeasurementV2(_)
-            | DeviceMsg::MeasurementV3(_) => Row {
+            | DeviceMsg::MeasurementV3(_)
+            | DeviceMsg::MeasurementV5(_) => Row {
                 kind: "measurement",
                 seq: Some(seq),
                 reading: Reading::of(msg),
@@ -321,11 +325,12 @@ fn fixed(v: Option<f64>, decimals: usize) -> String {
 /// The fields of a row, in the order of [`HEADER`]. The values come from
 /// the row's [`Reading`] or [`EventReading`] (units converted there); this
 /// only chooses the decimals.
-pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 24] {
+pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 27] {
     let m = r.reading.as_ref();
     let e = r.event.as_ref();
     let est = m.and_then(|m| m.estimate.as_ref());
     let gain = m.and_then(|m| m.gain.as_ref());
+    let icing = m.and_then(|m| m.icing.as_ref());
     let uptime = m.map(|m| m.uptime_ms).or(e.map(|e| e.uptime_ms));
     [
         iso_utc(host_unix_ms),
@@ -354,6 +359,9 @@ pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 24] {
         fixed(est.map(|e| e.medium_probability), 3),
         fixed(gain.map(|g| g.gain), 4),
         fixed(gain.map(|g| g.gain_sigma), 4),
+        fixed(icing.map(|i| i.rate_mm_per_h), 3),
+        fixed(icing.map(|i| i.rate_sigma_mm_per_h), 3),
+        opt(icing.map(|i| u8::from(i.accreting))),
     ]
 }
 
@@ -581,7 +589,7 @@ mod tests {
         let line = format_row(0, &Row::device(42, &DeviceMsg::Measurement(meas())));
         assert_eq!(
             line,
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,,\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,,,,,\n"
         );
         let v2 = DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 {
             measurement: meas(),
@@ -594,7 +602,7 @@ mod tests {
         });
         assert_eq!(
             format_row(0, &Row::device(42, &v2)),
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,2.345,0.310,rime,0.970,,\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,2.345,0.310,rime,0.970,,,,,\n"
         );
         let v3 = DeviceMsg::MeasurementV3(fois_protocol::MeasurementV3 {
             measurement: meas(),
@@ -606,7 +614,22 @@ mod tests {
         });
         assert_eq!(
             format_row(0, &Row::device(42, &v3)),
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,1.1503,0.0610\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,1.1503,0.0610,,,\n"
+        );
+        let v5 = DeviceMsg::MeasurementV5(fois_protocol::MeasurementV5 {
+            measurement: meas(),
+            estimate: None,
+            gain: None,
+            icing: Some(fois_protocol::IcingEstimate {
+                rate_um_per_h: 2_150,
+                sigma_um_per_h: 600,
+                accreting_permille: 940,
+                accreting: true,
+            }),
+        });
+        assert_eq!(
+            format_row(0, &Row::device(42, &v5)),
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,,,2.150,0.600,1\n"
         );
         assert_eq!(fields(&line).len(), HEADER.split(',').count());
         let g = format_row(5, &Row::gap(10, 3));
@@ -631,7 +654,7 @@ mod tests {
         let line = format_row(1, &r);
         let f = fields(&line);
         assert_eq!(f[17], "a, \"b\"\nc");
-        assert_eq!(f.len(), 24);
+        assert_eq!(f.len(), 27);
     }
 
     #[test]
@@ -678,7 +701,7 @@ mod tests {
             log.close().unwrap();
         }
         let t = LogTable::read(&p).unwrap();
-        assert_eq!(t.columns.len(), 24);
+        assert_eq!(t.columns.len(), 27);
         let seqs: Vec<&str> = t.rows.iter().map(|r| r[3].as_str()).collect();
         assert_eq!(seqs, ["1", "2"]);
         let text = std::fs::read_to_string(&p).unwrap();
@@ -690,10 +713,13 @@ mod tests {
             CsvLog::open(&other),
             Err(LogError::ForeignHeader(_))
         ));
-        // A log of the layout before the gain columns is not appended to
-        // (its rows would be narrower than the new ones): a clear refusal.
+        // A log of the layout before the gain (or the icing-rate) columns
+        // is not appended to (its rows would be narrower than the new
+        // ones): a clear refusal.
         let older = dir.path().join("older.csv");
-        let old_header = HEADER.trim_end_matches(",est_gain,est_gain_sigma");
+        let old_header = HEADER.trim_end_matches(
+            ",est_gain,est_gain_sigma,est_rate_mm_per_h,est_rate_sigma_mm_per_h,est_accreting",
+        );
         std::fs::write(&older, format!("{old_header}\n")).unwrap();
         let err = CsvLog::open(&older).err().map(|e| e.to_string());
         assert!(
