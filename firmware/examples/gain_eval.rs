@@ -273,7 +273,7 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
     let (mut on, mut off, mut dry) = (f64::NAN, f64::NAN, f64::NAN);
     let mut rate_done = false;
     if std::env::var("EST_TRACE").is_ok() {
-        for f in frames.iter().filter(|f| (f.t_s as u64) % 300 == 0) {
+        for f in frames.iter().filter(|f| (f.t_s as u64).is_multiple_of(300)) {
             if let (Some(p), r) = (f.est, f.est_rate) {
                 println!(
                     "t {:6.0} d {:5.2} est {:5.2} ± {:4.2} {:?} {:.2} | rate {:5.2} true {:5.2} | {:?} acc {}",

@@ -557,8 +557,47 @@ fn bench<P: FnMut(&[u8])>(
     ticks() - t0
 }
 
+/// The stack below `main`'s frame is painted with this before the runs.
+const STACK_PAINT: u32 = 0x5A5A_A5A5;
+/// How far below `main`'s frame the paint reaches, bytes.
+const STACK_PAINT_SPAN: usize = 32 * 1024;
+/// The painting function's own frame is left unpainted, bytes.
+const STACK_PAINT_SKIP: usize = 512;
+
+/// Paint the stack from `sp` − [`STACK_PAINT_SPAN`] up to `sp` −
+/// [`STACK_PAINT_SKIP`] (the RAM of mps2-an386 is 1 MiB: nothing else lives
+/// there).
+#[inline(never)]
+fn paint_stack(sp: usize) {
+    let mut a = sp - STACK_PAINT_SPAN;
+    while a < sp - STACK_PAINT_SKIP {
+        // SAFETY: an aligned word of RAM below the live stack, which no
+        // other data uses (statics sit at the bottom of the 1 MiB RAM).
+        unsafe { core::ptr::write_volatile(a as *mut u32, STACK_PAINT) };
+        a += 4;
+    }
+}
+
+/// The deepest the stack went below `sp` since [`paint_stack`], bytes.
+fn stack_high_water(sp: usize) -> usize {
+    let mut a = sp - STACK_PAINT_SPAN;
+    // SAFETY: as in `paint_stack`: read only.
+    while a < sp - STACK_PAINT_SKIP
+        && unsafe { core::ptr::read_volatile(a as *const u32) } == STACK_PAINT
+    {
+        a += 4;
+    }
+    sp - a
+}
+
 #[entry]
 fn main() -> ! {
+    // main's frame holds the node and the estimators of the benches; the
+    // stack below it is painted before the node's frames and before the
+    // estimator's worst seconds: what they overwrite is their deepest call
+    // path (the tests before build nodes on their own stacks; the board
+    // keeps its node in a static).
+    let sp = cortex_m::register::msp::read() as usize;
     let mut cp = match cortex_m::Peripherals::take() {
         Some(cp) => cp,
         None => fail("core peripherals taken"),
@@ -634,11 +673,13 @@ fn main() -> ! {
     );
     let mut bytes = 0usize;
     let mut tx = |b: &[u8]| bytes += b.len();
+    paint_stack(sp);
     bench(&mut node, 10, &mut tx); // warm-up
     const F: u32 = 200;
     let t_f = bench(&mut node, F, &mut tx);
     let t_2f = bench(&mut node, 2 * F, &mut tx);
     let frame_ticks = t_2f.saturating_sub(t_f) as f32 / F as f32;
+    let stack_node = stack_high_water(sp);
     let per_frame = (frame_ticks * insn_per_tick + 0.5) as u32;
     hprintln!(
         "measurement loop: K = {} cycles/frame, {} and {} frames, {} bytes sent",
@@ -675,6 +716,7 @@ fn main() -> ! {
     }
     let mut worst = 0u32;
     let mut alive = 0usize;
+    paint_stack(sp);
     // 24 seconds: more than two periods of the growth history, whose parts
     // fall in different seconds.
     for _ in 0..24 {
@@ -694,6 +736,11 @@ fn main() -> ! {
         alive,
         1 + 3 * fois_firmware::estimator::ROWS,
         fois_firmware::estimator::GAINS
+    );
+    hprintln!(
+        "stack high-water mark below main's frame: {} bytes in the node's frames (610), {} bytes in the estimator's worst seconds (24)",
+        stack_node,
+        stack_high_water(sp)
     );
     if est_frame * 10 > ESTIMATOR_BUDGET_PER_S || worst > ESTIMATOR_BUDGET_PER_S {
         hprintln!("error: the estimator is over its budget");

@@ -161,20 +161,24 @@ mod app {
                 Err(_) => defmt::panic!("flash store: sectors 6-7 are not two equal pages"),
             }
         };
-        let mut node = Node::new(adc, led, alarm, ld2, Delay, SkippableStorage(store), info);
-        node.set_clock_fallback(hse.is_none());
-        node.set_boot_faults(!bor_ok, plan.skip_store);
-        if let Some((line, resets)) = plan.panic_reset {
-            node.report_panic_reset(line, resets);
-        }
-        // After a watchdog, software, pin or panic reset: the alarm (and its
-        // acknowledgement) as before the reset, at once.
-        node.resume_rule(RuleSnapshot::resume(safety::rule_words(), power_on));
-        // Moved in without an await: a node held across one would live in
-        // this task's future as well as in NODE (7 KiB of static RAM twice).
-        match NODE.try_lock() {
-            Ok(mut slot) => *slot = Some(node),
-            Err(_) => defmt::panic!("the node's mutex is taken before the node exists"),
+        // Built and moved in within a block that ends before the first
+        // await: a node whose storage lived across one (even moved out)
+        // would sit in this task's future as well as in NODE (14 KiB of
+        // static RAM twice with the growth history).
+        {
+            let mut node = Node::new(adc, led, alarm, ld2, Delay, SkippableStorage(store), info);
+            node.set_clock_fallback(hse.is_none());
+            node.set_boot_faults(!bor_ok, plan.skip_store);
+            if let Some((line, resets)) = plan.panic_reset {
+                node.report_panic_reset(line, resets);
+            }
+            // After a watchdog, software, pin or panic reset: the alarm (and its
+            // acknowledgement) as before the reset, at once.
+            node.resume_rule(RuleSnapshot::resume(safety::rule_words(), power_on));
+            match NODE.try_lock() {
+                Ok(mut slot) => *slot = Some(node),
+                Err(_) => defmt::panic!("the node's mutex is taken before the node exists"),
+            }
         }
 
         #[cfg(not(feature = "field-link"))]
