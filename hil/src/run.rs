@@ -127,6 +127,14 @@ impl Observer {
                     Some((a, b)) => (a.min(m.i1_na), b.max(m.i1_na)),
                 });
             }
+            // The icing period's start and end (protocol 5) are the growth
+            // history's, not the rule's: counted apart, so every rule and
+            // fault expectation stays as it was.
+            DeviceMsg::Event(e)
+                if matches!(e.kind, EventKind::IcingStarted | EventKind::IcingEnded) =>
+            {
+                o.icing_events.push((e.uptime_ms as f64 / 1000.0, e.kind));
+            }
             DeviceMsg::Event(e) => {
                 let t_ns = e.uptime_ms.saturating_mul(1_000_000);
                 o.events.push(Seen {

@@ -539,8 +539,18 @@ impl Estimator {
         let mut h = [1.0 / LEVELS as f32; LEVELS];
         if use_history {
             let flat = hp.escape / LEVELS as f32;
+            let mut top = 0.0f32;
             for (a, m) in h.iter_mut().zip(self.history.weight()) {
                 *a = (1.0 - hp.escape) * m + flat;
+                top = top.max(*a);
+            }
+            // Dry against ice stays the bank's call: the dry face weighs
+            // as the history's likeliest level. Thick clear ice reads
+            // almost like a dry face; weighted by a history that had shed
+            // it, glaze at 10 mm/h and gain 0.85 read confidently thin in
+            // 890 frames of 10 accretions.
+            if let Some(d) = h.first_mut() {
+                *d = top;
             }
         }
         let mut parts = [None; GAINS];
