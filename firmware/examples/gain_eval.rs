@@ -5,18 +5,24 @@
 //! cargo run --release -p fois-firmware --example gain_eval -- [SEEDS] [FRAME_S] [FILTER]
 //! ```
 //!
-//! One line per class (medium, rate, gain or drift, prior): frames with
-//! |err| ≤ 2σ beyond 0.5 mm, RMS error at 2, 5 and 10 mm, frames
-//! "confidently thin" (est + 2σ < d/2 at d ≥ 4 mm), the gain's RMS error
-//! (ln) at 10 mm and the share of those frames within ±8 %. FILTER keeps
-//! only the classes whose name contains it (ending in `$`: the one named so). The estimator's settings can be
-//! `EST_DESIGN=fixed` runs every class with the gain taken as 1 ± 2 % (one
-//! narrow bank: the estimator before it tracked the gain), `EST_DESIGN=folded`
-//! with the gain's uncertainty folded into each state's covariance instead
-//! (gain 1, spread 0.2 in every state). The estimator's settings can be
-//! overridden through `EST_MEMORY` (gain memory, s) and `EST_PERIOD`
-//! (update period, s), `EST_SWITCH` (medium changes per hour) and `EST_WITHIN` (smallest gain spread within a
-//! hypothesis).
+//! One line per class (medium, rate, gain, prior; and the growth history's
+//! scenarios: paused 2 h at 5 mm, a varying rate, a rate step, shed and
+//! regrowth): frames with |err| ≤ 2σ beyond 0.5 mm, RMS error at 2, 5 and
+//! 10 mm (while growing, before any shed), frames "confidently thin" (est +
+//! 2σ < d/2 at d ≥ 4 mm), the medium right from 1 mm, the gain's RMS error
+//! (ln) at 10 mm, the icing rate one hour into the growth (RMS of
+//! ln(est/true), truth within 2σ), the icing flag's delays (on after the
+//! growth starts, off after it stops), shed → dry. FILTER keeps only the
+//! classes whose name contains it (ending in `$`: the one named so).
+//! `SEED_BASE` sets the first seed (default 101). `EST_DESIGN=fixed` runs
+//! every class with the gain taken as 1 ± 2 %, `EST_DESIGN=folded` with the
+//! gain's uncertainty folded into each state's covariance;
+//! `EST_HISTORY=off` without the growth history, `EST_HISTORY=nopause`
+//! without its pause state; `EST_TRACE=1` prints every 300 s of each run.
+//! Settings: `EST_MEMORY` (gain memory, s), `EST_PERIOD` (update period,
+//! s), `EST_SWITCH`, `EST_WITHIN`, and the history's `EST_LOOKS`
+//! (looks per mm), `EST_EARLY`, `EST_LOOKS_PER_H`, `EST_WALK`,
+//! `EST_HPERIOD`, `EST_GAMMA` (output weight), `EST_ESCAPE`.
 // An evaluation tool sharing the accuracy test's harness: a missing estimate
 // there is a failed evaluation, as in the tests.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -399,7 +405,7 @@ fn main() {
     let filter = args.get(3).cloned().unwrap_or_default();
     let params = params_from_env();
     println!(
-        "{seeds} accretions per class (seeds 101…), frames every {frame_s} s, gain memory {} s, update every {} s",
+        "{seeds} accretions per class, frames every {frame_s} s, gain memory {} s, update every {} s",
         params.gain_memory_s, params.update_period_s
     );
     let seed_base: u64 = std::env::var("SEED_BASE")
