@@ -5,18 +5,24 @@
 //! cargo run --release -p fois-firmware --example gain_eval -- [SEEDS] [FRAME_S] [FILTER]
 //! ```
 //!
-//! One line per class (medium, rate, gain or drift, prior): frames with
-//! |err| ≤ 2σ beyond 0.5 mm, RMS error at 2, 5 and 10 mm, frames
-//! "confidently thin" (est + 2σ < d/2 at d ≥ 4 mm), the gain's RMS error
-//! (ln) at 10 mm and the share of those frames within ±8 %. FILTER keeps
-//! only the classes whose name contains it (ending in `$`: the one named so). The estimator's settings can be
-//! `EST_DESIGN=fixed` runs every class with the gain taken as 1 ± 2 % (one
-//! narrow bank: the estimator before it tracked the gain), `EST_DESIGN=folded`
-//! with the gain's uncertainty folded into each state's covariance instead
-//! (gain 1, spread 0.2 in every state). The estimator's settings can be
-//! overridden through `EST_MEMORY` (gain memory, s) and `EST_PERIOD`
-//! (update period, s), `EST_SWITCH` (medium changes per hour) and `EST_WITHIN` (smallest gain spread within a
-//! hypothesis).
+//! One line per class (medium, rate, gain, prior; and the growth history's
+//! scenarios: paused 2 h at 5 mm, a varying rate, a rate step, shed and
+//! regrowth): frames with |err| ≤ 2σ beyond 0.5 mm, RMS error at 2, 5 and
+//! 10 mm (while growing, before any shed), frames "confidently thin" (est +
+//! 2σ < d/2 at d ≥ 4 mm), the medium right from 1 mm, the gain's RMS error
+//! (ln) at 10 mm, the icing rate one hour into the growth (RMS of
+//! ln(est/true), truth within 2σ), the icing flag's delays (on after the
+//! growth starts, off after it stops), shed → dry. FILTER keeps only the
+//! classes whose name contains it (ending in `$`: the one named so).
+//! `SEED_BASE` sets the first seed (default 101). `EST_DESIGN=fixed` runs
+//! every class with the gain taken as 1 ± 2 %, `EST_DESIGN=folded` with the
+//! gain's uncertainty folded into each state's covariance;
+//! `EST_HISTORY=off` without the growth history, `EST_HISTORY=nopause`
+//! without its pause state; `EST_TRACE=1` prints every 300 s of each run.
+//! Settings: `EST_MEMORY` (gain memory, s), `EST_PERIOD` (update period,
+//! s), `EST_SWITCH`, `EST_WITHIN`, and the history's `EST_LOOKS`
+//! (looks per mm), `EST_EARLY`, `EST_LOOKS_PER_H`, `EST_WALK`,
+//! `EST_HPERIOD`, `EST_GAMMA` (output weight), `EST_ESCAPE`.
 // An evaluation tool sharing the accuracy test's harness: a missing estimate
 // there is a failed evaluation, as in the tests.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -27,6 +33,21 @@ use eval::*;
 use fois_firmware::estimator::EstimatorParams;
 use fois_protocol::Medium;
 use fois_sim::IceKind;
+
+/// How a class's accretion grows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Shape {
+    /// From a dry face to 11 mm at the rate.
+    Steady,
+    /// To 5 mm, 2 h paused, on to 11 mm.
+    Pause,
+    /// ln r an Ornstein–Uhlenbeck process (sd 0.5, 1 h) around the rate.
+    Varying,
+    /// At the rate to 4 mm, then at 5× the rate to 11 mm.
+    Step,
+    /// To 6 mm, shed, 20 min dry, regrow to 8 mm.
+    Shed,
+}
 
 /// One class of runs.
 #[derive(Debug, Clone)]
@@ -39,6 +60,7 @@ struct Class {
     prior: Option<(f32, f32)>,
     /// A first accretion (grown, shed, dry for an hour) before the measured one.
     learned: bool,
+    shape: Shape,
 }
 
 /// What one class measured.
@@ -48,57 +70,107 @@ struct Score {
     thin: u64,
     err2: [Vec<f64>; 3],
     gain_err10: Vec<f64>,
+    /// ln(est/true) of the rate 60 min into the growth, and whether the
+    /// truth was within 2σ.
+    rate_ln_err: Vec<f64>,
+    rate_within: (u64, u64),
+    /// Seconds from the growth's start to the icing flag (NaN: never).
+    flag_on_s: Vec<f64>,
+    /// Seconds from the growth's end to the flag's clearing (NaN: never).
+    flag_off_s: Vec<f64>,
+    /// Seconds from the shed to the medium "dry" (NaN: never).
+    shed_dry_s: Vec<f64>,
+    /// Frames with ice ≥ 1 mm, and those whose medium is right.
+    medium: (u64, u64),
 }
 
 const AT_MM: [f64; 3] = [2.0, 5.0, 10.0];
 
 fn classes() -> Vec<Class> {
     let mut out = Vec::new();
-    for (kind, kname, temp_ok) in [
-        (IceKind::Rime, "rime", true),
-        (IceKind::Glazed, "glazed", true),
-    ] {
-        let _ = temp_ok;
+    for (kind, kname) in [(IceKind::Rime, "rime"), (IceKind::Glazed, "glazed")] {
         for rate in [2.0, 10.0] {
-            let base = |gain: f64, gain_end: Option<f64>, prior, learned, tag: String| Class {
+            let base = |gain: f64, prior, tag: String| Class {
                 name: format!("{kname} {rate} mm/h {tag}"),
                 kind,
                 rate_mm_per_h: rate,
                 gain,
-                gain_end,
+                gain_end: None,
                 prior,
-                learned,
+                learned: false,
+                shape: Shape::Steady,
             };
-            for g in [0.7, 0.85, 1.0, 1.15, 1.3] {
-                out.push(base(g, None, None, false, format!("g {g:.2}")));
+            for g in [0.85, 0.92, 1.0, 1.08, 1.15] {
+                out.push(base(g, None, format!("g {g:.2}")));
             }
-            out.push(base(1.0, Some(0.8), None, false, "drift 1→0.8".into()));
-            out.push(base(1.0, Some(1.2), None, false, "drift 1→1.2".into()));
-            out.push(base(
-                1.0,
-                None,
-                Some((1.0, 0.02)),
-                false,
-                "g 1.00 calibrated ±2 %".into(),
-            ));
-            for g in [0.85, 1.15] {
+            for g in [0.85, 1.0, 1.15] {
                 out.push(base(
                     g,
-                    None,
-                    Some((g as f32, 0.03)),
-                    false,
-                    format!("g {g:.2} calibrated ±3 %"),
-                ));
-                out.push(base(
-                    g,
-                    None,
-                    None,
-                    true,
-                    format!("g {g:.2} learned before"),
+                    Some((g as f32, 0.02)),
+                    format!("g {g:.2} calibrated ±2 %"),
                 ));
             }
         }
     }
+    let scenario = |name: &str, kind, rate, gain: f64, shape| Class {
+        name: name.into(),
+        kind,
+        rate_mm_per_h: rate,
+        gain,
+        gain_end: None,
+        prior: None,
+        learned: false,
+        shape,
+    };
+    out.push(scenario(
+        "rime 2 mm/h g 1.08 paused 2 h at 5 mm",
+        IceKind::Rime,
+        2.0,
+        1.08,
+        Shape::Pause,
+    ));
+    out.push(scenario(
+        "rime 2 mm/h g 0.92 paused 2 h at 5 mm",
+        IceKind::Rime,
+        2.0,
+        0.92,
+        Shape::Pause,
+    ));
+    out.push(scenario(
+        "rime varying around 2 mm/h g 1.08",
+        IceKind::Rime,
+        2.0,
+        1.08,
+        Shape::Varying,
+    ));
+    out.push(scenario(
+        "rime varying around 5 mm/h g 0.92",
+        IceKind::Rime,
+        5.0,
+        0.92,
+        Shape::Varying,
+    ));
+    out.push(scenario(
+        "rime step 2→10 mm/h at 4 mm g 1.08",
+        IceKind::Rime,
+        2.0,
+        1.08,
+        Shape::Step,
+    ));
+    out.push(scenario(
+        "rime 2 mm/h g 0.92 shed at 6 mm, regrow",
+        IceKind::Rime,
+        2.0,
+        0.92,
+        Shape::Shed,
+    ));
+    out.push(scenario(
+        "glazed 10 mm/h g 1.08 shed at 6 mm, regrow",
+        IceKind::Glazed,
+        10.0,
+        1.08,
+        Shape::Shed,
+    ));
     out
 }
 
@@ -120,6 +192,32 @@ fn params_from_env() -> EstimatorParams {
     if let Some(v) = get("EST_PERIOD") {
         p.update_period_s = v;
     }
+    match std::env::var("EST_HISTORY").as_deref() {
+        Ok("off") => p.history.enabled = false,
+        Ok("nopause") => p.history.pause_per_h = 0.0,
+        _ => {}
+    }
+    if let Some(v) = get("EST_LOOKS") {
+        p.history.looks_per_mm = v;
+    }
+    if let Some(v) = get("EST_EARLY") {
+        p.history.early_rime_looks_per_mm = v;
+    }
+    if let Some(v) = get("EST_LOOKS_PER_H") {
+        p.history.looks_per_h = v;
+    }
+    if let Some(v) = get("EST_WALK") {
+        p.history.rate_walk_per_h = v;
+    }
+    if let Some(v) = get("EST_HPERIOD") {
+        p.history.period_s = v;
+    }
+    if let Some(v) = get("EST_GAMMA") {
+        p.history.output_weight = v;
+    }
+    if let Some(v) = get("EST_ESCAPE") {
+        p.history.escape = v;
+    }
     p
 }
 
@@ -131,7 +229,43 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
         segments.push(Segment::dry(3600.0, temp));
     }
     let skip_s: f64 = segments.iter().map(|s| s.duration_s).sum();
-    segments.push(Segment::grow(c.kind, 0.0, 11.0, c.rate_mm_per_h, temp));
+    let r = c.rate_mm_per_h;
+    let (top_mm, stop_mm) = match c.shape {
+        Shape::Steady | Shape::Varying => {
+            let mut g = Segment::grow(c.kind, 0.0, 11.0, r, temp);
+            if c.shape == Shape::Varying {
+                g.rate_sd_ln = 0.5;
+                // As long as the mean rate needs for 11 mm (the thickness
+                // ends where the process takes it).
+            }
+            segments.push(g);
+            (11.0, 11.0)
+        }
+        Shape::Pause => {
+            segments.push(Segment::grow(c.kind, 0.0, 5.0, r, temp));
+            segments.push(Segment::pause(c.kind, 7200.0, temp));
+            segments.push(Segment::grow(c.kind, 5.0, 11.0, r, temp));
+            (11.0, 11.0)
+        }
+        Shape::Step => {
+            segments.push(Segment::grow(c.kind, 0.0, 4.0, r, temp));
+            segments.push(Segment::grow(c.kind, 4.0, 11.0, 5.0 * r, temp));
+            (11.0, 11.0)
+        }
+        Shape::Shed => {
+            segments.push(Segment::grow(c.kind, 0.0, 6.0, r, temp));
+            segments.push(Segment::dry(1200.0, temp));
+            segments.push(Segment::grow(c.kind, 0.0, 8.0, r, temp));
+            (8.0, 8.0)
+        }
+    };
+    let _ = top_mm;
+    // 40 min with the ice staying after the growth stops.
+    segments.push(Segment::pause(c.kind, 2400.0, temp));
+    let growth_end_s: f64 = segments.iter().map(|s| s.duration_s).sum::<f64>() - 2400.0;
+    let shed_at_s: Option<f64> =
+        (c.shape == Shape::Shed).then(|| segments.iter().take(3).map(|s| s.duration_s).sum());
+    let _ = stop_mm;
     let mut run = Run::new(seed, segments);
     run.led = c.gain;
     run.led_end = c.gain_end;
@@ -142,10 +276,57 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
     run.frame_s = frame_s;
     let frames = simulate(&run, params);
     let mut s = Score::default();
-    for f in frames
-        .iter()
-        .filter(|f| f.t_s >= skip_s && f.medium != Medium::Dry)
-    {
+    let (mut on, mut off, mut dry) = (f64::NAN, f64::NAN, f64::NAN);
+    let mut rate_done = false;
+    if std::env::var("EST_TRACE").is_ok() {
+        for f in frames.iter().filter(|f| (f.t_s as u64).is_multiple_of(300)) {
+            if let (Some(p), r) = (f.est, f.est_rate) {
+                println!(
+                    "t {:6.0} d {:5.2} est {:5.2} ± {:4.2} {:?} {:.2} | rate {:5.2} true {:5.2} | {:?} acc {}",
+                    f.t_s,
+                    f.thickness_mm,
+                    p.thickness_mm,
+                    p.sigma_mm,
+                    p.medium().0,
+                    p.medium().1,
+                    r.map_or(f32::NAN, |r| r.mean_mm_per_h),
+                    f.rate_mm_per_h,
+                    r.map(|r| (r.sigma_mm_per_h, r.p_accreting)),
+                    f.accreting
+                );
+            }
+        }
+    }
+    for f in frames.iter().filter(|f| f.t_s >= skip_s) {
+        if on.is_nan() && f.accreting {
+            on = f.t_s - skip_s;
+        }
+        if f.t_s >= growth_end_s && off.is_nan() && !f.accreting {
+            off = f.t_s - growth_end_s;
+        }
+        if let (Some(t0), Some(p)) = (shed_at_s, f.est)
+            && f.t_s >= t0
+            && dry.is_nan()
+            && p.medium().0 == Medium::Dry
+        {
+            dry = f.t_s - t0;
+        }
+        if !rate_done && f.t_s - skip_s >= 3600.0 {
+            rate_done = true;
+            if let Some(r) = f.est_rate
+                && f.rate_mm_per_h > 0.0
+            {
+                let est = f64::from(r.mean_mm_per_h).max(1e-3);
+                s.rate_ln_err.push((est / f.rate_mm_per_h).ln());
+                s.rate_within.1 += 1;
+                if (est - f.rate_mm_per_h).abs() <= 2.0 * f64::from(r.sigma_mm_per_h) {
+                    s.rate_within.0 += 1;
+                }
+            }
+        }
+        if f.medium == Medium::Dry {
+            continue;
+        }
         let est = f.est.expect("an estimate");
         let d = f.thickness_mm;
         let err = f64::from(est.thickness_mm) - d;
@@ -156,12 +337,22 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
                 s.within.0 += 1;
             }
         }
+        if d >= 1.0 {
+            s.medium.0 += 1;
+            if est.medium().0 == f.medium {
+                s.medium.1 += 1;
+            }
+        }
         if d >= 4.0 && f64::from(est.thickness_mm) + 2.0 * sigma < d / 2.0 {
             s.thin += 1;
         }
-        for (at, v) in AT_MM.iter().zip(s.err2.iter_mut()) {
-            if (d - at).abs() <= 0.05 {
-                v.push(err);
+        // RMS at 2, 5, 10 mm: the first growth only (a regrowth or a
+        // pause would count twice).
+        if f.rate_mm_per_h > 0.0 && shed_at_s.is_none_or(|t0| f.t_s < t0) {
+            for (at, v) in AT_MM.iter().zip(s.err2.iter_mut()) {
+                if (d - at).abs() <= 0.05 {
+                    v.push(err);
+                }
             }
         }
         if (d - 10.0).abs() <= 0.05
@@ -170,7 +361,34 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
             s.gain_err10.push((f64::from(g.gain) / f.gain).ln());
         }
     }
+    s.flag_on_s.push(on);
+    s.flag_off_s.push(off);
+    if shed_at_s.is_some() {
+        s.shed_dry_s.push(dry);
+    }
     s
+}
+
+/// Worst (largest) of the times, NaN counted as never: "—".
+fn worst_min(v: &[f64]) -> String {
+    if v.is_empty() {
+        return "".into();
+    }
+    if v.iter().any(|x| x.is_nan()) {
+        let n = v.iter().filter(|x| x.is_nan()).count();
+        return format!("never in {n}");
+    }
+    let m = v.iter().copied().fold(0.0, f64::max);
+    format!("{:.1}", m / 60.0)
+}
+
+fn median_min(v: &[f64]) -> String {
+    let mut w: Vec<f64> = v.iter().copied().filter(|x| !x.is_nan()).collect();
+    if w.is_empty() {
+        return "".into();
+    }
+    w.sort_by(f64::total_cmp);
+    format!("{:.1}", w[w.len() / 2] / 60.0)
 }
 
 fn rms(v: &[f64]) -> f64 {
@@ -187,13 +405,28 @@ fn main() {
     let filter = args.get(3).cloned().unwrap_or_default();
     let params = params_from_env();
     println!(
-        "{seeds} accretions per class (seeds 101…), frames every {frame_s} s, gain memory {} s, update every {} s",
+        "{seeds} accretions per class, frames every {frame_s} s, gain memory {} s, update every {} s",
         params.gain_memory_s, params.update_period_s
     );
+    let seed_base: u64 = std::env::var("SEED_BASE")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(101);
     println!(
-        "| class | within 2σ | RMS 2 mm | RMS 5 mm | RMS 10 mm | confidently thin | gain RMS at 10 mm | gain ±8 % |"
+        "seeds {seed_base}…{}, history {}",
+        seed_base + seeds - 1,
+        if !params.history.enabled {
+            "off"
+        } else if params.history.pause_per_h == 0.0 {
+            "without the pause state"
+        } else {
+            "on"
+        }
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!(
+        "| class | within 2σ | RMS 2 mm | RMS 5 mm | RMS 10 mm | confidently thin | medium right ≥ 1 mm | gain RMS at 10 mm | rate at 60 min: RMS ln(est/true) | rate within 2σ | icing flag on, median / worst min | off after stop, median / worst min | shed → dry, worst min |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     // FILTER ending in `$`: that class only.
     let keep = |name: &str| match filter.strip_suffix('$') {
         Some(exact) => name == exact,
@@ -207,7 +440,7 @@ fn main() {
                     sc.spawn(move || {
                         (0..seeds)
                             .filter(|s| s % 2 == part)
-                            .map(|s| score(c, 101 + s, frame_s, params))
+                            .map(|s| score(c, seed_base + s, frame_s, params))
                             .collect::<Vec<_>>()
                     })
                 })
@@ -226,23 +459,32 @@ fn main() {
                 a.extend(b);
             }
             all.gain_err10.extend(s.gain_err10);
+            all.rate_ln_err.extend(s.rate_ln_err);
+            all.rate_within.0 += s.rate_within.0;
+            all.rate_within.1 += s.rate_within.1;
+            all.flag_on_s.extend(s.flag_on_s);
+            all.flag_off_s.extend(s.flag_off_s);
+            all.shed_dry_s.extend(s.shed_dry_s);
+            all.medium.0 += s.medium.0;
+            all.medium.1 += s.medium.1;
         }
-        let g8 = all
-            .gain_err10
-            .iter()
-            .filter(|e| e.abs() <= (1.08f64).ln())
-            .count() as f64
-            / all.gain_err10.len().max(1) as f64;
         println!(
-            "| {} | {:.1} % | {:.2} | {:.2} | {:.2} | {} | {:.3} | {:.0} % |",
+            "| {} | {:.1} % | {:.2} | {:.2} | {:.2} | {} | {:.1} % | {:.3} | {:.2} | {:.0} % | {} / {} | {} / {} | {} |",
             c.name,
             100.0 * all.within.0 as f64 / all.within.1.max(1) as f64,
             rms(&all.err2[0]),
             rms(&all.err2[1]),
             rms(&all.err2[2]),
             all.thin,
+            100.0 * all.medium.1 as f64 / all.medium.0.max(1) as f64,
             rms(&all.gain_err10),
-            100.0 * g8
+            rms(&all.rate_ln_err),
+            100.0 * all.rate_within.0 as f64 / all.rate_within.1.max(1) as f64,
+            median_min(&all.flag_on_s),
+            worst_min(&all.flag_on_s),
+            median_min(&all.flag_off_s),
+            worst_min(&all.flag_off_s),
+            worst_min(&all.shed_dry_s),
         );
     }
 }

@@ -26,7 +26,7 @@ fn measure(w: &World, node: &mut SimNode) -> Measurement {
     let fs = step(node, w);
     fs.into_iter()
         .find_map(|f| match f.msg {
-            DeviceMsg::MeasurementV3(m) => Some(m.measurement),
+            DeviceMsg::MeasurementV5(m) => Some(m.measurement),
             _ => None,
         })
         .expect("streaming")

@@ -26,7 +26,7 @@ fn events(fs: &[DeviceFrame]) -> Vec<EventKind> {
 fn flags_of(fs: &[DeviceFrame]) -> u16 {
     fs.iter()
         .find_map(|f| match &f.msg {
-            DeviceMsg::MeasurementV3(m) => Some(m.measurement.flags),
+            DeviceMsg::MeasurementV5(m) => Some(m.measurement.flags),
             _ => None,
         })
         .expect("a measurement")
@@ -108,7 +108,7 @@ fn a_panic_reset_is_reported_once_and_the_third_in_a_row_skips_the_store() {
         let fs = run_until_saved(&mut node, &w);
         assert!(fs.iter().all(|f| !matches!(
             &f.msg,
-            DeviceMsg::MeasurementV3(m) if m.measurement.flags & flags::STORAGE_FAILED != 0
+            DeviceMsg::MeasurementV5(m) if m.measurement.flags & flags::STORAGE_FAILED != 0
         )));
         let baseline = node.baseline();
         assert!(baseline.is_some());

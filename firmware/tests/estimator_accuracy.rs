@@ -202,3 +202,89 @@ fn with_the_gain_unknown_sigma_stays_honest() {
         }
     }
 }
+
+#[test]
+fn the_icing_rate_is_honest_and_the_icing_period_starts_with_the_growth() {
+    // Rime at 2 mm/h from a dry face, a gain of 1.08 the node is not told,
+    // 1 Hz: one hour into the growth the rate's truth lies within 2σ and
+    // the icing period is on; it started within 15 min of the growth.
+    for seed in 101..=103u64 {
+        let mut run = Run::new(
+            seed,
+            vec![
+                Segment::dry(60.0, -8.0),
+                Segment::grow(IceKind::Rime, 0.0, 2.5, 2.0, -8.0),
+            ],
+        );
+        run.frame_s = 1.0;
+        run.led = 1.08;
+        let frames = simulate(&run, EstimatorParams::default());
+        let on = frames
+            .iter()
+            .find(|f| f.accreting)
+            .map(|f| f.t_s - 60.0)
+            .expect("the icing period starts");
+        assert!(on <= 900.0, "seed {seed}: the period started after {on} s");
+        let f = frames
+            .iter()
+            .find(|f| f.t_s >= 60.0 + 3600.0)
+            .expect("an hour of growth");
+        let r = f.est_rate.expect("a rate");
+        let (est, sd) = (f64::from(r.mean_mm_per_h), f64::from(r.sigma_mm_per_h));
+        println!("seed {seed}: period on after {on:.0} s; rate at 60 min {est:.2} ± {sd:.2} mm/h");
+        assert!((est - 2.0).abs() <= 2.0 * sd, "seed {seed}: {est} ± {sd}");
+        assert!(sd < 2.0, "seed {seed}: σ {sd} is the prior's");
+        assert!(f.accreting, "seed {seed}: not accreting after an hour");
+    }
+    // A water film at +5 °C is never an icing period.
+    let mut run = Run::new(
+        101,
+        vec![
+            Segment::dry(60.0, 5.0),
+            Segment::grow(IceKind::Water, 0.0, 1.0, 2.0, 5.0),
+        ],
+    );
+    run.frame_s = 1.0;
+    let frames = simulate(&run, EstimatorParams::default());
+    assert!(
+        frames.iter().all(|f| !f.accreting),
+        "water at +5 °C called icing"
+    );
+}
+
+#[test]
+fn a_rate_beyond_the_history_s_grid_widens_sigma() {
+    // 20 mm/h is beyond the growth history's 13 mm/h (out of model): the
+    // history falls behind, the output falls back to the bank's: σ honest,
+    // never confidently thin.
+    let (mut n, mut ok, mut thin) = (0u64, 0u64, 0u64);
+    for seed in 101..=103u64 {
+        let mut run = Run::new(
+            seed,
+            vec![
+                Segment::dry(60.0, -8.0),
+                Segment::grow(IceKind::Rime, 0.0, 10.0, 20.0, -8.0),
+            ],
+        );
+        run.frame_s = 1.0;
+        run.gain_prior = CALIBRATED;
+        for f in simulate(&run, EstimatorParams::default()) {
+            let Some(e) = f.est else { continue };
+            let (est, sd) = (f64::from(e.thickness_mm), f64::from(e.sigma_mm));
+            if f.thickness_mm > 0.5 {
+                n += 1;
+                ok += u64::from((est - f.thickness_mm).abs() <= 2.0 * sd);
+            }
+            if f.thickness_mm >= 4.0 && est + 2.0 * sd < f.thickness_mm / 2.0 {
+                thin += 1;
+            }
+        }
+    }
+    let share = ok as f64 / n as f64;
+    println!(
+        "20 mm/h: within 2σ {:.1} % of {n} frames, confidently thin {thin}",
+        100.0 * share
+    );
+    assert_eq!(thin, 0);
+    assert!(share >= 0.90, "within 2σ {share}");
+}

@@ -81,10 +81,12 @@ fn iced() -> (SimNode, World) {
 fn every_register_is_the_nodes_last_measurement_in_the_maps_scales() {
     let (mut node, w) = iced();
     let fs = step(&mut node, &w);
-    let (m, est, gain, seq) = fs
+    let (m, est, gain, icing, seq) = fs
         .iter()
         .find_map(|f| match &f.msg {
-            DeviceMsg::MeasurementV3(v) => Some((v.measurement.clone(), v.estimate, v.gain, f.seq)),
+            DeviceMsg::MeasurementV5(v) => {
+                Some((v.measurement.clone(), v.estimate, v.gain, v.icing, f.seq))
+            }
             _ => None,
         })
         .expect("a measurement");
@@ -104,7 +106,7 @@ fn every_register_is_the_nodes_last_measurement_in_the_maps_scales() {
             seq,
             estimate: est.as_ref(),
             gain: gain.as_ref(),
-            icing: None,
+            icing: icing.as_ref().map(registers::IcingRate::from),
         },
     );
     assert_eq!(r, want.to_vec());
@@ -117,10 +119,14 @@ fn every_register_is_the_nodes_last_measurement_in_the_maps_scales() {
     assert!((i1 - 2_500).abs() <= 100, "{i1}");
     assert_eq!(r[7] as i16, m.temperature_centi_c);
     assert_eq!((u32::from(r[18]) << 16) | u32::from(r[19]), seq);
-    // The gateway-only registers and the icing rate: not available.
+    // The gateway-only registers: not available.
     assert_eq!((r[16], r[17]), (0xFFFF, 0xFFFF));
     assert_eq!((r[21], r[22]), (0xFFFF, 0xFFFF));
-    assert_eq!(&r[24..27], &[0x8000, 0xFFFF, 0xFFFF]);
+    // The icing rate, in 0.01 mm/h and ‰, once the frame carries it.
+    let i = icing.expect("a version-5 node reports its icing rate");
+    assert_eq!(r[24], (i.rate_um_per_h + 5) / 10);
+    assert_eq!(r[26], i.accreting_permille);
+    assert_ne!(r[0] & status::ICING_RATE, 0);
     // FC 03 reads the same.
     let h = server.answer(&read(7, 3, 0, 27), &view, w.now_ms());
     assert_eq!(words(&h, 7, 3), r);

@@ -12,7 +12,7 @@ use fois_protocol::*;
 fn measurement(fs: &[DeviceFrame]) -> Measurement {
     fs.iter()
         .find_map(|f| match &f.msg {
-            DeviceMsg::MeasurementV3(m) => Some(m.measurement.clone()),
+            DeviceMsg::MeasurementV5(m) => Some(m.measurement.clone()),
             _ => None,
         })
         .expect("a measurement")
@@ -692,7 +692,7 @@ mod fuzz {
                 node.run_frame(w.now_ms(), &mut |b| bytes.extend_from_slice(b));
             }
             let fs = frames(&bytes);
-            let ms = fs.iter().filter(|f| matches!(f.msg, DeviceMsg::MeasurementV3(_))).count();
+            let ms = fs.iter().filter(|f| matches!(f.msg, DeviceMsg::MeasurementV5(_))).count();
             prop_assert!(ms == chunks.len() || !node.is_streaming());
         }
     }

@@ -1,4 +1,4 @@
-//! The node streams `MeasurementV3` with the ice estimator's estimate: fed
+//! The node streams `MeasurementV5` with the ice estimator's estimate: fed
 //! with the baseline-corrected currents of valid frames and the NTC's air
 //! temperature; saturated frames only predict; a dark calibration starts the
 //! estimator from "dry".
@@ -14,10 +14,10 @@ use fois_protocol::*;
 fn estimate(fs: &[DeviceFrame]) -> (Measurement, Option<IceEstimate>) {
     fs.iter()
         .find_map(|f| match &f.msg {
-            DeviceMsg::MeasurementV3(m) => Some((m.measurement.clone(), m.estimate)),
+            DeviceMsg::MeasurementV5(m) => Some((m.measurement.clone(), m.estimate)),
             _ => None,
         })
-        .expect("a MeasurementV3")
+        .expect("a MeasurementV5")
 }
 
 #[test]

@@ -1,4 +1,4 @@
-//! The node's optical gain: streamed with every `MeasurementV3`, set by a
+//! The node's optical gain: streamed with every `MeasurementV5`, set by a
 //! calibration against a target (`CalibrateGain`), kept in the flash store
 //! across a reset, forgotten on `ResetGain`, returned to the calibration by
 //! a dark calibration; `GAIN_OUT_OF_BAND` when it leaves the configured band;
@@ -32,10 +32,10 @@ fn ack(fs: &[DeviceFrame], id: u16) -> Result<AckResult, ErrorCode> {
 fn streamed_gain(fs: &[DeviceFrame]) -> (u16, Option<GainEstimate>) {
     fs.iter()
         .find_map(|f| match &f.msg {
-            DeviceMsg::MeasurementV3(m) => Some((m.measurement.flags, m.gain)),
+            DeviceMsg::MeasurementV5(m) => Some((m.measurement.flags, m.gain)),
             _ => None,
         })
-        .expect("a MeasurementV3")
+        .expect("a MeasurementV5")
 }
 
 /// A node whose face shows the target at `gain` × its currents.

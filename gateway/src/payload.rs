@@ -5,7 +5,7 @@
 //! node's frame `seq` and `uptime_ms`, so a consumer can drop the duplicates
 //! a gateway crash may cause (the pair is unique per node until it resets).
 
-use fois_link::reading::{EstimateReading, EventReading, GainReading, Reading};
+use fois_link::reading::{EstimateReading, EventReading, GainReading, IcingReading, Reading};
 use fois_link::text::{firmware_text, unique_id_hex};
 use fois_link::timefmt::iso_utc;
 use fois_protocol::{Hello, Medium};
@@ -96,6 +96,9 @@ pub struct StateJson {
     /// The node's optical gain estimate, when it sends one.
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub gain: Option<GainReading>,
+    /// The node's icing rate and meteorological icing, when it sends them.
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub icing: Option<IcingReading>,
 }
 
 impl StateJson {
@@ -133,12 +136,13 @@ impl StateJson {
             ice_thickness_mm: film(&[Medium::Glazed, Medium::Rime]),
             water_film_mm: film(&[Medium::Water]),
             gain: r.gain,
+            icing: r.icing,
         }
     }
 
     /// True when `other` differs in something that must go out at once
     /// (state, alarm, acknowledgement, validity, faults, baseline, medium,
-    /// presence of an estimate or a gain).
+    /// presence of an estimate or a gain, the icing period on or off).
     pub fn differs_discretely(&self, other: &StateJson) -> bool {
         self.state != other.state
             || self.alarm != other.alarm
@@ -148,6 +152,7 @@ impl StateJson {
             || self.dark_baseline != other.dark_baseline
             || self.estimate.map(|e| e.medium) != other.estimate.map(|e| e.medium)
             || self.gain.is_some() != other.gain.is_some()
+            || self.icing.map(|i| i.accreting) != other.icing.map(|i| i.accreting)
     }
 }
 

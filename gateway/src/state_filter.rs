@@ -71,7 +71,7 @@ macro_rules! band {
 /// gateway README, "Home Assistant"). Currents: the virtual node's noise is
 /// 0.02–0.04 µA rms, a rime onset more than 25 µA; thickness: a tenth of the
 /// estimator's usual σ.
-pub const DEADBANDS: [Deadband; 10] = [
+pub const DEADBANDS: [Deadband; 12] = [
     band!("i1_ua", 0.2, 0.02, |s| Some(s.i1_ua), |s, v| s.i1_ua = v),
     band!("i2_ua", 0.2, 0.02, |s| Some(s.i2_ua), |s, v| s.i2_ua = v),
     band!(
@@ -129,6 +129,30 @@ pub const DEADBANDS: [Deadband; 10] = [
             g.gain = v;
         }
     }),
+    // The icing rate: a tenth of a mm/h or 10 %; the probability of
+    // accreting as the medium's.
+    band!(
+        "rate_mm_per_h",
+        0.1,
+        0.1,
+        |s| s.icing.map(|i| i.rate_mm_per_h),
+        |s, v| {
+            if let Some(i) = &mut s.icing {
+                i.rate_mm_per_h = v;
+            }
+        }
+    ),
+    band!(
+        "accreting_probability",
+        0.05,
+        0.0,
+        |s| s.icing.map(|i| i.accreting_probability),
+        |s, v| {
+            if let Some(i) = &mut s.icing {
+                i.accreting_probability = v;
+            }
+        }
+    ),
     band!(
         "frames_lost",
         1.0,
@@ -178,6 +202,12 @@ impl StateFilter {
             && g.gain == old.gain
         {
             g.gain_sigma = old.gain_sigma;
+        }
+        // The icing rate's σ goes with the rate (an attribute).
+        if let (Some(i), Some(old)) = (&mut next.icing, last.icing)
+            && i.rate_mm_per_h == old.rate_mm_per_h
+        {
+            i.rate_sigma_mm_per_h = old.rate_sigma_mm_per_h;
         }
         if counters_due {
             self.counters_due = Some(now + COUNTERS_EVERY);

@@ -56,7 +56,7 @@ fn a_register_read_over_tcp_and_over_rtu_gives_the_same_value_for_the_same_measu
         let last = frames
             .iter()
             .rev()
-            .find(|f| matches!(f.msg, DeviceMsg::MeasurementV3(_)))
+            .find(|f| matches!(f.msg, DeviceMsg::MeasurementV5(_)))
             .unwrap();
         let mut snap = NodeSnapshot::new(0, Some("tower-9".into()), "/dev/x".into());
         snap.link_up = true;

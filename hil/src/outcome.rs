@@ -101,6 +101,9 @@ pub struct Outcome {
     pub hellos: u64,
     /// Rule and fault events, in order.
     pub events: Vec<Seen>,
+    /// The icing period's events (`IcingStarted`, `IcingEnded`: the
+    /// growth history's), with their node time, s.
+    pub icing_events: Vec<(f64, EventKind)>,
     /// Replies to commands (and to the button), in order.
     pub replies: Vec<ReplySeen>,
     /// The commands sent: (id, virtual time s); the button's id is
@@ -203,6 +206,7 @@ impl Outcome {
             saturated: 0,
             hellos: 0,
             events: Vec::new(),
+            icing_events: Vec::new(),
             replies: Vec::new(),
             sent: Vec::new(),
             stray_errors: 0,

@@ -105,7 +105,8 @@ impl Observer {
             DeviceMsg::Hello(_) => o.hellos += 1,
             DeviceMsg::Measurement(m)
             | DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 { measurement: m, .. })
-            | DeviceMsg::MeasurementV3(fois_protocol::MeasurementV3 { measurement: m, .. }) => {
+            | DeviceMsg::MeasurementV3(fois_protocol::MeasurementV3 { measurement: m, .. })
+            | DeviceMsg::MeasurementV5(fois_protocol::MeasurementV5 { measurement: m, .. }) => {
                 o.measurements += 1;
                 if !m.is_valid() {
                     o.saturated += 1;
@@ -125,6 +126,14 @@ impl Observer {
                     None => (m.i1_na, m.i1_na),
                     Some((a, b)) => (a.min(m.i1_na), b.max(m.i1_na)),
                 });
+            }
+            // The icing period's start and end (protocol 5) are the growth
+            // history's, not the rule's: counted apart, so every rule and
+            // fault expectation stays as it was.
+            DeviceMsg::Event(e)
+                if matches!(e.kind, EventKind::IcingStarted | EventKind::IcingEnded) =>
+            {
+                o.icing_events.push((e.uptime_ms as f64 / 1000.0, e.kind));
             }
             DeviceMsg::Event(e) => {
                 let t_ns = e.uptime_ms.saturating_mul(1_000_000);

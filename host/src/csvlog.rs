@@ -410,7 +410,7 @@ mod tests {
         let line = format_row(0, &Row::device(42, &DeviceMsg::Measurement(meas())));
         assert_eq!(
             line,
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,,\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,,,,,\n"
         );
         let v2 = DeviceMsg::MeasurementV2(fois_protocol::MeasurementV2 {
             measurement: meas(),
@@ -423,7 +423,7 @@ mod tests {
         });
         assert_eq!(
             format_row(0, &Row::device(42, &v2)),
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,2.345,0.310,rime,0.970,,\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,2.345,0.310,rime,0.970,,,,,\n"
         );
         let v3 = DeviceMsg::MeasurementV3(fois_protocol::MeasurementV3 {
             measurement: meas(),
@@ -435,7 +435,22 @@ mod tests {
         });
         assert_eq!(
             format_row(0, &Row::device(42, &v3)),
-            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,1.1503,0.0610\n"
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,1.1503,0.0610,,,\n"
+        );
+        let v5 = DeviceMsg::MeasurementV5(fois_protocol::MeasurementV5 {
+            measurement: meas(),
+            estimate: None,
+            gain: None,
+            icing: Some(fois_protocol::IcingEstimate {
+                rate_um_per_h: 2_150,
+                sigma_um_per_h: 600,
+                accreting_permille: 940,
+                accreting: true,
+            }),
+        });
+        assert_eq!(
+            format_row(0, &Row::device(42, &v5)),
+            "1970-01-01T00:00:00.000Z,0,measurement,42,1234,25.500,-0.007,0.100,0.000,-5.12,3300,Ice,1,1,64,,,,,,,,,,2.150,0.600,1\n"
         );
         assert_eq!(fields(&line).len(), HEADER.split(',').count());
         let g = format_row(5, &Row::gap(10, 3));
@@ -460,7 +475,7 @@ mod tests {
         let line = format_row(1, &r);
         let f = fields(&line);
         assert_eq!(f[17], "a, \"b\"\nc");
-        assert_eq!(f.len(), 24);
+        assert_eq!(f.len(), 27);
     }
 
     #[test]
@@ -507,7 +522,7 @@ mod tests {
             log.close().unwrap();
         }
         let t = LogTable::read(&p).unwrap();
-        assert_eq!(t.columns.len(), 24);
+        assert_eq!(t.columns.len(), 27);
         let seqs: Vec<&str> = t.rows.iter().map(|r| r[3].as_str()).collect();
         assert_eq!(seqs, ["1", "2"]);
         let text = std::fs::read_to_string(&p).unwrap();
@@ -519,10 +534,13 @@ mod tests {
             CsvLog::open(&other),
             Err(LogError::ForeignHeader(_))
         ));
-        // A log of the layout before the gain columns is not appended to
-        // (its rows would be narrower than the new ones): a clear refusal.
+        // A log of the layout before the gain (or the icing-rate) columns
+        // is not appended to (its rows would be narrower than the new
+        // ones): a clear refusal.
         let older = dir.path().join("older.csv");
-        let old_header = HEADER.trim_end_matches(",est_gain,est_gain_sigma");
+        let old_header = HEADER.trim_end_matches(
+            ",est_gain,est_gain_sigma,est_rate_mm_per_h,est_rate_sigma_mm_per_h,est_accreting",
+        );
         std::fs::write(&older, format!("{old_header}\n")).unwrap();
         let err = CsvLog::open(&older).err().map(|e| e.to_string());
         assert!(

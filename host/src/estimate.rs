@@ -25,7 +25,11 @@
 //! `est_p`, `est_gain`, `est_gain_sigma` (as the log's: the optical gain
 //! against the response table's and its standard deviation; the replay
 //! applies no temperature model: a log holds the air's temperature, not the
-//! optics') and `est_update`: what the frame did —
+//! optics'), `est_rate_mm_per_h`, `est_rate_sigma_mm_per_h`, `est_accreting`
+//! (as the log's: the icing rate now ± σ, mm/h, and the icing period 0/1 —
+//! the node's growth history, so a replay of sparse rows, e.g. a `sim
+//! curve` 180 s apart, updates it at every row) and `est_update`: what the
+//! frame did —
 //! `initialised`, `measured`, `waiting`, `no_currents` (a saturated row, or
 //! currents that are not finite numbers or beyond ±10 mA: predicted only),
 //! `outlier` (currents no state explains: predicted only), `restart` (the
@@ -49,13 +53,16 @@ use fois_firmware::estimator::{Estimator, EstimatorParams, Update};
 use crate::csvlog::LogReader;
 
 /// The appended columns.
-pub const EST_COLUMNS: [&str; 7] = [
+pub const EST_COLUMNS: [&str; 10] = [
     "est_thickness_mm",
     "est_sigma_mm",
     "est_kind",
     "est_p",
     "est_gain",
     "est_gain_sigma",
+    "est_rate_mm_per_h",
+    "est_rate_sigma_mm_per_h",
+    "est_accreting",
     "est_update",
 ];
 
@@ -224,7 +231,7 @@ impl Replay {
         x: Option<[f32; 2]>,
         temp_c: Option<f64>,
         restarted: bool,
-    ) -> [String; 7] {
+    ) -> [String; 10] {
         let e = self.est.step(dt_s as f32, x, temp_c.map(|t| t as f32));
         self.sum.frames += 1;
         let update = self.est.last_update();
@@ -239,9 +246,14 @@ impl Replay {
             update_name(update)
         };
         let gain = self.est.gain();
+        let icing = self.est.icing_estimate();
         match e {
             Some(e) => {
-                self.sum.last = Some(crate::text::estimate_text(&e));
+                let mut last = crate::text::estimate_text(&e);
+                if let Some(i) = &icing {
+                    last = format!("{last}, {}", crate::text::icing_text(i));
+                }
+                self.sum.last = Some(last);
                 [
                     format!("{:.3}", f64::from(e.thickness_um) / 1000.0),
                     format!("{:.3}", f64::from(e.sigma_um) / 1000.0),
@@ -249,18 +261,23 @@ impl Replay {
                     format!("{:.3}", f64::from(e.probability_permille) / 1000.0),
                     gain.map_or(String::new(), |g| format!("{:.3}", g.gain)),
                     gain.map_or(String::new(), |g| format!("{:.3}", g.gain * g.sigma)),
+                    icing.map_or(String::new(), |i| {
+                        format!("{:.3}", f64::from(i.rate_um_per_h) / 1000.0)
+                    }),
+                    icing.map_or(String::new(), |i| {
+                        format!("{:.3}", f64::from(i.sigma_um_per_h) / 1000.0)
+                    }),
+                    icing.map_or(String::new(), |i| u8::from(i.accreting).to_string()),
                     what.to_string(),
                 ]
             }
-            None => [
-                String::new(),
-                String::new(),
-                String::new(),
-                String::new(),
-                String::new(),
-                String::new(),
-                what.to_string(),
-            ],
+            None => std::array::from_fn(|k| {
+                if k == EST_COLUMNS.len() - 1 {
+                    what.to_string()
+                } else {
+                    String::new()
+                }
+            }),
         }
     }
 
@@ -269,7 +286,7 @@ impl Replay {
         self.sum.restarts += 1;
     }
 
-    fn log_row(&mut self, f: &StringRecord, c: LogCols) -> Option<[String; 7]> {
+    fn log_row(&mut self, f: &StringRecord, c: LogCols) -> Option<[String; 10]> {
         let LogCols {
             kind,
             uptime,
@@ -327,7 +344,7 @@ impl Replay {
         i: [usize; 2],
         run: Option<usize>,
         timing: CurveTiming,
-    ) -> anyhow::Result<[String; 7]> {
+    ) -> anyhow::Result<[String; 10]> {
         let mut restarted = false;
         if let Some(r) = run {
             let this = f[r].trim().to_string();
@@ -411,7 +428,7 @@ pub fn replay(
         };
         let mut fields = StringRecord::new();
         let mut line = 1u64;
-        let empty = || std::array::from_fn::<String, 7, _>(|_| String::new());
+        let empty = || std::array::from_fn::<String, 10, _>(|_| String::new());
         while rd.next_row(&mut fields)? {
             line += 1;
             let est = match layout {

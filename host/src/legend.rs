@@ -16,12 +16,14 @@ How to read the live view (first line of each block: the latest measurement)
   est       the node's ice estimate: medium (water, glazed, rime), thickness ± σ in mm
             (σ: one standard deviation; the truth lies within ±2σ 95 times in 100)
             and p, the probability (0–1) that the medium is the one named.
+  icing     how fast ice grows now, mm/h ± σ, and ACCRETING while an icing period is on
+            (meteorological icing; p: the probability that ice accretes now).
   gain      the node's optical gain (LED, fibres, face; 1.000 = as designed) ± σ;
             OUT OF BAND: outside its configured band (LED failing, face fouled).
   FAULT     node faults by name (ntc_open, storage_failed, ...), with what to check.
   frames    frames received; lost: missing from the sequence; rejected: failed their check.
   truth     (demo only) what the simulator has on the face, in virtual time: compare est.
-Events (ice_onset, wet_onset, fault_raised, ...) print as lines above the status.";
+Events (ice_onset, wet_onset, icing_started, fault_raised, ...) print as lines above the status.";
 
 #[cfg(test)]
 mod tests {
@@ -41,8 +43,21 @@ mod tests {
             );
         }
         for word in [
-            "I1, I2", "ambient", "°C", "state", "alarm", "est", "σ", " p,", "gain", "FAULT",
-            "lost", "rejected", "truth",
+            "I1, I2",
+            "ambient",
+            "°C",
+            "state",
+            "alarm",
+            "est",
+            "σ",
+            " p,",
+            "gain",
+            "FAULT",
+            "lost",
+            "rejected",
+            "truth",
+            "icing",
+            "ACCRETING",
         ] {
             assert!(LEGEND.contains(word), "{word} not explained");
         }

@@ -12,7 +12,7 @@ use fois_protocol::{Command, DeviceMsg};
 
 use crate::csvlog::{CsvLog, Row};
 use crate::exit;
-pub use crate::status::{fault_line, status_line, status_lines};
+pub use crate::status::{fault_line, icing_line, status_line, status_lines};
 use fois_link::advice::{Calibration, calibration_advice};
 use fois_link::reading::EventReading;
 use fois_link::text::{ack_text, error_text, event_name, hello_text};
@@ -215,12 +215,14 @@ impl Session<'_> {
                 match &f.msg {
                     DeviceMsg::Measurement(_)
                     | DeviceMsg::MeasurementV2(_)
-                    | DeviceMsg::MeasurementV3(_) => {
+                    | DeviceMsg::MeasurementV3(_)
+                    | DeviceMsg::MeasurementV5(_) => {
                         if let Some((m, estimate)) = f.msg.measurement() {
                             self.sum.measurements += 1;
                             self.sum.last = Some(m.clone());
                             self.sum.last_estimate = estimate.copied();
                             self.sum.last_gain = f.msg.gain().copied();
+                            self.sum.last_icing = f.msg.icing().copied();
                         }
                     }
                     DeviceMsg::Event(e) => {
@@ -305,6 +307,10 @@ impl Session<'_> {
             log.tick()?;
         }
         let mut lines = status_lines(self.sum.last.as_ref(), &self.sum).to_vec();
+        // The icing rate below the estimate (protocol v5 nodes).
+        if let Some(i) = icing_line(&self.sum) {
+            lines.insert(2, i);
+        }
         // The demo's truth right below the estimate it is to be compared with.
         if let Some(t) = &self.truth {
             lines.insert(2, (t.0)());

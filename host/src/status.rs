@@ -4,8 +4,8 @@
 //! the node's faults by name.
 
 use fois_link::reading::{celsius, ua};
-use fois_link::text::{estimate_text, gain_text};
-use fois_protocol::{DetectorState, GainEstimate, IceEstimate, Measurement, flags};
+use fois_link::text::{estimate_text, gain_text, icing_text};
+use fois_protocol::{DetectorState, GainEstimate, IceEstimate, IcingEstimate, Measurement, flags};
 
 /// Totals at the end of a monitor run.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -30,6 +30,8 @@ pub struct MonitorSummary {
     /// The optical gain estimate of the last measurement (protocol v3
     /// nodes).
     pub last_gain: Option<GainEstimate>,
+    /// The icing rate of the last measurement (protocol v5 nodes).
+    pub last_icing: Option<IcingEstimate>,
     /// Ice onsets seen.
     pub ice_onsets: u64,
 }
@@ -117,10 +119,22 @@ pub fn fault_line(m: &Measurement) -> Option<String> {
     Some(line)
 }
 
+/// The icing rate and meteorological icing (protocol v5 nodes): `icing
+/// rate 2.15 ± 0.60 mm/h ACCRETING (p 0.94)`; `None` when the node sends
+/// none.
+pub fn icing_line(s: &MonitorSummary) -> Option<String> {
+    s.last_icing
+        .as_ref()
+        .map(|i| format!("icing {}", icing_text(i)))
+}
+
 /// The status on one line (plain output).
 pub fn status_line(m: Option<&Measurement>, s: &MonitorSummary) -> String {
     let [a, b, c] = status_lines(m, s);
-    format!("{a}  | {b}  | {c}")
+    match icing_line(s) {
+        Some(i) => format!("{a}  | {b}  | {i}  | {c}"),
+        None => format!("{a}  | {b}  | {c}"),
+    }
 }
 
 #[cfg(test)]
@@ -179,5 +193,15 @@ mod tests {
                 l.chars().count()
             );
         }
+        assert_eq!(icing_line(&sum), None);
+        sum.last_icing = Some(IcingEstimate {
+            rate_um_per_h: 12_150,
+            sigma_um_per_h: 10_600,
+            accreting_permille: 1000,
+            accreting: true,
+        });
+        let line = icing_line(&sum).unwrap();
+        assert_eq!(line, "icing rate 12.15 ± 10.60 mm/h ACCRETING (p 1.00)");
+        assert!(line.chars().count() <= 80);
     }
 }

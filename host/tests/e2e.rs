@@ -433,6 +433,7 @@ fn make_rime_log(path: &Path) -> usize {
             fois_protocol::DeviceMsg::Measurement(_)
                 | fois_protocol::DeviceMsg::MeasurementV2(_)
                 | fois_protocol::DeviceMsg::MeasurementV3(_)
+                | fois_protocol::DeviceMsg::MeasurementV5(_)
         ) {
             n += 1;
         }

@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 use fois_firmware::modbus::server::{CRC16, crc_ok};
 use fois_link::Reading;
 use fois_protocol::registers::{self as reg, TABLE, status};
-use fois_protocol::{DeviceFrame, DeviceMsg, FrameDecoder, MeasurementV3, flags};
+use fois_protocol::{DeviceFrame, DeviceMsg, FrameDecoder, MeasurementV5, flags};
 
 mod common;
 use common::NodeProc;
@@ -103,14 +103,14 @@ fn registers_of(v: &serde_json::Value) -> Vec<u16> {
 }
 
 /// The node's frames so far (its frame log), by sequence number.
-fn logged(path: &std::path::Path) -> Vec<(u32, MeasurementV3)> {
+fn logged(path: &std::path::Path) -> Vec<(u32, MeasurementV5)> {
     let bytes = std::fs::read(path).unwrap_or_default();
     let mut dec = FrameDecoder::<{ fois_protocol::MAX_FRAME }>::new();
     let mut out = Vec::new();
     dec.feed::<DeviceFrame>(&bytes, |r| {
         if let Ok(DeviceFrame {
             seq,
-            msg: DeviceMsg::MeasurementV3(m),
+            msg: DeviceMsg::MeasurementV5(m),
         }) = r
         {
             out.push((seq, m));
@@ -122,8 +122,9 @@ fn logged(path: &std::path::Path) -> Vec<(u32, MeasurementV3)> {
 /// What each register must read for this frame, from the frame's reading
 /// in µA, °C, mm, fractions, gain factors divided by the table's scales
 /// (independent of the mapping function the node uses).
-fn expected(seq: u32, m: &MeasurementV3) -> Vec<u16> {
-    let r = Reading::new(&m.measurement, m.estimate.as_ref(), m.gain.as_ref());
+fn expected(seq: u32, m: &MeasurementV5) -> Vec<u16> {
+    let mut r = Reading::new(&m.measurement, m.estimate.as_ref(), m.gain.as_ref());
+    r.icing = m.icing.as_ref().map(fois_link::reading::IcingReading::from);
     let scale = |name: &str| TABLE.iter().find(|f| f.name == name).unwrap().scale;
     let int = |x: f64, name: &str| (x / scale(name)).round() as i64;
     let mut w = vec![0u16; reg::REGISTERS];
@@ -141,6 +142,8 @@ fn expected(seq: u32, m: &MeasurementV3) -> Vec<u16> {
         (r.gain.is_some(), status::GAIN),
         (r.dark_baseline, status::DARK_BASELINE),
         (!r.faults.is_empty(), status::FAULT),
+        (r.icing.is_some(), status::ICING_RATE),
+        (r.icing.is_some_and(|i| i.accreting), status::ACCRETING),
     ] {
         if on {
             bits |= b;
@@ -169,15 +172,24 @@ fn expected(seq: u32, m: &MeasurementV3) -> Vec<u16> {
     w[20] = r.vdda_mv;
     put32(&mut w, reg::FRAMES_LOST, reg::NA_U32); // gateway only
     w[23] = 0;
-    w[24] = reg::NA_I16; // no icing rate in the frame yet
-    w[25] = reg::NA_U16;
-    w[26] = reg::NA_U16;
+    match r.icing {
+        Some(i) => {
+            w[24] = int(i.rate_mm_per_h, "icing_rate") as i16 as u16;
+            w[25] = int(i.rate_sigma_mm_per_h, "icing_rate_sigma") as u16;
+            w[26] = int(i.accreting_probability, "accreting_probability") as u16;
+        }
+        None => {
+            w[24] = reg::NA_I16;
+            w[25] = reg::NA_U16;
+            w[26] = reg::NA_U16;
+        }
+    }
     w
 }
 
 /// Check a read of the whole block against the frame log: the frame of
 /// the sequence number it shows.
-fn check_against_log(regs: &[u16], log: &std::path::Path, who: &str) -> MeasurementV3 {
+fn check_against_log(regs: &[u16], log: &std::path::Path, who: &str) -> MeasurementV5 {
     assert_eq!(regs.len(), reg::REGISTERS, "{who}");
     let seq = (u32::from(regs[18]) << 16) | u32::from(regs[19]);
     let frames = logged(log);

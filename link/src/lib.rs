@@ -28,4 +28,4 @@ pub mod timefmt;
 pub mod versioned;
 
 pub use link::{Incoming, Link, LinkError, Reply, open_port};
-pub use reading::{EstimateReading, EventReading, GainReading, Reading};
+pub use reading::{EstimateReading, EventReading, GainReading, IcingReading, Reading};

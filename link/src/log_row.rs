@@ -29,6 +29,9 @@
 //! | `est_p` | 0–1 | posterior probability of that medium |
 //! | `est_gain` | 1 = table | the node's estimate of its optical gain (protocol v3 nodes; empty for older) |
 //! | `est_gain_sigma` | | its standard deviation |
+//! | `est_rate_mm_per_h` | mm/h | the node's icing rate: posterior mean growth rate now, 0 while nothing grows (protocol v5 nodes; empty for older) |
+//! | `est_rate_sigma_mm_per_h` | mm/h | its standard deviation |
+//! | `est_accreting` | 0/1 | meteorological icing: an icing period is on (the node's P(accreting) with hysteresis) |
 
 use fois_protocol::{DeviceMsg, Event};
 
@@ -37,7 +40,7 @@ use crate::text::{ack_text, error_text, event_name, hello_text};
 use crate::timefmt::iso_utc;
 
 /// The header line (without newline).
-pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,faults,frames_lost,detail,est_thickness_mm,est_sigma_mm,est_kind,est_p,est_gain,est_gain_sigma";
+pub const HEADER: &str = "host_time_utc,host_unix_ms,kind,seq,uptime_ms,i1_ua,i2_ua,ambient1_ua,ambient2_ua,temperature_c,vdda_mv,state,alarm,valid,flags,faults,frames_lost,detail,est_thickness_mm,est_sigma_mm,est_kind,est_p,est_gain,est_gain_sigma,est_rate_mm_per_h,est_rate_sigma_mm_per_h,est_accreting";
 
 /// One row of the log. Build it with the constructors, then the log writer (fois-host `CsvLog::write`, the gateway's daily log).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -104,7 +107,8 @@ impl Row {
         match msg {
             DeviceMsg::Measurement(_)
             | DeviceMsg::MeasurementV2(_)
-            | DeviceMsg::MeasurementV3(_) => Row {
+            | DeviceMsg::MeasurementV3(_)
+            | DeviceMsg::MeasurementV5(_) => Row {
                 kind: "measurement",
                 seq: Some(seq),
                 reading: Reading::of(msg),
@@ -147,11 +151,12 @@ fn fixed(v: Option<f64>, decimals: usize) -> String {
 /// The fields of a row, in the order of [`HEADER`]. The values come from
 /// the row's [`Reading`] or [`EventReading`] (units converted there); this
 /// only chooses the decimals.
-pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 24] {
+pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 27] {
     let m = r.reading.as_ref();
     let e = r.event.as_ref();
     let est = m.and_then(|m| m.estimate.as_ref());
     let gain = m.and_then(|m| m.gain.as_ref());
+    let icing = m.and_then(|m| m.icing.as_ref());
     let uptime = m.map(|m| m.uptime_ms).or(e.map(|e| e.uptime_ms));
     [
         iso_utc(host_unix_ms),
@@ -180,5 +185,8 @@ pub fn row_fields(host_unix_ms: u64, r: &Row) -> [String; 24] {
         fixed(est.map(|e| e.medium_probability), 3),
         fixed(gain.map(|g| g.gain), 4),
         fixed(gain.map(|g| g.gain_sigma), 4),
+        fixed(icing.map(|i| i.rate_mm_per_h), 3),
+        fixed(icing.map(|i| i.rate_sigma_mm_per_h), 3),
+        opt(icing.map(|i| u8::from(i.accreting))),
     ]
 }

@@ -12,8 +12,8 @@
 //! when the node sent them.
 
 use fois_protocol::{
-    DetectorState, DeviceMsg, Event, EventKind, GainEstimate, IceEstimate, Measurement, Medium,
-    flags,
+    DetectorState, DeviceMsg, Event, EventKind, GainEstimate, IceEstimate, IcingEstimate,
+    Measurement, Medium, flags,
 };
 use serde::{Serialize, Serializer};
 
@@ -100,6 +100,32 @@ impl From<&GainEstimate> for GainReading {
     }
 }
 
+/// The node's icing rate (protocol 5) in mm/h and as a probability:
+/// meteorological icing (ice accreting now) beside the estimate's
+/// instrumental icing (ice present).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct IcingReading {
+    /// Posterior mean growth rate, mm/h (0 while nothing grows).
+    pub rate_mm_per_h: f64,
+    /// Its standard deviation, mm/h.
+    pub rate_sigma_mm_per_h: f64,
+    /// Probability that ice accretes now, 0–1.
+    pub accreting_probability: f64,
+    /// An icing period is on (the probability with the node's hysteresis).
+    pub accreting: bool,
+}
+
+impl From<&IcingEstimate> for IcingReading {
+    fn from(i: &IcingEstimate) -> Self {
+        IcingReading {
+            rate_mm_per_h: f64::from(i.rate_um_per_h) / 1000.0,
+            rate_sigma_mm_per_h: f64::from(i.sigma_um_per_h) / 1000.0,
+            accreting_probability: fraction(i.accreting_permille),
+            accreting: i.accreting,
+        }
+    }
+}
+
 /// One measurement frame (any protocol version) in µA, °C, mm.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Reading {
@@ -138,6 +164,9 @@ pub struct Reading {
     /// The node's optical gain estimate (protocol 3, once it has one).
     #[serde(flatten, skip_serializing_if = "Option::is_none")]
     pub gain: Option<GainReading>,
+    /// The node's icing rate (protocol 5, once it has one).
+    #[serde(flatten, skip_serializing_if = "Option::is_none")]
+    pub icing: Option<IcingReading>,
 }
 
 impl Reading {
@@ -164,14 +193,22 @@ impl Reading {
             faults: fault_names(m.flags),
             estimate: estimate.map(EstimateReading::from),
             gain: gain.map(GainReading::from),
+            icing: None,
         }
     }
 
+    /// The reading with the icing rate the node sent with it (protocol 5).
+    pub fn with_icing(mut self, icing: Option<&IcingEstimate>) -> Reading {
+        self.icing = icing.map(IcingReading::from);
+        self
+    }
+
     /// The reading of a measurement message (`Measurement`,
-    /// `MeasurementV2`, `MeasurementV3`); `None` for any other message.
+    /// `MeasurementV2`, `MeasurementV3`, `MeasurementV5`); `None` for any
+    /// other message.
     pub fn of(msg: &DeviceMsg) -> Option<Reading> {
         let (m, estimate) = msg.measurement()?;
-        Some(Reading::new(m, estimate, msg.gain()))
+        Some(Reading::new(m, estimate, msg.gain()).with_icing(msg.icing()))
     }
 
     /// The detector says ice.
@@ -189,7 +226,8 @@ impl Reading {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct EventReading {
     /// `ice_onset`, `ice_cleared`, `wet_onset`, `wet_cleared`,
-    /// `fault_raised`, `fault_cleared`.
+    /// `fault_raised`, `fault_cleared`, `panic_reset`, `icing_started`,
+    /// `icing_ended`.
     pub kind: &'static str,
     /// Node time, ms.
     pub uptime_ms: u64,
@@ -282,6 +320,39 @@ mod tests {
         });
         assert_eq!(Reading::of(&v1), Reading::of(&v3));
         assert!(Reading::of(&DeviceMsg::Event(event())).is_none());
+        let v5 = DeviceMsg::MeasurementV5(fois_protocol::MeasurementV5 {
+            measurement: meas(),
+            estimate: None,
+            gain: None,
+            icing: None,
+        });
+        assert_eq!(Reading::of(&v1), Reading::of(&v5));
+    }
+
+    #[test]
+    fn the_icing_rate_in_mm_per_h_and_its_keys_only_when_sent() {
+        let v5 = DeviceMsg::MeasurementV5(fois_protocol::MeasurementV5 {
+            measurement: meas(),
+            estimate: Some(rime_estimate()),
+            gain: Some(gain_estimate()),
+            icing: Some(IcingEstimate {
+                rate_um_per_h: 2_150,
+                sigma_um_per_h: 600,
+                accreting_permille: 940,
+                accreting: true,
+            }),
+        });
+        let r = Reading::of(&v5).unwrap();
+        let i = r.icing.unwrap();
+        assert_eq!((i.rate_mm_per_h, i.rate_sigma_mm_per_h), (2.15, 0.6));
+        assert_eq!((i.accreting_probability, i.accreting), (0.94, true));
+        let v = serde_json::to_value(&r).unwrap();
+        assert_eq!(v["rate_mm_per_h"], 2.15);
+        assert_eq!(v["rate_sigma_mm_per_h"], 0.6);
+        assert_eq!(v["accreting_probability"], 0.94);
+        assert_eq!(v["accreting"], true);
+        let v = serde_json::to_value(Reading::new(&meas(), None, None)).unwrap();
+        assert!(v.get("rate_mm_per_h").is_none() && v.get("accreting").is_none());
     }
 
     fn event() -> Event {

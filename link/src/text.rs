@@ -3,7 +3,7 @@
 //! gateway logs them; the wire's units converted by [`crate::reading`].
 
 use fois_protocol::{
-    Ack, AckResult, ErrorReply, EventKind, GainEstimate, Hello, IceEstimate, Medium,
+    Ack, AckResult, ErrorReply, EventKind, GainEstimate, Hello, IceEstimate, IcingEstimate, Medium,
 };
 
 use crate::reading::{fraction, mm, ua};
@@ -104,6 +104,24 @@ pub fn gain_text(g: &GainEstimate) -> String {
     format!("gain {:.3} ± {:.3}", g.gain, g.gain_sigma)
 }
 
+/// The icing rate as the monitor shows it: `rate 2.15 ± 0.60 mm/h
+/// ACCRETING (p 0.94)`, or `... not accreting (p 0.12)` outside an icing
+/// period (the node's flag, with its hysteresis).
+pub fn icing_text(i: &IcingEstimate) -> String {
+    let r = crate::reading::IcingReading::from(i);
+    format!(
+        "rate {:.2} ± {:.2} mm/h {} (p {:.2})",
+        r.rate_mm_per_h,
+        r.rate_sigma_mm_per_h,
+        if r.accreting {
+            "ACCRETING"
+        } else {
+            "not accreting"
+        },
+        r.accreting_probability
+    )
+}
+
 /// The estimate as the monitor shows it: `ICE rime 2.3 ± 0.3 mm (p 0.97)`,
 /// `WATER 0.4 ± 0.2 mm (p 0.99)`, `DRY (p 0.99)`.
 pub fn estimate_text(e: &IceEstimate) -> String {
@@ -131,6 +149,23 @@ mod tests {
             medium,
             probability_permille: pm,
         }
+    }
+
+    #[test]
+    fn icing_texts() {
+        let mut i = IcingEstimate {
+            rate_um_per_h: 2_150,
+            sigma_um_per_h: 600,
+            accreting_permille: 940,
+            accreting: true,
+        };
+        assert_eq!(icing_text(&i), "rate 2.15 ± 0.60 mm/h ACCRETING (p 0.94)");
+        i.accreting = false;
+        i.accreting_permille = 120;
+        assert_eq!(
+            icing_text(&i),
+            "rate 2.15 ± 0.60 mm/h not accreting (p 0.12)"
+        );
     }
 
     #[test]

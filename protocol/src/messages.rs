@@ -45,6 +45,10 @@ pub enum DeviceMsg {
     /// of its own optical gain. A version-3 node streams this instead of
     /// [`DeviceMsg::MeasurementV2`].
     MeasurementV3(MeasurementV3),
+    /// Version 5: a [`MeasurementV3`]'s content and the node's icing rate
+    /// and meteorological icing ([`IcingEstimate`]). A version-5 node
+    /// streams this instead of [`DeviceMsg::MeasurementV3`].
+    MeasurementV5(MeasurementV5),
 }
 
 impl DeviceMsg {
@@ -56,6 +60,7 @@ impl DeviceMsg {
             DeviceMsg::Measurement(m) => Some((m, None)),
             DeviceMsg::MeasurementV2(m) => Some((&m.measurement, m.estimate.as_ref())),
             DeviceMsg::MeasurementV3(m) => Some((&m.measurement, m.estimate.as_ref())),
+            DeviceMsg::MeasurementV5(m) => Some((&m.measurement, m.estimate.as_ref())),
             _ => None,
         }
     }
@@ -65,6 +70,16 @@ impl DeviceMsg {
     pub fn gain(&self) -> Option<&GainEstimate> {
         match self {
             DeviceMsg::MeasurementV3(m) => m.gain.as_ref(),
+            DeviceMsg::MeasurementV5(m) => m.gain.as_ref(),
+            _ => None,
+        }
+    }
+
+    /// The node's icing rate of a [`DeviceMsg::MeasurementV5`], if it sent
+    /// one. `None` for every other message.
+    pub fn icing(&self) -> Option<&IcingEstimate> {
+        match self {
+            DeviceMsg::MeasurementV5(m) => m.icing.as_ref(),
             _ => None,
         }
     }
@@ -293,6 +308,39 @@ pub struct MeasurementV3 {
     pub gain: Option<GainEstimate>,
 }
 
+/// Version 5: a [`MeasurementV3`]'s content and the node's icing rate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct MeasurementV5 {
+    /// The frame's currents, temperature, flags and detector state.
+    pub measurement: Measurement,
+    /// The ice estimate after this frame, if any.
+    pub estimate: Option<IceEstimate>,
+    /// The optical gain estimate, if the node has one.
+    pub gain: Option<GainEstimate>,
+    /// The icing rate and meteorological icing, if the node has them.
+    pub icing: Option<IcingEstimate>,
+}
+
+/// Version 5: how fast ice grows on the face now (meteorological icing:
+/// ice accreting now, IEA Wind Task 19), as the node's growth history
+/// estimates it; the ice present (instrumental icing) is the
+/// [`IceEstimate`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, MaxSize)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct IcingEstimate {
+    /// Posterior mean growth rate, µm/h (0 while nothing grows; saturates
+    /// at 65 535 µm/h).
+    pub rate_um_per_h: u16,
+    /// Its standard deviation, µm/h (saturates).
+    pub sigma_um_per_h: u16,
+    /// Probability that ice accretes now, ‰ (0–1000).
+    pub accreting_permille: u16,
+    /// An icing period is on (the probability with hysteresis; its start
+    /// and end are [`EventKind::IcingStarted`] / [`EventKind::IcingEnded`]).
+    pub accreting: bool,
+}
+
 /// Version 3: the sensor's relative optical gain (LED output × fibre
 /// coupling × phototransistor responsivity × load resistor, against the
 /// gain the node's response table was built for) as the node estimates it.
@@ -413,13 +461,19 @@ pub enum EventKind {
         /// boots without its flash store (`STORE_SKIPPED`).
         resets_in_row: u8,
     },
+    /// Version 5: an icing period starts (P(accreting) rose above the
+    /// node's start threshold): ice accretes now.
+    IcingStarted,
+    /// Version 5: the icing period ends (P(accreting) fell below the end
+    /// threshold): nothing accretes now (ice may remain).
+    IcingEnded,
 }
 
 impl EventKind {
     /// The kind as a snake_case word without its fault bits (`ice_onset`,
     /// `ice_cleared`, `wet_onset`, `wet_cleared`, `fault_raised`,
-    /// `fault_cleared`, `panic_reset`): its name in text formats (scenario files, MQTT
-    /// payloads).
+    /// `fault_cleared`, `panic_reset`, `icing_started`, `icing_ended`): its
+    /// name in text formats (scenario files, MQTT payloads).
     pub const fn name(&self) -> &'static str {
         match self {
             EventKind::IceOnset => "ice_onset",
@@ -429,6 +483,8 @@ impl EventKind {
             EventKind::FaultRaised(_) => "fault_raised",
             EventKind::FaultCleared(_) => "fault_cleared",
             EventKind::PanicReset { .. } => "panic_reset",
+            EventKind::IcingStarted => "icing_started",
+            EventKind::IcingEnded => "icing_ended",
         }
     }
 }

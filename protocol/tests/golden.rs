@@ -478,6 +478,74 @@ fn cases() -> Vec<(&'static str, Vec<u8>)> {
                 }),
             ),
         ),
+        // Version 5 additions: the icing rate.
+        (
+            "measurement_v5_icing",
+            device(
+                26,
+                DeviceMsg::MeasurementV5(MeasurementV5 {
+                    measurement: measurement(),
+                    estimate: Some(IceEstimate {
+                        thickness_um: 4_200,
+                        sigma_um: 380,
+                        medium: Medium::Rime,
+                        probability_permille: 970,
+                    }),
+                    gain: Some(GainEstimate {
+                        gain_ppm: 1_080_000,
+                        sigma_ppm: 40_000,
+                    }),
+                    icing: Some(IcingEstimate {
+                        rate_um_per_h: 2_150,
+                        sigma_um_per_h: 600,
+                        accreting_permille: 940,
+                        accreting: true,
+                    }),
+                }),
+            ),
+        ),
+        (
+            "measurement_v5_no_icing",
+            device(
+                27,
+                DeviceMsg::MeasurementV5(MeasurementV5 {
+                    measurement: measurement(),
+                    estimate: None,
+                    gain: None,
+                    icing: None,
+                }),
+            ),
+        ),
+        (
+            "event_icing_started",
+            device(
+                28,
+                DeviceMsg::Event(Event {
+                    uptime_ms: 600_000,
+                    kind: EventKind::IcingStarted,
+                    i1_na: 12_000,
+                    i2_na: 4_000,
+                    rise1_na: 11_900,
+                    temperature_centi_c: -800,
+                    frames: 0,
+                }),
+            ),
+        ),
+        (
+            "event_icing_ended",
+            device(
+                29,
+                DeviceMsg::Event(Event {
+                    uptime_ms: 900_000,
+                    kind: EventKind::IcingEnded,
+                    i1_na: 30_000,
+                    i2_na: 9_000,
+                    rise1_na: 29_900,
+                    temperature_centi_c: -750,
+                    frames: 0,
+                }),
+            ),
+        ),
     ]
 }
 
@@ -601,6 +669,22 @@ const GOLDEN: &[(&str, &str)] = &[
     (
         "error_invalid_link_settings",
         "06 1c 04 01 10 0b 05 5d d8 38 77 00",
+    ),
+    (
+        "measurement_v5_icing",
+        "30 1a 07 e8 07 d0 86 03 17 c0 b8 02 ac 02 ff 07 e4 19 c0 40 02 01 e8 20 fc 02 03 ca 07 01 c0 f5 41 c0 b8 02 01 e6 10 d8 04 ac 07 01 cc 3e 7c 72 00",
+    ),
+    (
+        "measurement_v5_no_icing",
+        "15 1b 07 e8 07 d0 86 03 17 c0 b8 02 ac 02 ff 07 e4 19 c0 40 02 01 01 05 bd 79 d7 90 00",
+    ),
+    (
+        "event_icing_started",
+        "11 1c 02 c0 cf 24 07 c0 bb 01 c0 3e f8 b9 01 bf 0c 05 ad 7b 58 a7 00",
+    ),
+    (
+        "event_icing_ended",
+        "12 1d 02 a0 f7 36 08 e0 d4 03 d0 8c 01 98 d3 03 db 0b 05 0b 67 1d 1a 00",
     ),
 ];
 

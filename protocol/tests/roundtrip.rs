@@ -138,6 +138,31 @@ fn max_frame_bounds_the_widest_messages() {
         gain_high_permille: u16::MAX,
         ..Config::from(widest_config_v1.clone())
     };
+    let widest_measurement_v5 = DeviceFrame {
+        seq: u32::MAX,
+        msg: DeviceMsg::MeasurementV5(MeasurementV5 {
+            measurement: match widest_measurement.msg.clone() {
+                DeviceMsg::Measurement(m) => m,
+                _ => unreachable!(),
+            },
+            estimate: Some(IceEstimate {
+                thickness_um: u16::MAX,
+                sigma_um: u16::MAX,
+                medium: Medium::Rime,
+                probability_permille: u16::MAX,
+            }),
+            gain: Some(GainEstimate {
+                gain_ppm: u32::MAX,
+                sigma_ppm: u32::MAX,
+            }),
+            icing: Some(IcingEstimate {
+                rate_um_per_h: u16::MAX,
+                sigma_um_per_h: u16::MAX,
+                accreting_permille: u16::MAX,
+                accreting: true,
+            }),
+        }),
+    };
     let widest_ack = DeviceFrame {
         seq: u32::MAX,
         msg: DeviceMsg::Ack(Ack {
@@ -168,18 +193,20 @@ fn max_frame_bounds_the_widest_messages() {
         postcard::to_stdvec(&widest_ack_v3).unwrap().len(),
         postcard::to_stdvec(&widest_cmd).unwrap().len(),
         postcard::to_stdvec(&widest_cmd_v3).unwrap().len(),
+        postcard::to_stdvec(&widest_measurement_v5).unwrap().len(),
     ];
     for s in sizes {
         assert!(s <= MAX_PAYLOAD, "payload {s} > MAX_PAYLOAD {MAX_PAYLOAD}");
     }
-    // The widest `Ack(ConfigV3)` (version 3) is the largest message:
-    // MAX_PAYLOAD is exact.
-    assert_eq!(sizes[4], MAX_PAYLOAD);
+    // The widest `MeasurementV5` (version 5: the icing rate) is the largest
+    // message (79 B, the widest `Ack(ConfigV3)` 70 B): MAX_PAYLOAD is exact.
+    assert_eq!(sizes[7], MAX_PAYLOAD);
     assert_eq!(sizes.iter().max().copied(), Some(MAX_PAYLOAD));
     for f in [
         &widest_measurement,
         &widest_measurement_v2,
         &widest_measurement_v3,
+        &widest_measurement_v5,
         &widest_ack,
         &widest_ack_v3,
     ] {

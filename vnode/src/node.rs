@@ -679,7 +679,7 @@ mod tests {
         assert_eq!(&fixed.node().hello().unique_id, b"FOIS-VIRTUAL");
     }
 
-    /// The gain the node's first `MeasurementV3` reports.
+    /// The gain the node's first `MeasurementV5` reports.
     fn first_gain(opts: NodeOptions) -> (f64, f64) {
         use fois_protocol::{DeviceFrame, DeviceMsg, FrameDecoder};
         let env = Arc::new(Environment::new(
@@ -693,7 +693,7 @@ mod tests {
         while gain.is_none() {
             vn.step_frame(&mut |bytes: &[u8]| {
                 dec.feed::<DeviceFrame>(bytes, |r| {
-                    if let DeviceMsg::MeasurementV3(m) = r.unwrap().msg {
+                    if let DeviceMsg::MeasurementV5(m) = r.unwrap().msg {
                         let g = m.gain.unwrap();
                         gain.get_or_insert((g.gain(), g.sigma()));
                     }

@@ -36,7 +36,7 @@ fn frames(segments: Vec<Segment>, until_s: f64) -> Vec<(u64, i32)> {
     let mut dec = FrameDecoder::<{ fois_protocol::MAX_FRAME }>::new();
     node.run_until_s(until_s, &mut |bytes: &[u8]| {
         dec.feed::<DeviceFrame>(bytes, |r| {
-            if let DeviceMsg::MeasurementV3(m) = r.unwrap().msg {
+            if let DeviceMsg::MeasurementV5(m) = r.unwrap().msg {
                 sink.borrow_mut()
                     .push((m.measurement.uptime_ms, m.measurement.i1_na));
             }

@@ -31,7 +31,7 @@ fn a_flood_of_calibrations_does_not_starve_the_measurement() {
     let mut dec = FrameDecoder::<{ fois_protocol::MAX_FRAME }>::new();
     let mut tx = move |bytes: &[u8]| {
         dec.feed::<DeviceFrame>(bytes, |r| match r.unwrap().msg {
-            DeviceMsg::MeasurementV3(m) => f.borrow_mut().push(m.measurement.uptime_ms),
+            DeviceMsg::MeasurementV5(m) => f.borrow_mut().push(m.measurement.uptime_ms),
             DeviceMsg::Ack(_) | DeviceMsg::Error(_) => *a.borrow_mut() += 1,
             _ => {}
         })

@@ -232,40 +232,45 @@ mod app {
                 "flash"
             }
         );
-        let flash = BoardFlash::new(Flash::new_blocking(p.FLASH), wdg);
-        let store = match FlashStore::new(flash, BoardFlash::RANGE) {
-            Ok(s) => s,
-            Err(_) => defmt::panic!("flash store: sectors 6-7 are not two equal pages"),
+        // Built and moved in within a block that ends before the first
+        // await: a node whose storage lived across one (even moved out)
+        // would sit in this task's future as well as in NODE (14 KiB of
+        // static RAM twice with the growth history).
+        let (link_settings, modbus, button) = {
+            let flash = BoardFlash::new(Flash::new_blocking(p.FLASH), wdg);
+            let store = match FlashStore::new(flash, BoardFlash::RANGE) {
+                Ok(s) => s,
+                Err(_) => defmt::panic!("flash store: sectors 6-7 are not two equal pages"),
+            };
+            let store = SkippableStorage::new(store, store_read);
+            let mut node = Node::new(adc, led, alarm, ld2, Delay, store, info);
+            node.set_clock_fallback(hse.is_none());
+            node.set_boot_faults(!bor_ok, store_read != StoreRead::Read);
+            if let Some((line, resets)) = plan.panic_reset {
+                node.report_panic_reset(line, resets);
+            }
+            // The outputs kept their early level through the store's read; the
+            // node drives them from here, at the same level.
+            board::release_outputs();
+            node.resume_rule(snapshot);
+            // B1 held at power-up: back to the framed protocol (the way back
+            // when the host no longer speaks Modbus).
+            let button = ExtiInput::new(p.PC13, p.EXTI13, Pull::None, Irqs);
+            if button.is_low() && node.button_held_at_boot(now_ms()) {
+                defmt::info!("button held at power-up: the link is framed again");
+            }
+            let link_settings = node.link_settings();
+            let modbus = link_settings.protocol == fois_protocol::LinkProtocol::ModbusRtu;
+            MODBUS.store(modbus, Ordering::Relaxed);
+            if modbus {
+                rtu::publish(node.modbus_view());
+            }
+            match NODE.try_lock() {
+                Ok(mut slot) => *slot = Some(node),
+                Err(_) => defmt::panic!("the node's mutex is taken before the node exists"),
+            }
+            (link_settings, modbus, button)
         };
-        let store = SkippableStorage::new(store, store_read);
-        let mut node = Node::new(adc, led, alarm, ld2, Delay, store, info);
-        node.set_clock_fallback(hse.is_none());
-        node.set_boot_faults(!bor_ok, store_read != StoreRead::Read);
-        if let Some((line, resets)) = plan.panic_reset {
-            node.report_panic_reset(line, resets);
-        }
-        // The outputs kept their early level through the store's read; the
-        // node drives them from here, at the same level.
-        board::release_outputs();
-        node.resume_rule(snapshot);
-        // B1 held at power-up: back to the framed protocol (the way back
-        // when the host no longer speaks Modbus).
-        let button = ExtiInput::new(p.PC13, p.EXTI13, Pull::None, Irqs);
-        if button.is_low() && node.button_held_at_boot(now_ms()) {
-            defmt::info!("button held at power-up: the link is framed again");
-        }
-        let link_settings = node.link_settings();
-        let modbus = link_settings.protocol == fois_protocol::LinkProtocol::ModbusRtu;
-        MODBUS.store(modbus, Ordering::Relaxed);
-        if modbus {
-            rtu::publish(node.modbus_view());
-        }
-        // Moved in without an await: a node held across one would live in
-        // this task's future as well as in NODE (7 KiB of static RAM twice).
-        match NODE.try_lock() {
-            Ok(mut slot) => *slot = Some(node),
-            Err(_) => defmt::panic!("the node's mutex is taken before the node exists"),
-        }
 
         let parity = modbus.then_some(link_settings.parity);
         #[cfg(not(feature = "field-link"))]

@@ -6,13 +6,14 @@
 //! learns the gain and the output posterior is the weighted mixture of the
 //! grids'.
 
-use fois_protocol::IceEstimate;
+use fois_protocol::{IceEstimate, IcingEstimate};
 
 use super::fast_math;
 use super::gain_bank::{GAINS, Gain, GainBank, UNKNOWN_GAIN_SD};
 use super::grid::{self, Grid, Moments, Shared};
+use super::history::{self, History, LEVELS, READY_TO_LOOK, Rate};
 use super::params::{EstimatorParams, within};
-use super::posterior::{Posterior, Update};
+use super::posterior::{Posterior, Update, to_u16};
 use super::response::{ROWS, STEP_MM, row_mm};
 
 /// Prior probability of the dry face; the three media share the rest.
@@ -25,8 +26,25 @@ const MAX_DT_S: f32 = 86_400.0;
 /// 330 µA full scale of the default front end).
 const MAX_CURRENT_UA: f32 = 10_000.0;
 
+/// P(accreting) above which an icing period starts.
+pub const ACCRETING_ON: f32 = 0.7;
+
+/// P(accreting) below which an icing period ends.
+pub const ACCRETING_OFF: f32 = 0.3;
+
 /// Most frames averaged into one update.
 pub const MAX_PENDING: usize = 16;
+
+/// `v` scaled to sum 1 (as it is when it cannot be).
+fn normalised(mut v: [f32; LEVELS]) -> [f32; LEVELS] {
+    let s: f32 = v.iter().sum();
+    if s.is_finite() && s > 0.0 {
+        for a in v.iter_mut() {
+            *a /= s;
+        }
+    }
+    v
+}
 
 /// ln(1 + eˣ), without overflow.
 fn softplus(x: f32) -> f32 {
@@ -58,6 +76,17 @@ pub struct Estimator {
     pending_dt_s: f32,
     update: Update,
     posterior: Option<Posterior>,
+    /// The growth history beside the bank.
+    history: History,
+    /// The bank's P(rime) of the last summary.
+    bank_p_rime: f32,
+    /// The growth rate after the last step.
+    rate: Option<Rate>,
+    /// The bank's likelihood gathered over parts, and the part done.
+    lik: [f32; LEVELS],
+    lik_part: u8,
+    /// The icing-period flag (P(accreting) with hysteresis).
+    accreting: bool,
 }
 
 impl Default for Estimator {
@@ -88,6 +117,16 @@ impl Estimator {
             pending_dt_s: 0.0,
             update: Update::Waiting,
             posterior: None,
+            history: {
+                let mut h = History::new();
+                h.set_output_weight(params.history.output_weight);
+                h
+            },
+            bank_p_rime: 0.0,
+            rate: None,
+            lik: [0.0; LEVELS],
+            lik_part: 0,
+            accreting: false,
         }
     }
 
@@ -107,6 +146,12 @@ impl Estimator {
         self.clear_pending();
         self.update = Update::Waiting;
         self.posterior = None;
+        self.history = History::new();
+        self.history
+            .set_output_weight(self.params.history.output_weight);
+        self.lik_part = 0;
+        self.rate = None;
+        self.accreting = false;
     }
 
     /// The face is known to be clean and dry (a dark calibration has just
@@ -119,6 +164,7 @@ impl Estimator {
             g.set_dry();
         }
         self.clear_pending();
+        self.history.set_dry();
         self.update = Update::Initialised;
         self.summarise();
     }
@@ -143,6 +189,30 @@ impl Estimator {
     /// The posterior after the last step (`None` before the first valid frame).
     pub fn posterior(&self) -> Option<Posterior> {
         self.posterior
+    }
+
+    /// The growth rate and P(accreting) after the last step (`None` before
+    /// the first valid frame, or with the history off).
+    pub fn rate(&self) -> Option<Rate> {
+        self.rate
+    }
+
+    /// Meteorological icing now: P(accreting) with hysteresis — set above
+    /// [`ACCRETING_ON`], cleared below [`ACCRETING_OFF`].
+    pub fn accreting(&self) -> bool {
+        self.accreting
+    }
+
+    /// The icing rate as the protocol carries it (µm/h, ‰, the icing
+    /// period's flag); `None` before the first valid frame or with the
+    /// history off.
+    pub fn icing_estimate(&self) -> Option<IcingEstimate> {
+        self.rate.map(|r| IcingEstimate {
+            rate_um_per_h: to_u16(r.mean_mm_per_h * 1000.0),
+            sigma_um_per_h: to_u16(r.sigma_mm_per_h * 1000.0),
+            accreting_permille: to_u16(r.p_accreting * 1000.0).min(1000),
+            accreting: self.accreting,
+        })
     }
 
     /// The estimate as the protocol carries it.
@@ -291,6 +361,11 @@ impl Estimator {
                 ice_row * fast_math::exp(ln_ice_t),
             ],
             row_ratio: [fast_math::exp(-STEP_MM / p.water_scale_mm), 1.0, 1.0],
+            temp_factor: [
+                fast_math::exp(ln_water_t),
+                fast_math::exp(ln_ice_t),
+                fast_math::exp(ln_ice_t),
+            ],
         }
     }
 
@@ -316,6 +391,12 @@ impl Estimator {
         self.learn_gain(0.0, &ln_z);
         self.update = Update::Initialised;
         self.summarise();
+        if !self.history.initialised {
+            // The first look at full weight: the output after it is the
+            // bank's (one look, not two).
+            let lik = normalised(self.bank_likelihood(0..GAINS));
+            self.history.initialise_from(&lik, 0.05);
+        }
         self.estimate()
     }
 
@@ -327,6 +408,32 @@ impl Estimator {
         let x = self.pending_mean();
         let negative = x.is_none() && self.pending_negative > 0;
         self.clear_pending();
+        // The history predicts to now before the output is formed, and
+        // looks at the bank after it, in parts (`History::advance`, and the
+        // bank's likelihood in three): at 10 Hz one part per update, its
+        // cost spread over seconds; all at once when the updates are slow
+        // (a replay of sparse frames).
+        let hp = self.params.history;
+        let slow = dt_s >= 1.5;
+        let mut look_now = false;
+        if hp.enabled && self.history.initialised {
+            let due = self.history.gather(dt_s, hp.period_s);
+            let stage = self.history.stage();
+            if stage == READY_TO_LOOK {
+                look_now = true;
+            } else if stage != 0 || due {
+                if slow {
+                    self.history.finish(&hp);
+                    if self.history.stage() == 0 && due {
+                        self.history.advance(&hp);
+                        self.history.finish(&hp);
+                    }
+                    look_now = self.history.stage() == READY_TO_LOOK;
+                } else {
+                    self.history.advance(&hp);
+                }
+            }
+        }
         let shared = self.shared();
         let gains = self.bank.gains_now();
         if negative {
@@ -377,6 +484,37 @@ impl Estimator {
             self.learn_gain(dt_s, &ln_z);
         }
         self.summarise();
+        if look_now {
+            if self.update != Update::Measured {
+                self.lik_part = 0;
+                self.history.skip_measure();
+            } else if slow {
+                self.lik_part = 0;
+                let lik = normalised(self.bank_likelihood(0..GAINS));
+                self.history.look(&lik, self.bank_p_rime, &hp);
+                self.history.finish(&hp);
+            } else {
+                // Three parts: half the grids, the rest, the look.
+                match self.lik_part {
+                    0 => {
+                        self.lik = self.bank_likelihood(0..GAINS / 2);
+                        self.lik_part = 1;
+                    }
+                    1 => {
+                        let rest = self.bank_likelihood(GAINS / 2..GAINS);
+                        for (a, b) in self.lik.iter_mut().zip(rest) {
+                            *a += b;
+                        }
+                        self.lik_part = 2;
+                    }
+                    _ => {
+                        let lik = normalised(self.lik);
+                        self.history.look(&lik, self.bank_p_rime, &hp);
+                        self.lik_part = 0;
+                    }
+                }
+            }
+        }
     }
 
     /// The bank learns the gain from each hypothesis' ln predictive
@@ -388,27 +526,112 @@ impl Estimator {
         }
     }
 
-    /// The output posterior: the weighted mixture of the grids'.
+    /// The output posterior: the weighted mixture of the grids', each
+    /// weighted by the history's thickness marginal (mixed with a flat
+    /// share, the history's `escape`); the bank's own marginal is kept for
+    /// the history's next measurement, and the rate is the history's,
+    /// widened towards its prior as far as the bank's evidence falls
+    /// outside what the history foresaw.
     fn summarise(&mut self) {
         let shared = self.shared();
-        let mut parts = [None; GAINS];
-        for (p, g) in parts.iter_mut().zip(self.grids.iter()) {
-            *p = g.summarise(&shared);
+        let hp = self.params.history;
+        let use_history = hp.enabled && self.history.initialised;
+        let mut h = [1.0 / LEVELS as f32; LEVELS];
+        if use_history {
+            let flat = hp.escape / LEVELS as f32;
+            let mut top = 0.0f32;
+            for (a, m) in h.iter_mut().zip(self.history.weight()) {
+                *a = (1.0 - hp.escape) * m + flat;
+                top = top.max(*a);
+            }
+            // Dry against ice stays the bank's call: the dry face weighs
+            // as the history's likeliest level. Thick clear ice reads
+            // almost like a dry face; weighted by a history that had shed
+            // it, glaze at 10 mm/h and gain 0.85 read confidently thin in
+            // 890 frames of 10 accretions.
+            if let Some(d) = h.first_mut() {
+                *d = top;
+            }
         }
-        let post = Moments::mixture(
-            parts
-                .iter()
-                .zip(*self.bank.weights())
-                .filter_map(|(m, w)| m.map(|m| (w, m))),
-        );
+        let mut parts = [None; GAINS];
+        let mut p_medium = [0.0f32; 4];
+        for ((p, g), w) in parts
+            .iter_mut()
+            .zip(self.grids.iter())
+            .zip(*self.bank.weights())
+        {
+            *p = g
+                .summarise_weighted(&shared, &h, w, &mut p_medium)
+                .map(|(m, ratio)| (w * ratio, m));
+        }
+        // Thickness from the product with the history; the medium from the
+        // bank alone (the history weighs thickness, not medium: weighted,
+        // rime's broad branch lost to glaze's narrow one between 1 and 3 mm
+        // — medium right 78 % of glazed frames instead of 93 %).
+        let post = Moments::mixture(parts.iter().filter_map(|m| *m)).map(|mut p| {
+            let s: f32 = p_medium.iter().sum();
+            if s > 0.0 {
+                for (a, b) in p.p_medium.iter_mut().zip(p_medium) {
+                    *a = b / s;
+                }
+            }
+            p
+        });
         if post.is_none() {
             // A state that cannot be normalised (never expected) restarts
             // the filter rather than report nonsense.
             let update = self.update;
             self.reset();
             self.update = update;
+            self.posterior = None;
+            return;
         }
+        self.bank_p_rime = p_medium[3];
         self.posterior = post;
+        self.rate = if use_history {
+            // Credibility of the history: the share of the output's weight
+            // its own part carries against the flat escape.
+            let w = self.history.credibility();
+            let (hr, pr) = (self.history.rate(), history::prior_rate());
+            let mean = w * hr.mean_mm_per_h + (1.0 - w) * pr.mean_mm_per_h;
+            let m2 = w
+                * (hr.sigma_mm_per_h * hr.sigma_mm_per_h + hr.mean_mm_per_h * hr.mean_mm_per_h)
+                + (1.0 - w)
+                    * (pr.sigma_mm_per_h * pr.sigma_mm_per_h + pr.mean_mm_per_h * pr.mean_mm_per_h);
+            let p_water = post.map(|p| p.p_medium[1]).unwrap_or(0.0);
+            let p_acc = w * hr.p_accreting + (1.0 - w) * pr.p_accreting;
+            Some(Rate {
+                mean_mm_per_h: mean,
+                sigma_mm_per_h: fast_math::sqrt((m2 - mean * mean).max(0.0)),
+                p_accreting: (p_acc * (1.0 - p_water)).clamp(0.0, 1.0),
+            })
+        } else {
+            None
+        };
+        if let Some(r) = self.rate {
+            if r.p_accreting >= ACCRETING_ON {
+                self.accreting = true;
+            } else if r.p_accreting <= ACCRETING_OFF {
+                self.accreting = false;
+            }
+        } else {
+            self.accreting = false;
+        }
+    }
+
+    /// The bank's thickness likelihood, gain and medium summed out, over
+    /// the gain hypotheses `part` (each grid's normalised, times its
+    /// weight): the history's measurement.
+    fn bank_likelihood(&self, part: core::ops::Range<usize>) -> [f32; LEVELS] {
+        let shared = self.shared();
+        let mut lik = [0.0f32; LEVELS];
+        let weights = self.bank.weights();
+        for j in part {
+            if let (Some(g), Some(w)) = (self.grids.get(j), weights.get(j)) {
+                g.add_likelihood(&shared, *w, &mut lik);
+            }
+        }
+        lik
     }
 
     /// Set the gain's prior: `gain` relative to the table (at

@@ -7,6 +7,7 @@
 //! documentation (`mod.rs`).
 
 use super::fast_math;
+use super::history::LEVELS;
 use super::params::EstimatorParams;
 use super::posterior::{Posterior, Update};
 use super::response::{MEDIA, ROWS, STEP_MM, table_of};
@@ -47,6 +48,10 @@ pub(crate) struct Shared {
     /// Ratio of one row's factor to the previous one's, per medium (the
     /// water film's exponential prior; 1 for ice).
     pub row_ratio: [f32; 3],
+    /// The temperature's factor per medium without the prior (the dry
+    /// face's is 1): the history measures the bank's likelihood, not its
+    /// prior, which would count once per look.
+    pub temp_factor: [f32; 3],
 }
 
 /// Covariance C = g²Σ + R + s²(gμ)(gμ)ᵀ of a state for gain g, nA²
@@ -433,6 +438,108 @@ impl Grid {
             m1_mm: m1 * inv,
             m2_mm2: m2 * inv,
         })
+    }
+}
+
+impl Grid {
+    /// The grid's posterior (as [`Self::summarise`]) weighted per level by
+    /// `h` (the history's prediction; level 0 the dry face, level i + 1 row
+    /// i), and `w` · its unweighted P(medium) added to `p_medium_plain`.
+    /// Returns the weighted moments and the ratio of the weighted
+    /// normaliser to the plain one.
+    #[inline(never)]
+    pub fn summarise_weighted(
+        &self,
+        s: &Shared,
+        h: &[f32; LEVELS],
+        w: f32,
+        p_medium_plain: &mut [f32; 4],
+    ) -> Option<(Moments, f32)> {
+        if !self.initialised {
+            return None;
+        }
+        let (h0, h_rows) = h.split_first()?;
+        let dry = self.dry * s.dry_factor;
+        let mut total = dry;
+        let mut total_w = dry * h0;
+        let mut p_medium = [dry * h0, 0.0, 0.0, 0.0];
+        let mut plain_medium = [dry, 0.0, 0.0, 0.0];
+        let (mut m1, mut m2) = (0.0f32, 0.0f32);
+        for (k, cells) in self.cells.iter().enumerate() {
+            let ratio = s.row_ratio[k];
+            let mut f = s.factor[k] * ratio;
+            let (mut pk, mut pk_plain, mut s1, mut s2) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+            let mut d = STEP_MM;
+            for (&c, &hj) in cells.iter().zip(h_rows) {
+                let q = c * f;
+                f *= ratio;
+                pk_plain += q;
+                let qw = q * hj;
+                pk += qw;
+                s1 += qw * d;
+                s2 += qw * d * d;
+                d += STEP_MM;
+            }
+            if let Some(slot) = p_medium.get_mut(k + 1) {
+                *slot = pk;
+            }
+            if let Some(slot) = plain_medium.get_mut(k + 1) {
+                *slot = pk_plain;
+            }
+            total += pk_plain;
+            total_w += pk;
+            m1 += s1;
+            m2 += s2;
+        }
+        if !(total.is_finite() && total > 0.0 && total_w.is_finite() && total_w > 0.0) {
+            return None;
+        }
+        let inv = 1.0 / total;
+        for (a, b) in p_medium_plain.iter_mut().zip(plain_medium) {
+            *a += w * b * inv;
+        }
+        let inv_w = 1.0 / total_w;
+        for pm in p_medium.iter_mut() {
+            *pm *= inv_w;
+        }
+        Some((
+            Moments {
+                p_medium,
+                m1_mm: m1 * inv_w,
+                m2_mm2: m2 * inv_w,
+            },
+            total_w * inv,
+        ))
+    }
+
+    /// The grid's thickness likelihood (the filtered evidence times the
+    /// temperature's factor, without the prior, which would count once per
+    /// look of the history), normalised, times `w`, added to `lik`.
+    #[inline(never)]
+    pub fn add_likelihood(&self, s: &Shared, w: f32, lik: &mut [f32; LEVELS]) {
+        if !self.initialised {
+            return;
+        }
+        let mut plain = [0.0f32; LEVELS];
+        let (p0, rows) = plain.split_at_mut(1);
+        if let Some(p) = p0.first_mut() {
+            *p = self.dry;
+        }
+        let mut total = self.dry;
+        for (k, cells) in self.cells.iter().enumerate() {
+            let t = s.temp_factor[k];
+            for (pl, &c) in rows.iter_mut().zip(cells) {
+                let v = c * t;
+                *pl += v;
+                total += v;
+            }
+        }
+        if total.is_finite() && total > 0.0 {
+            let a = w / total;
+            for (l, p) in lik.iter_mut().zip(plain) {
+                *l += a * p;
+            }
+        }
     }
 }
 

@@ -59,15 +59,19 @@
 //! # Files
 //!
 //! The files import in one direction: [`filter`] (the [`Estimator`] and its
-//! driver) reads [`gain_bank`], `grid`, [`posterior`], [`response`],
-//! [`params`]; `grid` reads the response table through [`response`] and
-//! [`table_entry`]; the generated [`table`] reads only [`table_entry`]. This
-//! file declares them and re-exports their items.
+//! driver) reads [`gain_bank`], `grid`, [`history`], [`posterior`],
+//! [`response`], [`params`]; `grid` reads the response table through
+//! [`response`] and [`table_entry`], and the history's level count;
+//! [`history`] (the growth history: thickness × rate × growing/paused, the
+//! icing rate) reads [`params`] and [`response`]; the generated [`table`]
+//! reads only [`table_entry`]. This file declares them and re-exports their
+//! items.
 
 pub(crate) mod fast_math;
 pub mod filter;
 pub mod gain_bank;
 mod grid;
+pub mod history;
 pub mod params;
 pub mod posterior;
 pub mod response;
@@ -75,9 +79,10 @@ pub mod response;
 pub mod table;
 pub mod table_entry;
 
-pub use filter::{Estimator, MAX_PENDING};
+pub use filter::{ACCRETING_OFF, ACCRETING_ON, Estimator, MAX_PENDING};
 pub use gain_bank::{GAIN_REF_TEMP_C, GAINS, Gain, UNKNOWN_GAIN_SD};
-pub use params::EstimatorParams;
+pub use history::{RATE_BINS, RATE_MAX_MM_PER_H, RATE_MIN_MM_PER_H, Rate};
+pub use params::{EstimatorParams, HistoryParams};
 pub use posterior::{Posterior, Update};
 pub use response::{MEDIA, ROWS, STEP_MM};
 pub use table_entry::TableEntry;

@@ -54,6 +54,8 @@ pub struct EstimatorParams {
     /// table's narrowest states sit (thick rime reads like 2 mm of rime at
     /// a few per cent more gain).
     pub gain_within_min: f32,
+    /// The growth history beside the bank (`history.rs`).
+    pub history: HistoryParams,
 }
 
 impl Default for EstimatorParams {
@@ -74,6 +76,7 @@ impl Default for EstimatorParams {
             update_period_s: 1.0,
             gain_memory_s: 3600.0,
             gain_within_min: 0.02,
+            history: HistoryParams::default(),
         }
     }
 }
@@ -121,6 +124,97 @@ impl EstimatorParams {
             update_period_s: within(self.update_period_s, 0.0, 60.0, d.update_period_s),
             gain_memory_s: within(self.gain_memory_s, 1.0, 1.0e7, d.gain_memory_s),
             gain_within_min: within(self.gain_within_min, 0.0, 0.5, d.gain_within_min),
+            history: self.history.sanitized(),
+        }
+    }
+}
+
+/// The history's settings (library settings with documented defaults).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HistoryParams {
+    /// Off: the estimator's output is the bank's alone (the design before).
+    pub enabled: bool,
+    /// The history updates once per this period, s (default 10: its seven parts run one a second).
+    pub period_s: f32,
+    /// Rate of a step of the rate to a neighbouring bin, per hour (default 1).
+    pub rate_walk_per_h: f32,
+    /// Growth pauses at this rate, per hour (default 0.2; 0: no pause
+    /// state — the design without it).
+    pub pause_per_h: f32,
+    /// Paused growth (and a dry face) starts growing at this rate, per hour
+    /// (default 1).
+    pub resume_per_h: f32,
+    /// The ice sheds to a dry face at this rate, per hour (default 0.5).
+    pub shed_per_h: f32,
+    /// Share of the probability that restarts anywhere, per hour (default
+    /// 0.1): the model's escape.
+    pub restart_per_h: f32,
+    /// Looks of the bank's evidence per mm of expected growth (default 0.3:
+    /// one look per ~3 mm).
+    pub looks_per_mm: f32,
+    /// Extra looks per mm in the first `early_mm` of an accretion, scaled
+    /// by the bank's probability of rime (default 0.7): rime's thin layers
+    /// are where its history resolves the most; glazed ice does not get it.
+    pub early_rime_looks_per_mm: f32,
+    /// Thickness below which the early trust acts, mm (default 1.5).
+    pub early_mm: f32,
+    /// Looks per hour of time, whatever the growth (default 1): a dry face,
+    /// a pause, a stop are seen in time.
+    pub looks_per_h: f32,
+    /// Prior weight of "the history is wrong" in the output (default 0.05):
+    /// where the bank's evidence falls outside what the history foresaw,
+    /// the output is the bank's.
+    pub escape: f32,
+    /// Exponent of the history's marginal in the output (default 0.35): the
+    /// history is itself built of tempered looks at the same bank; at full
+    /// weight its product with the bank's narrow, wrong branches (rime read
+    /// as glaze at 1–3 mm) was confident.
+    pub output_weight: f32,
+}
+
+impl Default for HistoryParams {
+    fn default() -> Self {
+        HistoryParams {
+            enabled: true,
+            period_s: 10.0,
+            rate_walk_per_h: 1.0,
+            pause_per_h: 0.2,
+            resume_per_h: 1.0,
+            shed_per_h: 0.5,
+            restart_per_h: 0.1,
+            looks_per_mm: 0.3,
+            early_rime_looks_per_mm: 0.7,
+            early_mm: 1.5,
+            looks_per_h: 1.0,
+            escape: 0.05,
+            output_weight: 0.35,
+        }
+    }
+}
+
+impl HistoryParams {
+    /// Every field in its valid range; a field that is not takes its default.
+    pub fn sanitized(self) -> Self {
+        let d = HistoryParams::default();
+        HistoryParams {
+            enabled: self.enabled,
+            period_s: within(self.period_s, 0.0, 600.0, d.period_s),
+            rate_walk_per_h: within(self.rate_walk_per_h, 0.0, 100.0, d.rate_walk_per_h),
+            pause_per_h: within(self.pause_per_h, 0.0, 100.0, d.pause_per_h),
+            resume_per_h: within(self.resume_per_h, 0.0, 100.0, d.resume_per_h),
+            shed_per_h: within(self.shed_per_h, 0.0, 100.0, d.shed_per_h),
+            restart_per_h: within(self.restart_per_h, 0.0, 100.0, d.restart_per_h),
+            looks_per_mm: within(self.looks_per_mm, 0.0, 100.0, d.looks_per_mm),
+            early_rime_looks_per_mm: within(
+                self.early_rime_looks_per_mm,
+                0.0,
+                100.0,
+                d.early_rime_looks_per_mm,
+            ),
+            early_mm: within(self.early_mm, 0.0, 15.0, d.early_mm),
+            looks_per_h: within(self.looks_per_h, 0.0, 3600.0, d.looks_per_h),
+            escape: within(self.escape, 1e-4, 1.0, d.escape),
+            output_weight: within(self.output_weight, 0.0, 1.0, d.output_weight),
         }
     }
 }

@@ -56,7 +56,8 @@ impl Posterior {
     }
 }
 
-fn to_u16(x: f32) -> u16 {
+/// `x` rounded into a `u16` (0 for NaN and below, saturating above).
+pub(super) fn to_u16(x: f32) -> u16 {
     if x.is_nan() || x <= 0.0 {
         0
     } else if x >= 65_535.0 {

@@ -5,7 +5,7 @@
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
-use fois_protocol::{DeviceMsg, Event, EventKind, IceEstimate, Measurement, MeasurementV3, flags};
+use fois_protocol::{DeviceMsg, Event, EventKind, IceEstimate, Measurement, MeasurementV5, flags};
 
 use super::{Node, Report};
 use crate::hal::PhotoAdc;
@@ -42,9 +42,10 @@ where
 {
     /// One output frame: K LED-off/LED-on cycles (settle waits through the
     /// delay), currents, temperature, V_DDA, the ice rule, the outputs, the
-    /// ice estimator. Sends a `MeasurementV3` (the measurement with the
-    /// estimate) if streaming, then any `Event`s (rule transition first, then
-    /// faults raised/cleared).
+    /// ice estimator. Sends a `MeasurementV5` (the measurement with the
+    /// estimate, the gain and the icing rate) if streaming, then any
+    /// `Event`s (rule transition first, then faults raised/cleared, then
+    /// an icing period's start or end).
     pub fn run_frame(&mut self, now_ms: u64, tx: &mut impl FnMut(&[u8])) {
         let values = self.measure_frame();
         let rise1_na = self.rise1_na(values.currents.net_na[0]);
@@ -75,18 +76,21 @@ where
             state: self.rule.state(),
         };
         let gain = self.gain_estimate();
+        let icing = self.estimator.icing_estimate();
         self.last_report = Some(Report {
             seq: self.seq,
             estimate,
             gain,
+            icing,
         });
         if self.streaming {
-            let msg = MeasurementV3 {
+            let msg = MeasurementV5 {
                 measurement: m.clone(),
                 estimate,
                 gain,
+                icing,
             };
-            self.send(DeviceMsg::MeasurementV3(msg), tx);
+            self.send(DeviceMsg::MeasurementV5(msg), tx);
         }
         let event = |kind: EventKind, frames: u16| Event {
             uptime_ms: now_ms,
@@ -116,6 +120,17 @@ where
             );
         }
         self.reported_faults = faults;
+        // An icing period (the estimator's P(accreting) with hysteresis).
+        let icing = self.estimator.accreting();
+        if icing != self.reported_icing {
+            let kind = if icing {
+                EventKind::IcingStarted
+            } else {
+                EventKind::IcingEnded
+            };
+            self.send(DeviceMsg::Event(event(kind, 0)), tx);
+            self.reported_icing = icing;
+        }
         if let Some((line, resets_in_row)) = self.panic_report.take() {
             let kind = EventKind::PanicReset {
                 line,

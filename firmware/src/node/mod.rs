@@ -72,6 +72,8 @@ pub struct Report {
     pub estimate: Option<fois_protocol::IceEstimate>,
     /// The optical gain estimate.
     pub gain: Option<GainEstimate>,
+    /// The icing rate after the frame.
+    pub icing: Option<fois_protocol::IcingEstimate>,
 }
 
 /// The node. Type parameters: ADC, LED (PB0), alarm output (PA9), indicator
@@ -115,6 +117,9 @@ where
     stream_period_ms: Option<u32>,
     decoder: FrameDecoder<MAX_FRAME>,
     reported_faults: u16,
+    /// The icing period the node last reported (`IcingStarted` /
+    /// `IcingEnded`).
+    reported_icing: bool,
     reset_request: bool,
     last: Option<Measurement>,
     estimator: Estimator,
@@ -206,6 +211,7 @@ where
             stream_period_ms: None,
             decoder: FrameDecoder::new(),
             reported_faults: 0,
+            reported_icing: false,
             reset_request: false,
             last: None,
             estimator: Estimator::default(),

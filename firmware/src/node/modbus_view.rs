@@ -6,7 +6,7 @@
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
 use fois_protocol::registers::{
-    self, CommandResult, FRAMES_LOST, NA_U32, Sample, measurement_registers, status,
+    self, CommandResult, FRAMES_LOST, IcingRate, NA_U32, Sample, measurement_registers, status,
 };
 
 use super::Node;
@@ -41,7 +41,7 @@ where
                     seq: rep.seq,
                     estimate: rep.estimate.as_ref(),
                     gain: rep.gain.as_ref(),
-                    icing: None,
+                    icing: rep.icing.as_ref().map(IcingRate::from),
                 },
             );
         }

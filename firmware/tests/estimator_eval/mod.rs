@@ -7,7 +7,7 @@
 //! `examples/estimator_eval.rs`.
 #![allow(dead_code)]
 
-use fois_firmware::estimator::{Estimator, EstimatorParams, Gain, Posterior};
+use fois_firmware::estimator::{Estimator, EstimatorParams, Gain, Posterior, Rate};
 use fois_protocol::Medium;
 use fois_sim::{Curve, Geometry, IceKind, SensorKind, SimConfig, accretion_curve};
 use rand_core::Rng;
@@ -24,6 +24,10 @@ pub struct Segment {
     pub rate_mm_per_h: f64,
     /// Air temperature at the start and the end (linear), °C.
     pub temp_c: (f64, f64),
+    /// Standard deviation of ln(rate) of a rate that varies (an
+    /// Ornstein–Uhlenbeck process in ln r with a 1 h time constant around
+    /// `rate_mm_per_h`); 0: constant.
+    pub rate_sd_ln: f64,
 }
 
 impl Segment {
@@ -33,6 +37,17 @@ impl Segment {
             duration_s,
             rate_mm_per_h: 0.0,
             temp_c: (temp_c, temp_c),
+            rate_sd_ln: 0.0,
+        }
+    }
+    /// `kind` on the face, not growing, for `duration_s`.
+    pub fn pause(kind: IceKind, duration_s: f64, temp_c: f64) -> Self {
+        Segment {
+            cover: Some(kind),
+            duration_s,
+            rate_mm_per_h: 0.0,
+            temp_c: (temp_c, temp_c),
+            rate_sd_ln: 0.0,
         }
     }
     /// Grow `kind` from the current thickness to `to_mm` at `rate`.
@@ -42,6 +57,7 @@ impl Segment {
             duration_s: (to_mm - from_mm).abs() / rate_mm_per_h.abs() * 3600.0,
             rate_mm_per_h,
             temp_c: (temp_c, temp_c),
+            rate_sd_ln: 0.0,
         }
     }
 }
@@ -99,6 +115,12 @@ pub struct FrameRecord {
     pub gain: f64,
     /// The estimator's gain after the frame.
     pub est_gain: Option<Gain>,
+    /// The true growth rate of the frame, mm/h (0: dry or not growing).
+    pub rate_mm_per_h: f64,
+    /// The estimator's growth rate after the frame.
+    pub est_rate: Option<Rate>,
+    /// The estimator's icing-period flag after the frame.
+    pub accreting: bool,
 }
 
 pub fn medium_of(kind: Option<IceKind>) -> Medium {
@@ -145,6 +167,10 @@ pub fn simulate(run: &Run, params: EstimatorParams) -> Vec<FrameRecord> {
         est.set_gain_prior(g, sd);
     }
     let total_s: f64 = run.segments.iter().map(|s| s.duration_s).sum();
+    // The varying rate's process has its own generator (the noise stays
+    // that of a constant rate).
+    let mut rate_rng = Pcg32::new(run.seed ^ 0x0A7E_0A7E, 0xA7E);
+    let mut rate_x = 0.0f64;
     let mut out = Vec::new();
     let mut d = 0.0f64;
     let mut t = 0.0f64;
@@ -153,8 +179,19 @@ pub fn simulate(run: &Run, params: EstimatorParams) -> Vec<FrameRecord> {
         if seg.cover.is_none() {
             d = 0.0;
         }
+        let rate_a = (-run.frame_s / 3600.0).exp();
+        if seg.rate_sd_ln > 0.0 {
+            rate_x = seg.rate_sd_ln * gaussian(&mut rate_rng);
+        }
         for i in 0..n {
             let w = i as f64 / n.max(1) as f64;
+            let rate_now = if seg.rate_sd_ln > 0.0 {
+                rate_x = rate_x * rate_a
+                    + seg.rate_sd_ln * (1.0 - rate_a * rate_a).sqrt() * gaussian(&mut rate_rng);
+                seg.rate_mm_per_h * (rate_x - 0.5 * seg.rate_sd_ln * seg.rate_sd_ln).exp()
+            } else {
+                seg.rate_mm_per_h
+            };
             let temp = seg.temp_c.0 + (seg.temp_c.1 - seg.temp_c.0) * w;
             let signal = match seg.cover {
                 None => [0.0, 0.0],
@@ -190,10 +227,13 @@ pub fn simulate(run: &Run, params: EstimatorParams) -> Vec<FrameRecord> {
                 est: est.posterior(),
                 gain,
                 est_gain: est.gain(),
+                rate_mm_per_h: if seg.cover.is_some() { rate_now } else { 0.0 },
+                est_rate: est.rate(),
+                accreting: est.accreting(),
             });
             t += run.frame_s;
             if seg.cover.is_some() {
-                d = (d + seg.rate_mm_per_h * run.frame_s / 3600.0).clamp(0.0, 15.0);
+                d = (d + rate_now * run.frame_s / 3600.0).clamp(0.0, 15.0);
             }
         }
     }
@@ -333,12 +373,14 @@ pub fn freeze_run(seed: u64) -> Run {
                 duration_s: 1200.0,
                 rate_mm_per_h: 0.0,
                 temp_c: (5.0, 0.0),
+                rate_sd_ln: 0.0,
             },
             Segment {
                 cover: Some(IceKind::Glazed),
                 duration_s: 3600.0,
                 rate_mm_per_h: 1.0,
                 temp_c: (0.0, -5.0),
+                rate_sd_ln: 0.0,
             },
         ],
     )

@@ -16,6 +16,8 @@ pub enum Needs {
     Estimate,
     /// Once the node has sent an optical gain estimate (protocol 3).
     Gain,
+    /// Once the node has sent an icing rate (protocol 5).
+    Icing,
     /// While MQTT commands are enabled in the config.
     Commands,
 }
@@ -123,7 +125,7 @@ const fn counter(object: &'static str, name: &'static str, key: &'static str) ->
 }
 
 /// Every entity a node can have, in the order they are announced.
-pub const NODE: [Entity; 17] = [
+pub const NODE: [Entity; 19] = [
     // What a user watches.
     Entity {
         device_class: Some("cold"),
@@ -161,6 +163,24 @@ pub const NODE: [Entity; 17] = [
         attributes: &[("probability", "medium_probability")],
         needs: Needs::Estimate,
         ..entity("sensor", "medium", "Medium", Source::Value("medium"))
+    },
+    // Meteorological icing (ice accreting now) beside the ice above
+    // (instrumental icing: ice present).
+    Entity {
+        attributes: &[("sigma", "rate_sigma_mm_per_h")],
+        needs: Needs::Icing,
+        ..measured("icing_rate", "Icing rate", "rate_mm_per_h", "mm/h", 2)
+    },
+    Entity {
+        device_class: Some("cold"),
+        attributes: &[("probability", "accreting_probability")],
+        needs: Needs::Icing,
+        ..entity(
+            "binary_sensor",
+            "icing_now",
+            "Icing now",
+            Source::Flag("accreting"),
+        )
     },
     // The node's health and its raw values.
     Entity {

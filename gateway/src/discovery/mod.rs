@@ -70,6 +70,9 @@ pub struct NodeInfo<'a> {
     pub estimate: bool,
     /// It has sent an optical gain estimate: the gain entity.
     pub gain: bool,
+    /// It has sent an icing rate (protocol 5): the icing-rate and
+    /// icing-now entities.
+    pub icing: bool,
 }
 
 fn origin() -> Value {
@@ -129,11 +132,12 @@ impl Discovery<'_> {
     /// the buttons when commands are on).
     fn wanted(&self, node: &NodeInfo) -> impl Iterator<Item = &'static Entity> {
         let commands = self.topics.command(node.name).is_some();
-        let (estimate, gain) = (node.estimate, node.gain);
+        let (estimate, gain, icing) = (node.estimate, node.gain, node.icing);
         entities::NODE.iter().filter(move |e| match e.needs {
             entities::Needs::Always => true,
             entities::Needs::Estimate => estimate,
             entities::Needs::Gain => gain,
+            entities::Needs::Icing => icing,
             entities::Needs::Commands => commands,
         })
     }

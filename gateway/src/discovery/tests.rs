@@ -4,7 +4,9 @@
 use super::*;
 use crate::payload::StateJson;
 use fois_link::Reading;
-use fois_protocol::{DetectorState, GainEstimate, IceEstimate, Measurement, Medium, flags};
+use fois_protocol::{
+    DetectorState, GainEstimate, IceEstimate, IcingEstimate, Measurement, Medium, flags,
+};
 
 fn hello(id: u8) -> Hello {
     Hello {
@@ -31,6 +33,7 @@ fn configs(version: HaVersion, commands: bool, estimate: bool, gain: bool) -> Ve
         hello: &h,
         estimate,
         gain,
+        icing: gain,
     };
     d.node_configs(&node)
         .into_iter()
@@ -120,7 +123,7 @@ fn a_node_is_a_device_under_the_gateway_named_by_its_hardware_id() {
 #[test]
 fn estimate_gain_and_command_entities_come_with_what_the_node_sends() {
     let all = configs(HaVersion::OLDEST, true, true, true);
-    assert_eq!(all.len(), 17);
+    assert_eq!(all.len(), 19);
     for (object, key) in [
         ("thickness", "ice_thickness_mm"),
         ("water_film", "water_film_mm"),
@@ -194,6 +197,7 @@ fn stale_configs_are_the_buttons_without_commands_and_the_name_based_ones() {
         hello: &h,
         estimate: false,
         gain: false,
+        icing: false,
     };
     assert_eq!(
         d.stale_topics(&node),
@@ -328,4 +332,39 @@ fn every_template_shows_what_the_state_says() {
     assert_eq!(show("alarm", &dry).0, "OFF");
     assert_eq!(show("thickness", &dry).0, "None");
     assert_eq!(show("medium", &dry), ("None".into(), Some(json!({}))));
+    // A node without an icing rate: unknown, not a template error.
+    assert_eq!(show("icing_rate", &dry), ("None".into(), Some(json!({}))));
+
+    // Rime growing at 2.15 ± 0.6 mm/h, an icing period on.
+    let mut r = Reading::new(
+        &Measurement {
+            uptime_ms: 1_000,
+            i1_na: 28_467,
+            i2_na: 10_174,
+            ambient1_na: 0,
+            ambient2_na: 0,
+            temperature_centi_c: -500,
+            vdda_mv: 3300,
+            flags: 0,
+            state: DetectorState::Ice,
+        },
+        None,
+        None,
+    );
+    r.icing = Some(fois_link::reading::IcingReading::from(&IcingEstimate {
+        rate_um_per_h: 2_150,
+        sigma_um_per_h: 600,
+        accreting_permille: 940,
+        accreting: true,
+    }));
+    let growing = serde_json::to_value(StateJson::new("tower-3", 6, &r, (121, 2), 0)).unwrap();
+    assert_eq!(
+        show("icing_rate", &growing),
+        ("2.15".into(), Some(json!({"sigma": 0.6})))
+    );
+    assert_eq!(
+        show("icing_now", &growing),
+        ("ON".into(), Some(json!({"probability": 0.94})))
+    );
+    assert_eq!(show("icing_now", &dry).0, "OFF");
 }

@@ -41,6 +41,7 @@ impl Gateway {
                 hello: &hello,
                 estimate: slot.has_estimate,
                 gain: slot.has_gain,
+                icing: slot.has_icing,
             };
             let stale = if slot.stale_cleared {
                 Vec::new()
@@ -60,15 +61,17 @@ impl Gateway {
         }
     }
 
-    /// A reading of node `k` with an estimate or a gain for the first
+    /// A reading of node `k` with an estimate, a gain or an icing rate for the first
     /// time: announce the node again with the entities that show them.
     pub(super) fn new_entities(&mut self, k: usize, r: &Reading) {
         let slot = &mut self.nodes[k];
         let estimate = r.estimate.is_some() && !slot.has_estimate;
         let gain = r.gain.is_some() && !slot.has_gain;
+        let icing = r.icing.is_some() && !slot.has_icing;
         slot.has_estimate |= estimate;
         slot.has_gain |= gain;
-        if estimate || gain {
+        slot.has_icing |= icing;
+        if estimate || gain || icing {
             self.announce_node(k);
         }
     }

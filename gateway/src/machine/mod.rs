@@ -103,6 +103,7 @@ pub(crate) struct MqttNode {
     last_meas_uptime: Option<u64>,
     has_estimate: bool,
     has_gain: bool,
+    has_icing: bool,
     /// Frames received since the gateway started.
     frames: u64,
     /// Stale discovery configs emptied (once per node and run).

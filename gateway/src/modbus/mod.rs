@@ -34,7 +34,7 @@ pub use fois_protocol::registers::{
     NA_U32, REGISTERS, SEQ, STATE, STATUS, TABLE, TEMPERATURE, THICKNESS, THICKNESS_SIGMA, VDDA,
     medium_code, state_code, status,
 };
-use fois_protocol::{GainEstimate, IceEstimate, Measurement};
+use fois_protocol::{GainEstimate, IceEstimate, IcingEstimate, Measurement};
 
 use crate::snapshot::NodeSnapshot;
 
@@ -69,6 +69,7 @@ pub fn register_map(node: &NodeSnapshot, now: Instant, stale_after: Duration) ->
     );
     if let Some(reading) = &node.reading {
         let (m, estimate, gain) = wire_values(reading);
+        let icing = wire_icing(reading);
         registers::measurement_registers(
             &mut r,
             &Sample {
@@ -76,7 +77,7 @@ pub fn register_map(node: &NodeSnapshot, now: Instant, stale_after: Duration) ->
                 seq: node.seq.unwrap_or(NA_U32),
                 estimate: estimate.as_ref(),
                 gain: gain.as_ref(),
-                icing: None,
+                icing: icing.as_ref().map(registers::IcingRate::from),
             },
         );
         if node.seq.is_none() {
@@ -120,6 +121,18 @@ fn wire_values(r: &Reading) -> (Measurement, Option<IceEstimate>, Option<GainEst
         sigma_ppm: u32_of(g.gain_sigma, 1e6),
     });
     (m, estimate, gain)
+}
+
+/// The icing rate's wire integers back from the reading (µm/h, ‰): the
+/// inverse of `fois_link::IcingReading`'s mapping.
+fn wire_icing(r: &Reading) -> Option<IcingEstimate> {
+    let u16_of = |x: f64, k: f64| (x * k).round().clamp(0.0, f64::from(u16::MAX)) as u16;
+    r.icing.map(|i| IcingEstimate {
+        rate_um_per_h: u16_of(i.rate_mm_per_h, 1e3),
+        sigma_um_per_h: u16_of(i.rate_sigma_mm_per_h, 1e3),
+        accreting_permille: u16_of(i.accreting_probability, 1e3),
+        accreting: i.accreting,
+    })
 }
 
 /// The register table as the README shows it (Markdown): the measurement

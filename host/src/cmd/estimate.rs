@@ -20,8 +20,9 @@ pub struct EstimateArgs {
     pub input: PathBuf,
     /// Where to write the input's rows with est_thickness_mm, est_sigma_mm
     /// (mm), est_kind (dry/water/glazed/rime), est_p (0-1), est_gain,
-    /// est_gain_sigma (the optical gain against the response table's) and
-    /// est_update appended. Must not be the input; an existing file is replaced (only
+    /// est_gain_sigma (the optical gain against the response table's),
+    /// est_rate_mm_per_h, est_rate_sigma_mm_per_h (the icing rate),
+    /// est_accreting (the icing period, 0/1) and est_update appended. Must not be the input; an existing file is replaced (only
     /// once the replay has succeeded).
     #[arg(long, value_name = "FILE.csv")]
     pub out: PathBuf,

@@ -6,10 +6,10 @@ use super::table::{
     ICING_RATE_SIGMA, Kind, MEDIUM, MEDIUM_PROBABILITY, NA_I16, NA_I32, NA_U16, NA_U32, REGISTERS,
     SEQ, STATE, STATUS, TABLE, TEMPERATURE, THICKNESS, THICKNESS_SIGMA, VDDA, status,
 };
-use crate::{DetectorState, GainEstimate, IceEstimate, Measurement, Medium, flags};
+use crate::{DetectorState, GainEstimate, IceEstimate, IcingEstimate, Measurement, Medium, flags};
 
-/// The icing rate a node reports (filled once the frame carries it; until
-/// then every caller passes `None`).
+/// The icing rate a node reports, in the registers' units (from the
+/// frame's [`IcingEstimate`]: `From`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct IcingRate {
     /// Accretion rate, 0.01 mm/h.
@@ -20,6 +20,19 @@ pub struct IcingRate {
     pub accreting: bool,
     /// The probability that it is, ‰.
     pub accreting_permille: u16,
+}
+
+impl From<&IcingEstimate> for IcingRate {
+    /// µm/h to 0.01 mm/h (10 µm/h), rounded half up, saturating.
+    fn from(i: &IcingEstimate) -> Self {
+        let centi = |um: u16| (um / 10).saturating_add(u16::from(um % 10 >= 5));
+        IcingRate {
+            rate_centi_mm_per_h: i16::try_from(centi(i.rate_um_per_h)).unwrap_or(i16::MAX),
+            sigma_centi_mm_per_h: centi(i.sigma_um_per_h),
+            accreting: i.accreting,
+            accreting_permille: i.accreting_permille,
+        }
+    }
 }
 
 /// One measurement as the registers show it: the wire's integers.

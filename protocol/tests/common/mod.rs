@@ -122,6 +122,32 @@ pub fn measurement_v3() -> impl Strategy<Value = MeasurementV3> {
         })
 }
 
+pub fn icing_estimate() -> impl Strategy<Value = IcingEstimate> {
+    (any::<u16>(), any::<u16>(), any::<u16>(), any::<bool>()).prop_map(
+        |(rate_um_per_h, sigma_um_per_h, accreting_permille, accreting)| IcingEstimate {
+            rate_um_per_h,
+            sigma_um_per_h,
+            accreting_permille,
+            accreting,
+        },
+    )
+}
+
+pub fn measurement_v5() -> impl Strategy<Value = MeasurementV5> {
+    (
+        measurement(),
+        proptest::option::of(ice_estimate()),
+        proptest::option::of(gain_estimate()),
+        proptest::option::of(icing_estimate()),
+    )
+        .prop_map(|(measurement, estimate, gain, icing)| MeasurementV5 {
+            measurement,
+            estimate,
+            gain,
+            icing,
+        })
+}
+
 pub fn event_kind() -> impl Strategy<Value = EventKind> {
     prop_oneof![
         Just(EventKind::IceOnset),
@@ -134,6 +160,8 @@ pub fn event_kind() -> impl Strategy<Value = EventKind> {
             line,
             resets_in_row
         }),
+        Just(EventKind::IcingStarted),
+        Just(EventKind::IcingEnded),
     ]
 }
 
@@ -286,6 +314,7 @@ pub fn device_msg() -> impl Strategy<Value = DeviceMsg> {
             .prop_map(|(id, code)| DeviceMsg::Error(ErrorReply { id, code })),
         measurement_v2().prop_map(DeviceMsg::MeasurementV2),
         measurement_v3().prop_map(DeviceMsg::MeasurementV3),
+        measurement_v5().prop_map(DeviceMsg::MeasurementV5),
     ]
 }
 
