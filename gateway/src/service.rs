@@ -302,19 +302,7 @@ impl Service {
             // offline. A clean DISCONNECT: no last will either (waited
             // for: a connection dropped without it publishes the will).
             let _ = io.client.try_disconnect();
-            let wait = tokio::time::sleep(Duration::from_millis(500));
-            tokio::pin!(wait);
-            loop {
-                tokio::select! {
-                    _ = &mut wait => break,
-                    ev = ev_rx.recv() => match ev {
-                        // The broker closes the connection once it has the
-                        // DISCONNECT (then no last will).
-                        Some(BrokerEvent::Down(_)) | None => break,
-                        Some(_) => {}
-                    }
-                }
-            }
+            until_broker_closes(&mut ev_rx, |_| {}).await;
             broker.abort();
             let sum = gw.finish();
             return Err(NameConflict { why, summary: sum }.into());
@@ -323,23 +311,32 @@ impl Service {
             gw.goodbye(Instant::now());
             io.carry_out(&mut gw);
             let _ = io.client.try_disconnect();
-            // Let the event loop send the goodbye and the DISCONNECT, until
-            // the broker closes the connection (a connection dropped before
-            // the DISCONNECT went out publishes the last will).
-            let wait = tokio::time::sleep(Duration::from_millis(500));
-            tokio::pin!(wait);
-            loop {
-                tokio::select! {
-                    _ = &mut wait => break,
-                    ev = ev_rx.recv() => match ev {
-                        Some(BrokerEvent::Down(_)) | None => break,
-                        Some(ev) => io.broker_event(&mut gw, ev),
-                    }
-                }
-            }
+            // Let the event loop send the goodbye and the DISCONNECT (a
+            // connection dropped before the DISCONNECT went out publishes
+            // the last will).
+            until_broker_closes(&mut ev_rx, |ev| io.broker_event(&mut gw, ev)).await;
         }
         broker.abort();
         Ok(gw.finish())
+    }
+}
+
+/// Wait, at most 500 ms, until the broker closes the connection after our
+/// DISCONNECT (then it publishes no last will); other events go to `on`.
+async fn until_broker_closes(
+    ev_rx: &mut mpsc::UnboundedReceiver<BrokerEvent>,
+    mut on: impl FnMut(BrokerEvent),
+) {
+    let wait = tokio::time::sleep(Duration::from_millis(500));
+    tokio::pin!(wait);
+    loop {
+        tokio::select! {
+            _ = &mut wait => break,
+            ev = ev_rx.recv() => match ev {
+                Some(BrokerEvent::Down(_)) | None => break,
+                Some(ev) => on(ev),
+            }
+        }
     }
 }
 

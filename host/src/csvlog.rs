@@ -251,10 +251,10 @@ impl LogTable {
 }
 
 /// A reader that remembers the last byte it delivered (at the end of the
-/// file: whether the last line was ended).
-struct LastByte<R> {
-    inner: R,
-    last: Option<u8>,
+/// file: whether the last line was ended). Also the icing report's.
+pub(crate) struct LastByte<R> {
+    pub(crate) inner: R,
+    pub(crate) last: Option<u8>,
 }
 
 impl<R: Read> Read for LastByte<R> {

@@ -16,6 +16,8 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use csv::ByteRecord;
 
+use crate::csvlog::LastByte;
+
 /// The medium the node names most likely (`est_kind`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -104,23 +106,6 @@ pub struct FileStats {
     pub has_rate: bool,
     /// The file has the node's thickness estimate.
     pub has_estimate: bool,
-}
-
-/// A reader that remembers the last byte it delivered (at the end: whether
-/// the last line was ended).
-struct LastByte<R> {
-    inner: R,
-    last: Option<u8>,
-}
-
-impl<R: Read> Read for LastByte<R> {
-    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
-        let n = self.inner.read(buf)?;
-        if let Some(&b) = buf[..n].last() {
-            self.last = Some(b);
-        }
-        Ok(n)
-    }
 }
 
 #[derive(Debug, Clone, Copy)]
