@@ -71,7 +71,10 @@ fn render(seq: u32, msg: &DeviceMsg, summary: &MonitorSummary) -> usize {
         DeviceMsg::Ack(a) => text::ack_text(a).len(),
         DeviceMsg::Error(e) => text::error_text(e).len(),
         DeviceMsg::Event(e) => text::event_name(&e.kind).len(),
-        DeviceMsg::Measurement(_) | DeviceMsg::MeasurementV2(_) | DeviceMsg::MeasurementV3(_) => 0,
+        DeviceMsg::Measurement(_)
+        | DeviceMsg::MeasurementV2(_)
+        | DeviceMsg::MeasurementV3(_)
+        | DeviceMsg::MeasurementV5(_) => 0,
     };
     if let Some((m, _)) = msg.measurement() {
         len += status_lines(Some(m), summary)
