@@ -441,6 +441,28 @@ impl Grid {
     }
 }
 
+/// The medium row of water in [`Grid`]'s cells (then glazed, rime).
+const WATER_ROW: usize = 0;
+
+/// One medium's row weighted per level by `h`: its plain and weighted
+/// mass and the weighted first and second moments of thickness.
+#[inline(always)]
+fn weighted_row(cells: &[f32], mut f: f32, ratio: f32, h: impl Iterator<Item = f32>) -> [f32; 4] {
+    let (mut pk, mut pk_plain, mut s1, mut s2) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+    let mut d = STEP_MM;
+    for (&c, hj) in cells.iter().zip(h) {
+        let q = c * f;
+        f *= ratio;
+        pk_plain += q;
+        let qw = q * hj;
+        pk += qw;
+        s1 += qw * d;
+        s2 += qw * d * d;
+        d += STEP_MM;
+    }
+    [pk, pk_plain, s1, s2]
+}
+
 impl Grid {
     /// The grid's posterior (as [`Self::summarise`]) weighted per level by
     /// `h` (the history's prediction; level 0 the dry face, level i + 1 row
@@ -467,19 +489,14 @@ impl Grid {
         let (mut m1, mut m2) = (0.0f32, 0.0f32);
         for (k, cells) in self.cells.iter().enumerate() {
             let ratio = s.row_ratio[k];
-            let mut f = s.factor[k] * ratio;
-            let (mut pk, mut pk_plain, mut s1, mut s2) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-            let mut d = STEP_MM;
-            for (&c, &hj) in cells.iter().zip(h_rows) {
-                let q = c * f;
-                f *= ratio;
-                pk_plain += q;
-                let qw = q * hj;
-                pk += qw;
-                s1 += qw * d;
-                s2 += qw * d * d;
-                d += STEP_MM;
-            }
+            let f = s.factor[k] * ratio;
+            // A water film is not an accretion: the history (ice growth)
+            // does not weigh its thickness; it weighs as the dry face does.
+            let [pk, pk_plain, s1, s2] = if k == WATER_ROW {
+                weighted_row(cells, f, ratio, core::iter::repeat(*h0))
+            } else {
+                weighted_row(cells, f, ratio, h_rows.iter().copied())
+            };
             if let Some(slot) = p_medium.get_mut(k + 1) {
                 *slot = pk;
             }
