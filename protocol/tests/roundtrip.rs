@@ -138,30 +138,23 @@ fn max_frame_bounds_the_widest_messages() {
         gain_high_permille: u16::MAX,
         ..Config::from(widest_config_v1.clone())
     };
-    let widest_measurement_v5 = DeviceFrame {
-        seq: u32::MAX,
-        msg: DeviceMsg::MeasurementV5(MeasurementV5 {
-            measurement: match widest_measurement.msg.clone() {
-                DeviceMsg::Measurement(m) => m,
-                _ => unreachable!(),
-            },
-            estimate: Some(IceEstimate {
-                thickness_um: u16::MAX,
-                sigma_um: u16::MAX,
-                medium: Medium::Rime,
-                probability_permille: u16::MAX,
+    // The version-3 content, and the widest icing rate.
+    let widest_measurement_v5 = match widest_measurement_v3.msg.clone() {
+        DeviceMsg::MeasurementV3(v3) => DeviceFrame {
+            seq: u32::MAX,
+            msg: DeviceMsg::MeasurementV5(MeasurementV5 {
+                measurement: v3.measurement,
+                estimate: v3.estimate,
+                gain: v3.gain,
+                icing: Some(IcingEstimate {
+                    rate_um_per_h: u16::MAX,
+                    sigma_um_per_h: u16::MAX,
+                    accreting_permille: u16::MAX,
+                    accreting: true,
+                }),
             }),
-            gain: Some(GainEstimate {
-                gain_ppm: u32::MAX,
-                sigma_ppm: u32::MAX,
-            }),
-            icing: Some(IcingEstimate {
-                rate_um_per_h: u16::MAX,
-                sigma_um_per_h: u16::MAX,
-                accreting_permille: u16::MAX,
-                accreting: true,
-            }),
-        }),
+        },
+        _ => unreachable!(),
     };
     let widest_ack = DeviceFrame {
         seq: u32::MAX,
