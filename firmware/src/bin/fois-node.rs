@@ -69,6 +69,7 @@ mod app {
     use fois_firmware::platform::watchdog::MAX_SLEEP_MS;
     use fois_firmware::storage::flash_store::FlashStore;
     use fois_firmware::storage::supply::{self, BOOT_SUPPLY_STEP_MS, BootRead};
+    use static_cell::StaticCell;
 
     use crate::board::{self, BoardAdc, BoardFlash, HeldOutput};
     use crate::link;
@@ -88,7 +89,13 @@ mod app {
         SkippableStorage<FlashStore<BoardFlash>>,
     >;
 
-    static NODE: Mutex<ThreadModeRawMutex, Option<BoardNode>> = Mutex::new(None);
+    /// The node, once built: a reference into [`NODE_CELL`], so this static
+    /// is all zeros (.bss). An `Option<BoardNode>` here would be `.data`: its
+    /// `None` is a non-zero niche, and the linker would keep the node's whole
+    /// 14 KiB initial image in flash to copy it at reset.
+    static NODE: Mutex<ThreadModeRawMutex, Option<&'static mut BoardNode>> = Mutex::new(None);
+    /// Where the node lives (.bss; written once, at boot).
+    static NODE_CELL: StaticCell<BoardNode> = StaticCell::new();
     /// Encoded frames waiting for the UART (written in thread mode, read by
     /// the transmit task on the link executor).
     static TX: Pipe<CriticalSectionRawMutex, 1024> = Pipe::new();
@@ -266,7 +273,7 @@ mod app {
                 rtu::publish(node.modbus_view());
             }
             match NODE.try_lock() {
-                Ok(mut slot) => *slot = Some(node),
+                Ok(mut slot) => *slot = Some(NODE_CELL.init(node)),
                 Err(_) => defmt::panic!("the node's mutex is taken before the node exists"),
             }
             (link_settings, modbus, button)
