@@ -24,8 +24,7 @@ pub fn unique_id_hex(h: &Hello) -> String {
 
 /// The firmware version as `major.minor.patch`.
 pub fn firmware_text(h: &Hello) -> String {
-    let [a, b, c] = h.firmware_version;
-    format!("{a}.{b}.{c}")
+    version_text(h.firmware_version)
 }
 
 /// One line describing a node.
@@ -38,6 +37,11 @@ pub fn hello_text(h: &Hello) -> String {
         h.protocol_version,
         h.reset_reason
     )
+}
+
+/// A firmware version as `major.minor.patch`.
+pub fn version_text(v: fois_protocol::FirmwareVersion) -> String {
+    format!("{}.{}.{}", v[0], v[1], v[2])
 }
 
 /// One line describing an answer.
@@ -66,6 +70,22 @@ pub fn ack_text(a: &Ack) -> String {
             l.modbus_address,
             l.parity.name()
         ),
+        AckResult::UpdateStatus(u) => format!(
+            "UpdateStatus phase={:?} next_offset={} image_len={}",
+            u.phase, u.next_offset, u.image_len
+        ),
+        AckResult::ImageInfo(i) => format!(
+            "ImageInfo version={} state={:?} slot_bytes={}",
+            version_text(i.version),
+            i.state,
+            i.slot_bytes
+        ),
+        AckResult::UpdateCommitted { version } => {
+            format!(
+                "UpdateCommitted: resetting into {} on trial",
+                version_text(*version)
+            )
+        }
     };
     format!("id={} {what}", a.id)
 }
@@ -93,6 +113,9 @@ pub fn error_text(e: &ErrorReply) -> String {
             f.state.name(),
             ua(f.rise1_na.into())
         ),
+        fois_protocol::ErrorCode::UpdateRefused(r) => {
+            format!("UpdateRefused({r:?}): {}", r.describe())
+        }
         other => format!("{other:?}"),
     };
     format!("id={id} {why}")

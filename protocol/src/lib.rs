@@ -8,6 +8,7 @@
 //! - [`seq`]: the sequence-gap rule (lost frames, restarts) every host reader uses.
 //! - [`link_settings`]: version 5, the host link's protocol (framed or Modbus RTU) and its Modbus settings.
 //! - [`registers`]: the Modbus register map the node (RTU) and the gateway (TCP) serve.
+//! - [`update`]: version 6, a firmware image over the link: the transfer's messages and the signed image's trailer.
 
 #![cfg_attr(not(any(feature = "std", test)), no_std)]
 
@@ -17,6 +18,7 @@ pub mod link_settings;
 pub mod messages;
 pub mod registers;
 pub mod seq;
+pub mod update;
 
 pub use config::{Config, ConfigError, ConfigField, ConfigV1, FIELDS, FieldSpec, LOAD_R_MAX_OHM};
 #[cfg(any(feature = "std", test))]
@@ -27,10 +29,14 @@ pub use framing::{
 pub use link_settings::{LinkProtocol, LinkSettings, LinkSettingsError, Parity};
 pub use messages::*;
 pub use seq::{SeqEvent, SeqTracker};
+pub use update::{
+    ChunkData, FirmwareVersion, ImageInfo, ImageSignature, ImageState, ImageTrailer,
+    UPDATE_CHUNK_MAX, UpdateBegin, UpdateChunk, UpdatePhase, UpdateRefusal, UpdateStatus,
+};
 
 /// The protocol version this crate speaks (in [`Hello::protocol_version`]).
 /// Bump it on any breaking change (see `protocol/README.md`, Compatibility).
-pub const PROTOCOL_VERSION: u16 = 5;
+pub const PROTOCOL_VERSION: u16 = 6;
 
 /// The oldest protocol version a host built from this crate still reads.
 /// Every version only adds variants at the end of its enums, so a frame of

@@ -467,12 +467,28 @@ pub enum EventKind {
     /// Version 5: the icing period ends (P(accreting) fell below the end
     /// threshold): nothing accretes now (ice may remain).
     IcingEnded,
+    /// Version 6: a new image passed its self-test on its trial boot and is
+    /// confirmed: it runs from now on.
+    ImageConfirmed {
+        /// The confirmed image's version.
+        version: crate::FirmwareVersion,
+    },
+    /// Version 6: a new image failed its trial boot (no self-test within
+    /// its time, a watchdog or a panic); the bootloader put the previous
+    /// image back, which sends this once after its boot.
+    ImageRolledBack {
+        /// The version that failed.
+        failed: crate::FirmwareVersion,
+        /// The version running again.
+        running: crate::FirmwareVersion,
+    },
 }
 
 impl EventKind {
     /// The kind as a snake_case word without its fault bits (`ice_onset`,
     /// `ice_cleared`, `wet_onset`, `wet_cleared`, `fault_raised`,
-    /// `fault_cleared`, `panic_reset`, `icing_started`, `icing_ended`): its
+    /// `fault_cleared`, `panic_reset`, `icing_started`, `icing_ended`,
+    /// `image_confirmed`, `image_rolled_back`): its
     /// name in text formats (scenario files, MQTT payloads).
     pub const fn name(&self) -> &'static str {
         match self {
@@ -485,6 +501,8 @@ impl EventKind {
             EventKind::PanicReset { .. } => "panic_reset",
             EventKind::IcingStarted => "icing_started",
             EventKind::IcingEnded => "icing_ended",
+            EventKind::ImageConfirmed { .. } => "image_confirmed",
+            EventKind::ImageRolledBack { .. } => "image_rolled_back",
         }
     }
 }
@@ -538,6 +556,18 @@ pub enum AckResult {
     /// [`Command::SetLinkSettings`]: the link settings now stored (a
     /// change of protocol takes effect after this answer).
     LinkSettings(crate::LinkSettings),
+    /// Version 6: answer to the transfer's commands ([`Command::UpdateBegin`],
+    /// [`Command::UpdateChunk`], [`Command::GetUpdateStatus`],
+    /// [`Command::UpdateVerify`], [`Command::UpdateAbort`]): where it stands.
+    UpdateStatus(crate::UpdateStatus),
+    /// Version 6: answer to [`Command::GetImageInfo`].
+    ImageInfo(crate::ImageInfo),
+    /// Version 6: answer to [`Command::UpdateCommit`]: the node resets
+    /// right after this frame into the new image, on trial.
+    UpdateCommitted {
+        /// The version the node boots next.
+        version: crate::FirmwareVersion,
+    },
 }
 
 /// Dark (dry-face) baseline of both channels, subtracted by the ice rule.
@@ -594,6 +624,8 @@ pub enum ErrorCode {
     FaceNotDry(FaceReading),
     /// Version 5: [`Command::SetLinkSettings`] refused; nothing changed.
     InvalidLinkSettings(crate::LinkSettingsError),
+    /// Version 6: a piece of a firmware transfer refused; nothing changed.
+    UpdateRefused(crate::UpdateRefusal),
 }
 
 /// Version 4: a dark calibration that would move the baseline too far.
@@ -728,6 +760,23 @@ pub enum Command {
     /// (framed or Modbus RTU), the Modbus address and parity. The answer
     /// goes out in the old protocol; the new one is in force after it.
     SetLinkSettings(crate::LinkSettings),
+    /// Version 6: start a firmware transfer, or resume the one in progress
+    /// when the digest is its (`protocol/src/update.rs`).
+    UpdateBegin(crate::UpdateBegin),
+    /// Version 6: write one piece of the image at the offset the node expects.
+    UpdateChunk(crate::UpdateChunk),
+    /// Version 6: where the transfer stands (after a link drop or a power cut).
+    GetUpdateStatus,
+    /// Version 6: check the whole image (digest, trailer, version rule,
+    /// signature); nothing is marked.
+    UpdateVerify(crate::ImageSignature),
+    /// Version 6: boot the verified image next, on trial; the node resets
+    /// after the answer.
+    UpdateCommit,
+    /// Version 6: abandon the transfer (the slot is never booted).
+    UpdateAbort,
+    /// Version 6: which image runs ([`AckResult::ImageInfo`]).
+    GetImageInfo,
 }
 
 #[cfg(test)]

@@ -546,6 +546,126 @@ fn cases() -> Vec<(&'static str, Vec<u8>)> {
                 }),
             ),
         ),
+        // Version 6 additions: the firmware transfer.
+        (
+            "cmd_update_begin",
+            host(
+                16,
+                Command::UpdateBegin(UpdateBegin {
+                    image_len: 92_224,
+                    version: [0, 7, 0],
+                    image_digest: core::array::from_fn(|i| i as u8),
+                }),
+            ),
+        ),
+        (
+            "cmd_update_chunk",
+            host(
+                17,
+                Command::UpdateChunk(UpdateChunk {
+                    offset: 512,
+                    crc32: 0xDEAD_BEEF,
+                    data: ChunkData::new(&[1, 2, 3, 0, 255]).unwrap(),
+                }),
+            ),
+        ),
+        ("cmd_get_update_status", host(18, Command::GetUpdateStatus)),
+        (
+            "cmd_update_verify",
+            host(
+                19,
+                Command::UpdateVerify(ImageSignature::from_bytes(&core::array::from_fn(|i| {
+                    (i * 3) as u8
+                }))),
+            ),
+        ),
+        ("cmd_update_commit", host(20, Command::UpdateCommit)),
+        ("cmd_update_abort", host(21, Command::UpdateAbort)),
+        ("cmd_get_image_info", host(22, Command::GetImageInfo)),
+        (
+            "ack_update_status",
+            device(
+                30,
+                DeviceMsg::Ack(Ack {
+                    id: 17,
+                    result: AckResult::UpdateStatus(UpdateStatus {
+                        phase: UpdatePhase::Receiving,
+                        image_len: 92_224,
+                        next_offset: 768,
+                    }),
+                }),
+            ),
+        ),
+        (
+            "ack_image_info",
+            device(
+                31,
+                DeviceMsg::Ack(Ack {
+                    id: 22,
+                    result: AckResult::ImageInfo(ImageInfo {
+                        version: [0, 6, 0],
+                        state: ImageState::RolledBack { failed: [0, 7, 0] },
+                        slot_bytes: 131_072,
+                    }),
+                }),
+            ),
+        ),
+        (
+            "ack_update_committed",
+            device(
+                32,
+                DeviceMsg::Ack(Ack {
+                    id: 20,
+                    result: AckResult::UpdateCommitted { version: [0, 7, 0] },
+                }),
+            ),
+        ),
+        (
+            "error_update_refused",
+            device(
+                33,
+                DeviceMsg::Error(ErrorReply {
+                    id: Some(19),
+                    code: ErrorCode::UpdateRefused(UpdateRefusal::OlderVersion {
+                        running: [0, 7, 0],
+                        image: [0, 6, 0],
+                    }),
+                }),
+            ),
+        ),
+        (
+            "event_image_rolled_back",
+            device(
+                34,
+                DeviceMsg::Event(Event {
+                    uptime_ms: 5_000,
+                    kind: EventKind::ImageRolledBack {
+                        failed: [0, 7, 0],
+                        running: [0, 6, 0],
+                    },
+                    i1_na: 0,
+                    i2_na: 0,
+                    rise1_na: 0,
+                    temperature_centi_c: 0,
+                    frames: 0,
+                }),
+            ),
+        ),
+        (
+            "event_image_confirmed",
+            device(
+                35,
+                DeviceMsg::Event(Event {
+                    uptime_ms: 61_000,
+                    kind: EventKind::ImageConfirmed { version: [0, 7, 0] },
+                    i1_na: 0,
+                    i2_na: 0,
+                    rise1_na: 0,
+                    temperature_centi_c: 0,
+                    frames: 0,
+                }),
+            ),
+        ),
     ]
 }
 
@@ -686,6 +806,47 @@ const GOLDEN: &[(&str, &str)] = &[
         "event_icing_ended",
         "12 1d 02 a0 f7 36 08 e0 d4 03 d0 8c 01 98 d3 03 db 0b 05 0b 67 1d 1a 00",
     ),
+    // Version 6 additions.
+    (
+        "cmd_update_begin",
+        "06 10 0f c0 d0 05 02 07 01 24 01 02 03 04 05 06 07 08 09 0a 0b 0c 0d 0e 0f 10 11 12 13 14 15 16 17 18 19 1a 1b 1c 1d 1e 1f c7 c3 b9 6c 00",
+    ),
+    (
+        "cmd_update_chunk",
+        "0e 11 10 80 04 ef fd b6 f5 0d 05 01 02 03 06 ff a9 d6 29 bb 00",
+    ),
+    ("cmd_get_update_status", "07 12 11 de 42 9d 53 00"),
+    (
+        "cmd_update_verify",
+        "03 13 12 44 03 06 09 0c 0f 12 15 18 1b 1e 21 24 27 2a 2d 30 33 36 39 3c 3f 42 45 48 4b 4e 51 54 57 5a 5d 60 63 66 69 6c 6f 72 75 78 7b 7e 81 84 87 8a 8d 90 93 96 99 9c 9f a2 a5 a8 ab ae b1 b4 b7 ba bd 49 db 98 f4 00",
+    ),
+    ("cmd_update_commit", "07 14 13 74 84 c9 eb 00"),
+    ("cmd_update_abort", "07 15 14 96 20 b6 6c 00"),
+    ("cmd_get_image_info", "07 16 15 c3 43 9c 30 00"),
+    (
+        "ack_update_status",
+        "0f 1e 03 11 0c 01 c0 d0 05 80 06 5b c3 e7 44 00",
+    ),
+    (
+        "ack_image_info",
+        "05 1f 03 16 0d 02 06 02 02 02 07 08 80 80 08 c2 27 2e f6 00",
+    ),
+    (
+        "ack_update_committed",
+        "05 20 03 14 0e 02 07 05 fa 44 bb ee 00",
+    ),
+    (
+        "error_update_refused",
+        "07 21 04 01 13 0c 09 02 07 01 02 06 05 fa 1c 5a 14 00",
+    ),
+    (
+        "event_image_rolled_back",
+        "06 22 02 88 27 0a 02 07 01 02 06 01 01 01 01 01 05 81 de be c1 00",
+    ),
+    (
+        "event_image_confirmed",
+        "07 23 02 c8 dc 03 09 02 07 01 01 01 01 01 05 cb 76 3c d1 00",
+    ),
 ];
 
 fn hex(bytes: &[u8]) -> String {
@@ -714,11 +875,11 @@ fn wire_format_matches_golden_bytes() {
 
 #[test]
 fn protocol_version_is_frozen_with_these_bytes() {
-    // The snapshots above belong to version 5: the 21 of version 1 and the 3
+    // The snapshots above belong to version 6: the 21 of version 1 and the 3
     // of version 2 (unchanged: each version only added variants at the ends
     // of its enums and froze the old config shape as `ConfigV1`, so older
     // streams decode with these types), the version-3, version-4 and
-    // version-5 additions. A new version gets new snapshots.
-    assert_eq!(PROTOCOL_VERSION, 5);
+    // version-5 and version-6 additions. A new version gets new snapshots.
+    assert_eq!(PROTOCOL_VERSION, 6);
     assert_eq!(OLDEST_READABLE_VERSION, 1);
 }

@@ -178,6 +178,14 @@ fn max_frame_bounds_the_widest_messages() {
         id: u16::MAX,
         cmd: Command::SetConfigV3(widest_config),
     };
+    let widest_chunk = HostFrame {
+        id: u16::MAX,
+        cmd: Command::UpdateChunk(UpdateChunk {
+            offset: u32::MAX,
+            crc32: u32::MAX,
+            data: ChunkData::new(&[0xFF; UPDATE_CHUNK_MAX]).unwrap(),
+        }),
+    };
     let sizes = [
         postcard::to_stdvec(&widest_measurement).unwrap().len(),
         postcard::to_stdvec(&widest_measurement_v2).unwrap().len(),
@@ -187,13 +195,14 @@ fn max_frame_bounds_the_widest_messages() {
         postcard::to_stdvec(&widest_cmd).unwrap().len(),
         postcard::to_stdvec(&widest_cmd_v3).unwrap().len(),
         postcard::to_stdvec(&widest_measurement_v5).unwrap().len(),
+        postcard::to_stdvec(&widest_chunk).unwrap().len(),
     ];
     for s in sizes {
         assert!(s <= MAX_PAYLOAD, "payload {s} > MAX_PAYLOAD {MAX_PAYLOAD}");
     }
-    // The widest `MeasurementV5` (version 5: the icing rate) is the largest
-    // message (79 B, the widest `Ack(ConfigV3)` 70 B): MAX_PAYLOAD is exact.
-    assert_eq!(sizes[7], MAX_PAYLOAD);
+    // The widest `UpdateChunk` (version 6: 256 image bytes) is the largest
+    // message (the widest `MeasurementV5` 79 B): MAX_PAYLOAD is exact.
+    assert_eq!(sizes[8], MAX_PAYLOAD);
     assert_eq!(sizes.iter().max().copied(), Some(MAX_PAYLOAD));
     for f in [
         &widest_measurement,
@@ -205,7 +214,7 @@ fn max_frame_bounds_the_widest_messages() {
     ] {
         assert!(encode_to_vec(f).len() <= MAX_FRAME);
     }
-    for f in [&widest_cmd, &widest_cmd_v3] {
+    for f in [&widest_cmd, &widest_cmd_v3, &widest_chunk] {
         assert!(encode_to_vec(f).len() <= MAX_FRAME);
     }
     println!("MAX_PAYLOAD = {MAX_PAYLOAD} B, MAX_FRAME = {MAX_FRAME} B, sizes {sizes:?}");

@@ -187,6 +187,14 @@ where
                 }
                 Ok(AckResult::LinkSettings(self.link))
             }
+            // The firmware transfer (version 6) is not served by this build yet.
+            Command::UpdateBegin(_)
+            | Command::UpdateChunk(_)
+            | Command::GetUpdateStatus
+            | Command::UpdateVerify(_)
+            | Command::UpdateCommit
+            | Command::UpdateAbort
+            | Command::GetImageInfo => Err(ErrorCode::UnknownCommand),
         }
     }
 
