@@ -711,6 +711,9 @@ pub struct HostFrame {
 }
 
 /// Commands from the host. Every one is answered by an `Ack` or an `Error`.
+// `UpdateChunk` carries its 256 bytes inline: no_std has no box, and a
+// command lives once, on the stack of the dispatch that carries it out.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, MaxSize)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 pub enum Command {
