@@ -42,7 +42,7 @@ pub use crate::update_error::{Step, UpdateError, UpdateEvent, UpdateReport};
 pub const UPDATE_SINCE: u16 = 6;
 
 /// Timings and limits of the driver.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct UpdateOptions {
     /// How long one command waits for its answer: the protocol's
     /// `REPLY_TIMEOUT_MS` (an answer can wait behind a frame and an erase).
