@@ -454,6 +454,16 @@ impl<P: Read + Write> Driver<'_, '_, P> {
             Answer::Refused(UpdateRefusal::OutOfOrder { expected_offset })
                 if expected_offset <= self.total() && expected_offset != self.offset =>
             {
+                // Counted as a resume: a node that kept moving its offset
+                // would otherwise hold the driver for ever.
+                self.resumes += 1;
+                if self.resumes > self.opts.max_resumes {
+                    return Err(Fail::Fatal(UpdateError::Refused {
+                        step: Step::Transfer,
+                        refusal: UpdateRefusal::OutOfOrder { expected_offset },
+                        by_host: false,
+                    }));
+                }
                 self.offset = expected_offset;
                 (self.on_event)(UpdateEvent::Resumed {
                     from: expected_offset,

@@ -84,7 +84,8 @@ pub struct UpdateReport {
     pub started_at: u32,
     /// Commands sent again.
     pub retries: u32,
-    /// Times the transfer was picked up again after a link drop or reset.
+    /// Times the transfer was picked up again where the node said: after a
+    /// link drop or a reset, or a resent chunk it had taken already.
     pub resumes: u32,
     /// Time from the first begin to the verify's answer.
     pub transfer_time: Duration,
@@ -120,7 +121,10 @@ pub enum UpdateError {
         by_host: bool,
     },
     /// The node answered with another error.
-    #[error("the node answered {code:?} at {}", .step.name())]
+    #[error("the node answered {code:?} at {}{}", .step.name(),
+            if matches!(.code, ErrorCode::UnknownCommand) {
+                " (its firmware does not know the update commands: no updater built in)"
+            } else { "" })]
     NodeError {
         /// Where.
         step: Step,
