@@ -663,4 +663,42 @@ baud = 57600
         assert_eq!(fw.dir, std::path::PathBuf::from("/srv/fw"));
         assert_eq!(fw.confirm_timeout, Duration::from_secs(300));
     }
+
+    #[test]
+    fn the_packaged_example_with_its_firmware_lines_uncommented_is_the_default() {
+        let example = include_str!("../../debian/gateway.toml");
+        let mut in_section = false;
+        let text: String = example
+            .lines()
+            .map(|l| {
+                if l == "#[firmware]" {
+                    in_section = true;
+                } else if l.is_empty() {
+                    in_section = false;
+                }
+                match l {
+                    "enabled = false" => "enabled = true\n".to_string(),
+                    _ if in_section => format!("{}\n", &l[1..]),
+                    _ => format!("{l}\n"),
+                }
+            })
+            .collect();
+        let c = FileConfig::parse(&text)
+            .and_then(|f| f.resolve(&Overrides::default()))
+            .unwrap();
+        let fw = c.firmware.unwrap();
+        assert_eq!(
+            fw.dir,
+            std::path::PathBuf::from("/var/lib/fois-gateway/firmware")
+        );
+        assert_eq!(
+            fw.confirm_timeout.as_secs(),
+            super::super::firmware::DEFAULT_CONFIRM_TIMEOUT_S
+        );
+        // As shipped: off.
+        let shipped = FileConfig::parse(example)
+            .and_then(|f| f.resolve(&Overrides::default()))
+            .unwrap();
+        assert_eq!(shipped.firmware, None);
+    }
 }
