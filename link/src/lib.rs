@@ -16,7 +16,9 @@
 //!   signature), its digest and the transfer's begin.
 //! - [`update`]: the firmware update driver (begin, chunks, verify, commit,
 //!   the new image's confirmation), with retries and resume; its steps,
-//!   events, report and errors; [`update_timing`] its throughput model.
+//!   events, report and errors (`update_error`); `update_trial` its wait
+//!   for the new image's boot and verdict; [`update_timing`] its throughput
+//!   model.
 //! - `update_fake` (feature `fixtures`): a scripted node that follows the
 //!   update protocol, for the driver's tests and the gateway's.
 //! - [`numbers`]: finite-number parsers for command lines.
@@ -40,6 +42,7 @@ pub mod update_fake;
 #[cfg(test)]
 mod update_tests;
 pub mod update_timing;
+mod update_trial;
 pub mod versioned;
 
 pub use link::{Incoming, Link, LinkError, Reply, open_port};

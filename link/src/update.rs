@@ -28,9 +28,8 @@ use std::time::{Duration, Instant};
 
 use fois_protocol::update::version_allowed;
 use fois_protocol::{
-    Ack, AckResult, ChunkData, Command, DeviceMsg, ErrorCode, EventKind, FirmwareVersion, Hello,
-    ImageInfo, ImageState, SeqEvent, UPDATE_CHUNK_MAX, UpdateChunk, UpdatePhase, UpdateRefusal,
-    UpdateStatus,
+    AckResult, ChunkData, Command, DeviceMsg, ErrorCode, FirmwareVersion, Hello, ImageInfo,
+    ImageState, SeqEvent, UPDATE_CHUNK_MAX, UpdateChunk, UpdatePhase, UpdateRefusal, UpdateStatus,
 };
 
 use crate::link::{Incoming, Link, LinkError};
@@ -117,7 +116,7 @@ pub fn update<P: Read + Write>(
 }
 
 /// An answer to one command.
-enum Answer {
+pub(crate) enum Answer {
     Ack(AckResult),
     Refused(UpdateRefusal),
     Error(ErrorCode),
@@ -126,7 +125,7 @@ enum Answer {
 }
 
 /// Why a command got no usable answer.
-enum Fail {
+pub(crate) enum Fail {
     /// No answer after every attempt, or the port went away: try to resume.
     Down(LinkError),
     /// Stop.
@@ -139,16 +138,16 @@ impl From<UpdateError> for Fail {
     }
 }
 
-struct Driver<'a, 'r, P> {
-    link: &'a mut Link<P>,
-    image: &'a SignedImage,
-    opts: &'a UpdateOptions,
-    reopen: Option<&'a mut Reopen<'r, P>>,
-    on_event: &'a mut dyn FnMut(UpdateEvent),
-    retries: u32,
-    resumes: u32,
+pub(crate) struct Driver<'a, 'r, P> {
+    pub(crate) link: &'a mut Link<P>,
+    pub(crate) image: &'a SignedImage,
+    pub(crate) opts: &'a UpdateOptions,
+    pub(crate) reopen: Option<&'a mut Reopen<'r, P>>,
+    pub(crate) on_event: &'a mut dyn FnMut(UpdateEvent),
+    pub(crate) retries: u32,
+    pub(crate) resumes: u32,
     /// The node's next offset, as last known.
-    offset: u32,
+    pub(crate) offset: u32,
 }
 
 impl<P: Read + Write> Driver<'_, '_, P> {
@@ -323,7 +322,7 @@ impl<P: Read + Write> Driver<'_, '_, P> {
 
     /// After a lost port: reopen it (when the caller can) until the resume
     /// timeout. After a silent link: nothing to do but ask again.
-    fn reconnect(
+    pub(crate) fn reconnect(
         &mut self,
         since: Instant,
         step: Step,
@@ -492,145 +491,10 @@ impl<P: Read + Write> Driver<'_, '_, P> {
         }
     }
 
-    /// Wait for the node's boot, then for its verdict on the new image.
-    /// Returns the version it runs, confirmed.
-    fn confirm(&mut self, booted: Option<Hello>) -> Result<FirmwareVersion, UpdateError> {
-        let wanted = self.image.version();
-        let booted = match booted {
-            Some(h) => h,
-            None => {
-                (self.on_event)(UpdateEvent::Step(Step::Reboot));
-                self.wait_boot()?
-            }
-        };
-        (self.on_event)(UpdateEvent::Step(Step::Confirm));
-        let start = Instant::now();
-        let mut running = booted.firmware_version;
-        let mut state = if running == wanted {
-            ImageState::Trial
-        } else {
-            ImageState::RolledBack { failed: wanted }
-        };
-        let mut last_poll = Instant::now();
-        let mut asked: Option<u16> = None;
-        while start.elapsed() < self.opts.confirm_timeout {
-            if last_poll.elapsed() >= self.opts.status_poll {
-                last_poll = Instant::now();
-                asked = self.link.send(Command::GetImageInfo).ok();
-            }
-            let frames = match self.link.poll() {
-                Ok(f) => f,
-                Err(e) => {
-                    self.reconnect(start, Step::Confirm, &e)?;
-                    continue;
-                }
-            };
-            for inc in frames {
-                let Incoming::Frame(f, _) = inc else { continue };
-                match f.msg {
-                    DeviceMsg::Event(ev) => match ev.kind {
-                        EventKind::ImageConfirmed { version } if version == wanted => {
-                            return Ok(version);
-                        }
-                        EventKind::ImageRolledBack { failed, running } => {
-                            return Err(UpdateError::RolledBack { failed, running });
-                        }
-                        _ => {}
-                    },
-                    DeviceMsg::Hello(h) => running = h.firmware_version,
-                    DeviceMsg::Ack(a) if Some(a.id) == asked => {
-                        if let AckResult::ImageInfo(i) = a.result {
-                            running = i.version;
-                            state = i.state;
-                            match i.state {
-                                ImageState::Confirmed if i.version == wanted => return Ok(wanted),
-                                ImageState::RolledBack { failed } => {
-                                    return Err(UpdateError::RolledBack {
-                                        failed,
-                                        running: i.version,
-                                    });
-                                }
-                                // The old image, confirmed: the commit did
-                                // not take (a reset before it).
-                                ImageState::Confirmed => {
-                                    return Err(UpdateError::NotConfirmed {
-                                        running: i.version,
-                                        expected: wanted,
-                                        state: i.state,
-                                        waited_ms: start.elapsed().as_millis() as u64,
-                                    });
-                                }
-                                _ => {}
-                            }
-                        }
-                    }
-                    _ => {}
-                }
-            }
-        }
-        Err(UpdateError::NotConfirmed {
-            running,
-            expected: wanted,
-            state,
-            waited_ms: start.elapsed().as_millis() as u64,
-        })
-    }
-
-    /// The node's `Hello` after the commit: its boot hello, or (after a
-    /// restart was seen, or the port was reopened) the answer to `GetInfo`.
-    fn wait_boot(&mut self) -> Result<Hello, UpdateError> {
-        let start = Instant::now();
-        let ask_after = self.opts.reply_timeout.min(Duration::from_secs(3));
-        let mut asked_at: Option<Instant> = None;
-        let mut ids: Vec<u16> = Vec::new();
-        let mut restarted = false;
-        while start.elapsed() < self.opts.boot_timeout {
-            if start.elapsed() >= ask_after && asked_at.is_none_or(|t| t.elapsed() >= ask_after) {
-                asked_at = Some(Instant::now());
-                if let Ok(id) = self.link.send(Command::GetInfo) {
-                    ids.push(id);
-                }
-            }
-            let frames = match self.link.poll() {
-                Ok(f) => f,
-                Err(e) => {
-                    self.reconnect(start, Step::Reboot, &e)?;
-                    restarted = true;
-                    continue;
-                }
-            };
-            let mut frames = frames.into_iter();
-            while let Some(inc) = frames.next() {
-                let Incoming::Frame(f, seq) = inc else {
-                    continue;
-                };
-                if seq == SeqEvent::Restart {
-                    restarted = true;
-                }
-                let hello = match f.msg {
-                    DeviceMsg::Hello(h) if restarted => Some(h),
-                    DeviceMsg::Ack(Ack {
-                        id,
-                        result: AckResult::Info(h),
-                    }) if restarted && ids.contains(&id) => Some(h),
-                    _ => None,
-                };
-                if let Some(h) = hello {
-                    // Its first events (a confirmation) may be in this batch.
-                    self.link.keep(frames);
-                    return Ok(h);
-                }
-            }
-        }
-        Err(UpdateError::NoBoot {
-            waited_ms: start.elapsed().as_millis() as u64,
-        })
-    }
-
     /// Send `cmd` and wait for its answer; send it again (up to
     /// `attempts`) when none comes in time or a garbled frame arrived
     /// instead. An answer to any of the sends counts.
-    fn exchange(&mut self, cmd: Command, step: Step) -> Result<Answer, Fail> {
+    pub(crate) fn exchange(&mut self, cmd: Command, step: Step) -> Result<Answer, Fail> {
         let mut ids = Vec::new();
         let mut last = None;
         for attempt in 0..self.opts.attempts.max(1) {
