@@ -8,6 +8,7 @@
 //! | [`config`] | the TOML file, the flags that override it ([`config::file::Overrides`], declared once), defaults, checks, [`config::Secret`] |
 //! | [`command`] | the node command words, their parser, the front-end command: shared by the reader, the machine, MQTT and Modbus |
 //! | [`reader`] | the node reader: one thread per serial port (`fois_link`), handshake, stream, reconnect |
+//! | [`rollout`] | firmware roll-outs: the command, the readers' update slots, one node at a time, stop at the first failure |
 //! | [`season_log`] | `[log] dir`: each node's frames as daily CSV files in the monitor's format, compressed after the day, pruned after the days kept (its own thread) |
 //! | [`machine`] | the state machine, free of network IO: node reports and broker events in, publish/subscribe/command actions out |
 //! | [`service`] | the runtime: tokio, rumqttc's event loop, the readers, the Modbus server, the machine's actions carried out |
@@ -34,6 +35,7 @@ pub mod net_runtime;
 pub mod payload;
 pub mod queue;
 pub mod reader;
+pub mod rollout;
 pub mod season_log;
 pub mod service;
 pub mod snapshot;

@@ -278,6 +278,60 @@ pub struct CommandResultJson<'a> {
     pub host_unix_ms: u64,
 }
 
+/// `<node>/update/progress` (QoS 0): one event of a node's update.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct UpdateProgressJson<'a> {
+    /// Node name.
+    pub node: &'a str,
+    /// The image's file name.
+    pub image: &'a str,
+    /// `step`, `progress`, `retry` or `resumed`.
+    pub event: &'static str,
+    /// The step (connect, begin, transfer, verify, commit, reboot, confirm).
+    pub step: Option<&'static str>,
+    /// Bytes the node has.
+    pub done: Option<u32>,
+    /// Bytes of the image.
+    pub total: Option<u32>,
+    /// Host time, Unix ms.
+    pub host_unix_ms: u64,
+}
+
+/// `<node>/update/result` (retained): how a node's update ended.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct UpdateResultJson<'a> {
+    /// Node name.
+    pub node: &'a str,
+    /// The image's file name.
+    pub image: &'a str,
+    /// The node runs the image, confirmed.
+    pub ok: bool,
+    /// The versions, or why it failed.
+    pub detail: String,
+    /// Host time, Unix ms.
+    pub host_unix_ms: u64,
+}
+
+/// `<gw>/firmware/result` (retained): a roll-out's end, or why a roll-out
+/// command was refused.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RolloutResultJson {
+    /// The image's file name (as the command gave it).
+    pub image: String,
+    /// Every node updated.
+    pub ok: bool,
+    /// In words.
+    pub detail: String,
+    /// The nodes updated, in order.
+    pub updated: Vec<String>,
+    /// The node that failed (the roll-out stopped there).
+    pub failed: Option<String>,
+    /// The nodes not reached.
+    pub not_reached: Vec<String>,
+    /// Host time, Unix ms.
+    pub host_unix_ms: u64,
+}
+
 /// `<gw>/status` (retained).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct StatusJson {

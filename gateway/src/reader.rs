@@ -19,8 +19,11 @@ use fois_link::timefmt::unix_ms_now;
 use fois_link::{Incoming, Link, LinkError, open_port};
 use fois_protocol::{Command, DeviceFrame, DeviceMsg, Hello, SeqEvent, SeqTracker};
 
+use fois_link::update::{UpdateEvent, update};
+
 use crate::command::NodeCommand;
 use crate::config::NodeSpec;
+use crate::rollout::{UpdateJob, UpdateSlot};
 
 /// Wait between reconnection attempts.
 pub const RETRY_INTERVAL: Duration = Duration::from_millis(500);
@@ -52,6 +55,19 @@ pub enum NodeUpdate {
     /// The port cannot be opened or the handshake failed (reported once per
     /// outage, while it lasts).
     Unreachable(String),
+    /// A firmware update's progress (the reader runs it on its link, its
+    /// stream paused: [`crate::rollout`]).
+    Update(UpdateEvent),
+    /// A roll-out ended (sent by the roll-out itself; `node` is the last
+    /// node it tried).
+    RolloutEnd(crate::rollout::RolloutOutcome),
+    /// A node's firmware update ended (sent by the roll-out).
+    UpdateDone {
+        /// The node runs the image, confirmed.
+        ok: bool,
+        /// The version it runs, or why it failed.
+        detail: String,
+    },
     /// The node's answer to an MQTT command.
     CommandResult {
         /// The command.
@@ -140,13 +156,17 @@ fn sleep_unless_stopped(d: Duration, stop: &AtomicBool) {
 }
 
 /// Read one node until `stop`: open with `open`, handshake, stream, report;
-/// reconnect on loss. Returns when `stop` is set or the sink is gone.
+/// reconnect on loss. Returns when `stop` is set or the sink is gone. A
+/// job left in `updates` pauses the stream: the reader runs the update on
+/// its link, reports it, and connects again (the node has reset).
+#[allow(clippy::too_many_arguments)]
 pub fn run_reader<P, O, S>(
     node: usize,
     name: &str,
     mut open: O,
     sink: &mut S,
     commands: &Receiver<NodeCommand>,
+    updates: &UpdateSlot,
     timings: ReaderTimings,
     stop: &AtomicBool,
 ) where
@@ -182,11 +202,23 @@ pub fn run_reader<P, O, S>(
         if !rep.send(NodeUpdate::Up(hello)) {
             return;
         }
-        let end = stream(&mut link, &mut rep, commands, node_version, timings, stop);
-        tracker = link.seq.clone();
+        let end = stream(
+            &mut link,
+            &mut rep,
+            commands,
+            updates,
+            node_version,
+            timings,
+            stop,
+        );
         match end {
             StreamEnd::SinkGone => return,
             StreamEnd::Stopped => {}
+            StreamEnd::Update(job) => {
+                if !run_job(&mut link, &mut open, &job, &mut rep) {
+                    return;
+                }
+            }
             StreamEnd::LinkLost(reason) => {
                 if !rep.send(NodeUpdate::Down(reason)) {
                     return;
@@ -194,7 +226,40 @@ pub fn run_reader<P, O, S>(
                 sleep_unless_stopped(timings.retry, stop);
             }
         }
+        tracker = link.seq.clone();
     }
+}
+
+/// Run an update job on the reader's link (reopening the port with `open`
+/// if it goes away), report its progress (at most once a second), and
+/// tell the roll-out how it ended. False when the sink is gone.
+fn run_job<P, O, S>(
+    link: &mut Link<P>,
+    open: &mut O,
+    job: &UpdateJob,
+    rep: &mut Reporter<'_, S>,
+) -> bool
+where
+    P: Read + Write,
+    O: FnMut() -> Result<P, LinkError>,
+    S: Sink,
+{
+    let mut sink_ok = true;
+    let mut last_progress: Option<Instant> = None;
+    let result = update(link, &job.image, &job.opts, Some(open), &mut |e| {
+        if let UpdateEvent::Progress { done, total } = e
+            && done < total
+            && last_progress.is_some_and(|t| t.elapsed() < Duration::from_secs(1))
+        {
+            return;
+        }
+        if matches!(e, UpdateEvent::Progress { .. }) {
+            last_progress = Some(Instant::now());
+        }
+        sink_ok &= rep.send(NodeUpdate::Update(e));
+    });
+    let _ = job.done.send(result.map_err(|e| e.to_string()));
+    sink_ok
 }
 
 /// Why [`stream`] returned.
@@ -205,6 +270,8 @@ enum StreamEnd {
     Stopped,
     /// The gateway no longer listens (the sink is gone).
     SinkGone,
+    /// A firmware update waits in the reader's slot.
+    Update(UpdateJob),
 }
 
 /// Stream until the link is lost, `stop`, or the sink is gone. Commands
@@ -213,6 +280,7 @@ fn stream<P: Read + Write, S: Sink>(
     link: &mut Link<P>,
     rep: &mut Reporter<'_, S>,
     commands: &Receiver<NodeCommand>,
+    updates: &UpdateSlot,
     node_version: u16,
     timings: ReaderTimings,
     stop: &AtomicBool,
@@ -229,6 +297,9 @@ fn stream<P: Read + Write, S: Sink>(
     loop {
         if stop.load(Ordering::Relaxed) {
             return StreamEnd::Stopped;
+        }
+        if let Some(job) = updates.take() {
+            return StreamEnd::Update(job);
         }
         match commands.try_recv() {
             Ok(cmd) => match link.send(cmd.wire_command(node_version)) {
@@ -322,6 +393,7 @@ pub fn spawn_serial_reader<S: Sink + Send + 'static>(
     spec: NodeSpec,
     mut sink: S,
     commands: Receiver<NodeCommand>,
+    updates: UpdateSlot,
     timings: ReaderTimings,
     stop: Arc<AtomicBool>,
 ) -> std::io::Result<std::thread::JoinHandle<()>> {
@@ -329,7 +401,9 @@ pub fn spawn_serial_reader<S: Sink + Send + 'static>(
         .name(format!("node-{node}"))
         .spawn(move || {
             let open = || open_port(&spec.port, spec.baud);
-            run_reader(node, &spec.port, open, &mut sink, &commands, timings, &stop);
+            run_reader(
+                node, &spec.port, open, &mut sink, &commands, &updates, timings, &stop,
+            );
         })
 }
 
@@ -445,7 +519,17 @@ mod tests {
                 retry: Duration::from_millis(20),
                 handshake: Duration::from_millis(500),
             };
-            run_reader(3, "fake", || Ok(f2.clone()), &mut tx, &cmd_rx, timings, &s2);
+            let updates = UpdateSlot::default();
+            run_reader(
+                3,
+                "fake",
+                || Ok(f2.clone()),
+                &mut tx,
+                &cmd_rx,
+                &updates,
+                timings,
+                &s2,
+            );
         });
         let next = || rx.recv_timeout(Duration::from_secs(2)).unwrap();
         let m = next();

@@ -17,13 +17,16 @@ use rumqttc::{AsyncClient, ConnectionError, Event, EventLoop, Incoming, Outgoing
 use tokio::sync::mpsc;
 use tracing::{info, warn};
 
+use fois_link::timefmt::unix_ms_now;
+
 use crate::command::{FrontEndCommand, NodeCommand};
 use crate::config::GatewayConfig;
 use crate::machine::{Action, Gateway, GatewaySummary, RECONNECT_DELAY};
 use crate::mqtt::{describe, mqtt_options};
 use crate::net_runtime::NetRuntime;
 use crate::queue::{Queue, QueueLimits};
-use crate::reader::{NodeMsg, ReaderTimings, spawn_serial_reader};
+use crate::reader::{NodeMsg, NodeUpdate, ReaderTimings, Sink, spawn_serial_reader};
+use crate::rollout::{NodeOutcome, PICKUP_TIMEOUT, UpdateSlot, run_rollout, update_text};
 use crate::season_log::{SeasonLog, rows_of};
 use crate::snapshot::Fleet;
 use crate::topics::Topics;
@@ -202,6 +205,7 @@ impl Service {
         };
         let mut cmd_txs = Vec::new();
         let mut threads = Vec::new();
+        let slots: Vec<UpdateSlot> = cfg.nodes.iter().map(|_| UpdateSlot::default()).collect();
         for (k, spec) in cfg.nodes.iter().enumerate() {
             let (ctx, crx) = std::sync::mpsc::channel();
             cmd_txs.push(ctx);
@@ -211,12 +215,16 @@ impl Service {
                     spec.clone(),
                     node_tx.clone(),
                     crx,
+                    slots[k].clone(),
                     timings,
                     readers_stop.clone(),
                 )
                 .context("cannot start a node reader thread")?,
             );
         }
+        // The roll-out reports like a reader, while one runs: a weak
+        // sender, so the readers' end still closes the channel.
+        let rollout_tx = node_tx.downgrade();
         drop(node_tx);
 
         // The daily logs: a thread of their own, off the runtime.
@@ -228,6 +236,11 @@ impl Service {
             client,
             resume: resume_tx,
             cmd_txs,
+            rollouts: RolloutIo {
+                slots,
+                tx: rollout_tx,
+                stop: readers_stop.clone(),
+            },
         };
         let mut tick = tokio::time::interval(TICK);
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
@@ -354,11 +367,78 @@ fn on_node(gw: &mut Gateway, season: Option<&mut SeasonLog>, fleet: &Fleet, m: N
 }
 
 /// The IO side: the MQTT client, the broker task's resume signal, the
-/// node readers' command channels.
+/// node readers' command channels and update slots.
 struct Io {
     client: AsyncClient,
     resume: mpsc::UnboundedSender<()>,
     cmd_txs: Vec<std::sync::mpsc::Sender<NodeCommand>>,
+    rollouts: RolloutIo,
+}
+
+/// What a roll-out needs: the readers' update slots, the channel of the
+/// readers' reports, the readers' stop flag.
+struct RolloutIo {
+    slots: Vec<UpdateSlot>,
+    tx: mpsc::WeakSender<NodeMsg>,
+    stop: Arc<AtomicBool>,
+}
+
+impl RolloutIo {
+    /// Run a roll-out on a thread of its own; it reports each node's end
+    /// and its own like a reader. `Err` when it cannot start.
+    fn start(
+        &self,
+        image: Arc<fois_link::signed_image::SignedImage>,
+        order: Vec<usize>,
+        opts: fois_link::update::UpdateOptions,
+    ) -> Result<(), String> {
+        let mut tx = self
+            .tx
+            .upgrade()
+            .ok_or_else(|| "the node readers have stopped".to_string())?;
+        let slots = self.slots.clone();
+        let stop = self.stop.clone();
+        std::thread::Builder::new()
+            .name("rollout".into())
+            .spawn(move || {
+                let mut last = order.first().copied().unwrap_or(0);
+                let outcome = run_rollout(
+                    &order,
+                    &image,
+                    &opts,
+                    &slots,
+                    PICKUP_TIMEOUT,
+                    &stop,
+                    &mut |k, o| {
+                        last = k;
+                        let (ok, detail) = match o {
+                            NodeOutcome::Updated(r) => (true, update_text(r)),
+                            NodeOutcome::Failed(why) => (false, why.clone()),
+                        };
+                        let update = NodeUpdate::UpdateDone { ok, detail };
+                        let _ = Sink::send(
+                            &mut tx,
+                            NodeMsg {
+                                node: k,
+                                host_unix_ms: unix_ms_now(),
+                                update,
+                            },
+                        );
+                    },
+                );
+                let update = NodeUpdate::RolloutEnd(outcome);
+                let _ = Sink::send(
+                    &mut tx,
+                    NodeMsg {
+                        node: last,
+                        host_unix_ms: unix_ms_now(),
+                        update,
+                    },
+                );
+            })
+            .map(|_| ())
+            .map_err(|e| format!("cannot start the roll-out thread: {e}"))
+    }
 }
 
 impl Io {
@@ -403,6 +483,15 @@ impl Io {
         let mut unsent = Vec::new();
         for a in gw.actions() {
             let sent = match &a {
+                Action::RollOut { image, order, opts } => {
+                    if let Err(why) =
+                        self.rollouts
+                            .start(image.clone(), order.clone(), opts.clone())
+                    {
+                        gw.rollout_failed_to_start(&why);
+                    }
+                    continue;
+                }
                 Action::Command { node, command } => {
                     let delivered = self
                         .cmd_txs

@@ -85,6 +85,26 @@ impl Topics {
     pub fn command_result(&self, node: &str) -> String {
         format!("{}/{node}/command/result", self.base)
     }
+
+    /// The roll-out command (`[firmware] dir` set).
+    pub fn firmware_command(&self) -> String {
+        format!("{}/firmware/command", self.base)
+    }
+
+    /// A roll-out's result (retained).
+    pub fn firmware_result(&self) -> String {
+        format!("{}/firmware/result", self.base)
+    }
+
+    /// A node's update progress (QoS 0).
+    pub fn update_progress(&self, node: &str) -> String {
+        format!("{}/{node}/update/progress", self.base)
+    }
+
+    /// A node's last update result (retained).
+    pub fn update_result(&self, node: &str) -> String {
+        format!("{}/{node}/update/result", self.base)
+    }
 }
 
 #[cfg(test)]
@@ -105,5 +125,9 @@ mod tests {
         assert_eq!(t.command("n1").as_deref(), Some("ops/n1/do"));
         assert_eq!(t.command_result("n1"), "fois/gw1/n1/command/result");
         assert_eq!(Topics::new("fois", "gw1", None).command("n1"), None);
+        assert_eq!(t.firmware_command(), "fois/gw1/firmware/command");
+        assert_eq!(t.firmware_result(), "fois/gw1/firmware/result");
+        assert_eq!(t.update_progress("n1"), "fois/gw1/n1/update/progress");
+        assert_eq!(t.update_result("n1"), "fois/gw1/n1/update/result");
     }
 }

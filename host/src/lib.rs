@@ -9,6 +9,9 @@
 //! - [`estimate`]: a log or a simulated curve replayed through the node's ice estimator.
 //! - [`icing`]: the icing report (`foisctl icing-report`): events, monthly totals, IEA ice class.
 //! - [`compare`]: a log against the simulator's band; [`plot`]: every figure.
+//! - [`signing`]: the update key pair's files, signing an application binary into a signed
+//!   image, checking one (`keygen`, `sign`, `image-info`; `update` sends it with
+//!   `fois_link::update`).
 //! - [`exit`]: the exit codes; [`mod@bench`]: the decoder benchmark and the
 //!   long-run check.
 //!
@@ -27,6 +30,7 @@ pub mod keys;
 pub mod legend;
 pub mod monitor;
 pub mod plot;
+pub mod signing;
 pub mod status;
 
 pub use fois_link::text;

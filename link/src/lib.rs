@@ -12,6 +12,15 @@
 //! - [`versioned`]: the dark-calibration and acknowledgement commands in the
 //!   shape of the node's protocol version.
 //! - [`timefmt`]: host timestamps (Unix ms, ISO 8601 UTC).
+//! - [`signed_image`]: a signed firmware image file (body, trailer,
+//!   signature), its digest and the transfer's begin.
+//! - [`update`]: the firmware update driver (begin, chunks, verify, commit,
+//!   the new image's confirmation), with retries and resume; its steps,
+//!   events, report and errors (`update_error`); `update_trial` its wait
+//!   for the new image's boot and verdict; [`update_timing`] its throughput
+//!   model.
+//! - `update_fake` (feature `fixtures`): a scripted node that follows the
+//!   update protocol, for the driver's tests and the gateway's.
 //! - [`numbers`]: finite-number parsers for command lines.
 //! - `fixtures` (feature `fixtures`): test data, one iced node's measurement, estimate and
 //!   gain.
@@ -23,8 +32,17 @@ pub mod link;
 pub mod log_row;
 pub mod numbers;
 pub mod reading;
+pub mod signed_image;
 pub mod text;
 pub mod timefmt;
+pub mod update;
+mod update_error;
+#[cfg(any(test, feature = "fixtures"))]
+pub mod update_fake;
+#[cfg(test)]
+mod update_tests;
+pub mod update_timing;
+mod update_trial;
 pub mod versioned;
 
 pub use link::{Incoming, Link, LinkError, Reply, open_port};

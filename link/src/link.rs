@@ -140,6 +140,18 @@ impl<P: Read + Write> Link<P> {
         &mut self.port
     }
 
+    /// Drop the frames read while waiting for an answer, not yet handed
+    /// out (a caller that reads none of them).
+    pub fn discard_backlog(&mut self) {
+        self.backlog.clear();
+    }
+
+    /// Hand `frames` out again on the next [`Link::poll`] (a caller that
+    /// stopped reading in the middle of a batch).
+    pub fn keep(&mut self, frames: impl IntoIterator<Item = Incoming>) {
+        self.backlog.extend(frames);
+    }
+
     /// Forget a partial frame and the sequence history (after a reconnect
     /// the caller decides how to count the gap).
     pub fn reset_decoder(&mut self) {

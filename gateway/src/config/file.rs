@@ -39,6 +39,9 @@ pub struct FileConfig {
     /// The daily logs of the nodes' frames.
     #[serde(default)]
     pub log: super::log::LogFile,
+    /// The signed images a roll-out may name.
+    #[serde(default)]
+    pub firmware: super::firmware::FirmwareFile,
     /// The nodes, one `[[node]]` table each.
     #[serde(default, rename = "node")]
     pub nodes: Vec<NodeFile>,

@@ -6,11 +6,13 @@
 //! | --- | --- |
 //! | [`file`] | the file as written ([`file::FileConfig`]: every key optional, unknown keys refused) and the flags' [`file::Overrides`] |
 //! | [`log`] | `[log]`: the directory and the days kept of the nodes' daily CSV logs |
+//! | [`firmware`] | `[firmware]`: the directory of signed images a roll-out may name, the new image's confirm time, the image-name rule |
 //! | [`modbus`] | `[modbus]`: the Modbus TCP server's address, commands, stale time, unit ids |
 //! | [`resolve`] | [`file::FileConfig::resolve`]: flags over file over defaults, section by section, every check |
 //! | here (reads only [`modbus`] and [`log`]) | the resolved [`GatewayConfig`], [`Secret`], names, [`BrokerAddr`], [`NodeSpec`] |
 //!
 //! The imports go one way: `modbus` and `log` read none of their siblings
+//! (`firmware` reads only `located`, for its keys' lines)
 //! (modbus's tests, which parse whole files, live in `modbus/tests.rs`),
 //! this file reads them, `file` reads those and this, `resolve` reads all.
 //!
@@ -19,6 +21,7 @@
 //! with `{:?}` or `--print-config` never shows them.
 
 pub mod file;
+pub mod firmware;
 pub mod located;
 pub mod log;
 pub mod modbus;
@@ -149,6 +152,8 @@ pub struct GatewayConfig {
     pub modbus: Option<ModbusConfig>,
     /// The daily logs of the nodes' frames (None: off).
     pub log: Option<LogConfig>,
+    /// Roll-outs of signed images (None: off).
+    pub firmware: Option<firmware::FirmwareConfig>,
 }
 
 /// Default queue bound: 256 MiB (a day of 200 nodes at one measurement per

@@ -116,6 +116,7 @@ impl FileConfig {
             ));
         }
         let log = super::log::resolve_log(self.log)?;
+        let firmware = super::firmware::resolve_firmware(self.firmware, commands.topic.is_some())?;
         Ok(GatewayConfig {
             name,
             topic_prefix,
@@ -133,6 +134,7 @@ impl FileConfig {
             nodes,
             modbus,
             log,
+            firmware,
         })
     }
 }
@@ -628,5 +630,75 @@ baud = 57600
             .unwrap_err()
             .to_string();
         assert!(!err.contains("hunter2"), "{err}");
+    }
+
+    #[test]
+    fn a_firmware_section_needs_commands_and_names_its_line() {
+        let node = "[[node]]\nport = \"/dev/x\"\n";
+        let err = |text: &str| {
+            FileConfig::parse(text)
+                .and_then(|f| f.resolve(&Overrides::default()))
+                .unwrap_err()
+                .to_string()
+        };
+        assert_eq!(
+            err(&format!("{node}[firmware]\ndir = \"/srv/fw\"\n")),
+            "line 4, key `firmware.dir`: [firmware] dir is set but commands are not enabled: a \
+             roll-out is a command, add `enabled = true` to [commands] (or remove [firmware])"
+        );
+        assert_eq!(
+            err(&format!(
+                "[commands]\nenabled = true\n{node}[firmware]\ndir = \"d\"\nconfirm_timeout_s = 0\n"
+            )),
+            "line 7, key `firmware.confirm_timeout_s`: [firmware] confirm_timeout_s = 0: give 1 to \
+             3600 s"
+        );
+        assert!(err(&format!("{node}[firmware]\ndirectory = \"d\"\n")).contains("unknown field"));
+        let c = FileConfig::parse(&format!(
+            "[commands]\nenabled = true\n{node}[firmware]\ndir = \"/srv/fw\"\nconfirm_timeout_s = 300\n"
+        ))
+        .and_then(|f| f.resolve(&Overrides::default()))
+        .unwrap();
+        let fw = c.firmware.unwrap();
+        assert_eq!(fw.dir, std::path::PathBuf::from("/srv/fw"));
+        assert_eq!(fw.confirm_timeout, Duration::from_secs(300));
+    }
+
+    #[test]
+    fn the_packaged_example_with_its_firmware_lines_uncommented_is_the_default() {
+        let example = include_str!("../../debian/gateway.toml");
+        let mut in_section = false;
+        let text: String = example
+            .lines()
+            .map(|l| {
+                if l == "#[firmware]" {
+                    in_section = true;
+                } else if l.is_empty() {
+                    in_section = false;
+                }
+                match l {
+                    "enabled = false" => "enabled = true\n".to_string(),
+                    _ if in_section => format!("{}\n", &l[1..]),
+                    _ => format!("{l}\n"),
+                }
+            })
+            .collect();
+        let c = FileConfig::parse(&text)
+            .and_then(|f| f.resolve(&Overrides::default()))
+            .unwrap();
+        let fw = c.firmware.unwrap();
+        assert_eq!(
+            fw.dir,
+            std::path::PathBuf::from("/var/lib/fois-gateway/firmware")
+        );
+        assert_eq!(
+            fw.confirm_timeout.as_secs(),
+            super::super::firmware::DEFAULT_CONFIRM_TIMEOUT_S
+        );
+        // As shipped: off.
+        let shipped = FileConfig::parse(example)
+            .and_then(|f| f.resolve(&Overrides::default()))
+            .unwrap();
+        assert_eq!(shipped.firmware, None);
     }
 }

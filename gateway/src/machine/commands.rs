@@ -77,6 +77,10 @@ impl Gateway {
             self.on_own_availability(payload, now);
             return;
         }
+        if self.cfg.firmware.is_some() && topic == self.topics.firmware_command() {
+            self.on_firmware_command(payload, retained);
+            return;
+        }
         if self.cfg.command_topic.is_none() {
             return;
         }

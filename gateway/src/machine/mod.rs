@@ -21,6 +21,7 @@ pub mod journal;
 mod nodes;
 pub mod owner;
 mod retained_check;
+mod rollout;
 #[cfg(test)]
 mod tests;
 
@@ -70,6 +71,16 @@ pub enum Action {
         node: usize,
         /// The command.
         command: NodeCommand,
+    },
+    /// Start a roll-out ([`crate::rollout::run_rollout`]): update these
+    /// nodes, in order, one at a time, with this image.
+    RollOut {
+        /// The signed image.
+        image: std::sync::Arc<fois_link::signed_image::SignedImage>,
+        /// The nodes, in order.
+        order: Vec<usize>,
+        /// The driver's options.
+        opts: fois_link::update::UpdateOptions,
     },
 }
 
@@ -146,6 +157,8 @@ pub struct Gateway {
     sub_pkids: HashMap<u16, Option<usize>>,
     /// The rate limit of the nodes' lines in the log.
     journal: journal::Limiter,
+    /// The image of the roll-out running, if one is.
+    rollout: Option<String>,
 }
 
 impl Gateway {
@@ -177,6 +190,7 @@ impl Gateway {
             sub_fifo: VecDeque::new(),
             sub_pkids: HashMap::new(),
             journal: journal::Limiter::default(),
+            rollout: None,
         }
     }
 
@@ -277,6 +291,9 @@ impl Gateway {
                     if let Some(n) = node.and_then(|k| self.nodes.get_mut(k)) {
                         n.subscribed = false;
                     }
+                }
+                Action::RollOut { .. } => {
+                    self.rollout_failed_to_start("the node readers have stopped")
                 }
                 Action::Command { node, command } => {
                     let name = self.node_name(*node).unwrap_or_default();
@@ -403,6 +420,7 @@ impl Gateway {
         self.claim_name();
         self.announce_all(now);
         self.watch_availability();
+        self.watch_firmware();
     }
 
     /// Every retained message: availability, discovery, each node's.

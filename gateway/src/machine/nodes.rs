@@ -137,6 +137,9 @@ impl Gateway {
                 self.publish_command_result(&name, command.name(), ok, detail, t);
             }
             NodeUpdate::Frame(f, ev) => self.on_frame(k, f, ev, t, now),
+            NodeUpdate::Update(e) => self.on_update_event(k, e, t),
+            NodeUpdate::UpdateDone { ok, detail } => self.on_update_done(k, ok, detail, t),
+            NodeUpdate::RolloutEnd(o) => self.on_rollout_end(o, t),
         }
     }
 

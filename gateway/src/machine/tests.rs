@@ -91,6 +91,7 @@ fn topics(actions: &[Action]) -> Vec<String> {
             Action::Publish { topic, .. } => topic.clone(),
             Action::Subscribe { topic, .. } => format!("SUBSCRIBE {topic}"),
             Action::Command { command, .. } => format!("COMMAND {}", command.name()),
+            Action::RollOut { order, .. } => format!("ROLLOUT {order:?}"),
         })
         .collect()
 }
@@ -546,3 +547,4 @@ fn a_node_has_one_key_for_its_topics_and_its_home_assistant_ids() {
 }
 
 mod journal;
+mod rollout;

@@ -65,7 +65,14 @@ pub fn rows_of(m: &NodeMsg) -> Vec<Row> {
         NodeUpdate::Up(h) => vec![at(Row::note("link_up", fois_link::text::hello_text(h)))],
         NodeUpdate::Down(reason) => vec![at(Row::note("link_lost", reason.clone()))],
         NodeUpdate::Rejected => vec![at(Row::note("rejected", "frame rejected by the decoder"))],
-        NodeUpdate::Unreachable(_) | NodeUpdate::CommandResult { .. } => Vec::new(),
+        NodeUpdate::UpdateDone { ok, detail } => vec![at(Row::note(
+            if *ok { "update_done" } else { "update_failed" },
+            detail.clone(),
+        ))],
+        NodeUpdate::Unreachable(_)
+        | NodeUpdate::CommandResult { .. }
+        | NodeUpdate::Update(_)
+        | NodeUpdate::RolloutEnd(_) => Vec::new(),
     }
 }
 

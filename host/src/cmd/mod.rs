@@ -15,7 +15,9 @@ pub mod monitor;
 pub mod plot;
 pub mod request;
 pub mod scene;
+pub mod sign;
 pub mod sim;
+pub mod update;
 pub mod virtual_node;
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -70,6 +72,28 @@ pub enum Cmd {
     /// (`framed`).
     #[command(after_help = exit::TABLE)]
     Modbus(modbus::ModbusArgs),
+    /// Send a signed image (`foisctl sign`) to the node over its link:
+    /// checked against the node first (board, size, version rule), sent in
+    /// 256-byte chunks with a progress bar, verified by the node (digest,
+    /// signature), committed; the node boots it on trial and confirms it
+    /// after its self-test, or rolls back. Running it again after a cut
+    /// continues where the node is. Protocol-6 nodes.
+    #[command(after_help = exit::UPDATE_TABLE)]
+    Update(update::UpdateArgs),
+    /// Make the update key pair: DIR/fois-update.key (the secret seed, hex,
+    /// mode 0600) and DIR/fois-update.pub (the public key the firmware is
+    /// built with). Never overwrites.
+    #[command(after_help = exit::SIGN_TABLE)]
+    Keygen(sign::KeygenArgs),
+    /// Sign an application binary into an image for `foisctl update`:
+    /// body | trailer (version, board, downgrade flag, body length) |
+    /// ed25519 signature of the SHA-512 of body and trailer.
+    #[command(after_help = exit::SIGN_TABLE)]
+    Sign(sign::SignArgs),
+    /// What a signed image says (version, board, flags, sizes, digest) and,
+    /// with --key, whether its signature verifies.
+    #[command(after_help = exit::SIGN_TABLE)]
+    ImageInfo(sign::ImageInfoArgs),
     /// Run the firmware's own logic on simulated hardware (ray-traced ice
     /// accretion, analog front end, ambient light) and serve it on a
     /// pseudo-terminal. Prints the pty path on the first line of stdout; talk
@@ -145,6 +169,10 @@ impl Cli {
             Cmd::ResetGain(a) => request::reset_gain(&a),
             Cmd::Ack(a) => request::ack(&a),
             Cmd::Modbus(a) => modbus::run(a),
+            Cmd::Update(a) => update::run(&a),
+            Cmd::Keygen(a) => sign::keygen(&a),
+            Cmd::Sign(a) => sign::sign(&a),
+            Cmd::ImageInfo(a) => sign::image_info(&a),
             Cmd::VirtualNode(a) => {
                 install_ctrlc();
                 virtual_node::run(a, &STOP)
