@@ -32,6 +32,34 @@ pub const ACCRETING_ON: f32 = 0.7;
 /// P(accreting) below which an icing period ends.
 pub const ACCRETING_OFF: f32 = 0.3;
 
+/// Meteorological icing as the node states it: three-valued, since where
+/// the currents barely move with the thickness (thick rime or glaze) the
+/// node cannot tell growth from a pause within the clearing time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum IcingState {
+    /// The icing period is on: ice accretes now.
+    Accreting,
+    /// P(accreting) ≤ [`ACCRETING_OFF`]: no ice accretes.
+    NotAccreting,
+    /// Neither: the evidence cannot tell (P between the thresholds, or the
+    /// change looks too weak for the period to stay on).
+    Uncertain,
+}
+
+impl IcingState {
+    /// From the icing period's flag and P(accreting) (as carried on the
+    /// wire).
+    pub fn of(accreting: bool, p_accreting: f32) -> Self {
+        if accreting {
+            IcingState::Accreting
+        } else if p_accreting <= ACCRETING_OFF {
+            IcingState::NotAccreting
+        } else {
+            IcingState::Uncertain
+        }
+    }
+}
+
 /// Most frames averaged into one update.
 pub const MAX_PENDING: usize = 16;
 
@@ -87,6 +115,8 @@ pub struct Estimator {
     lik_part: u8,
     /// The icing-period flag (P(accreting) with hysteresis).
     accreting: bool,
+    /// The change looks can tell growth from a pause.
+    can_tell: bool,
 }
 
 impl Default for Estimator {
@@ -127,6 +157,7 @@ impl Estimator {
             lik: [0.0; LEVELS],
             lik_part: 0,
             accreting: false,
+            can_tell: true,
         }
     }
 
@@ -152,6 +183,7 @@ impl Estimator {
         self.lik_part = 0;
         self.rate = None;
         self.accreting = false;
+        self.can_tell = true;
     }
 
     /// The face is known to be clean and dry (a dark calibration has just
@@ -198,9 +230,19 @@ impl Estimator {
     }
 
     /// Meteorological icing now: P(accreting) with hysteresis — set above
-    /// [`ACCRETING_ON`], cleared below [`ACCRETING_OFF`].
+    /// [`ACCRETING_ON`] while the node can tell growth from a pause, cleared
+    /// below [`ACCRETING_OFF`] or when it no longer can.
     pub fn accreting(&self) -> bool {
         self.accreting
+    }
+
+    /// The icing state (`None` before the first valid frame or with the
+    /// history off): accreting (the icing period's flag), not accreting
+    /// (P(accreting) ≤ [`ACCRETING_OFF`]), else uncertain — what a host
+    /// reads from the flag and P(accreting) on the wire.
+    pub fn icing_state(&self) -> Option<IcingState> {
+        self.rate
+            .map(|r| IcingState::of(self.accreting, r.p_accreting))
     }
 
     /// The icing rate as the protocol carries it (µm/h, ‰, the icing
@@ -417,6 +459,10 @@ impl Estimator {
         let slow = dt_s >= 1.5;
         let mut look_now = false;
         if hp.enabled && self.history.initialised {
+            let x_change = if negative { None } else { x };
+            let gain = self.bank.gain().gain;
+            self.history
+                .gather_currents(dt_s, x_change, gain, self.bank_p_rime, &hp);
             let due = self.history.gather(dt_s, hp.period_s);
             let stage = self.history.stage();
             if stage == READY_TO_LOOK {
@@ -608,10 +654,17 @@ impl Estimator {
         } else {
             None
         };
+        // The icing period: P(accreting) with hysteresis, while the change
+        // looks can tell growth from a pause (else "uncertain", the period
+        // ends: thick rime or glaze barely moves the currents).
+        self.can_tell = self
+            .history
+            .discern_nats(&hp)
+            .is_none_or(|d| d >= hp.tell_nats);
         if let Some(r) = self.rate {
-            if r.p_accreting >= ACCRETING_ON {
+            if r.p_accreting >= ACCRETING_ON && self.can_tell {
                 self.accreting = true;
-            } else if r.p_accreting <= ACCRETING_OFF {
+            } else if r.p_accreting <= ACCRETING_OFF || !self.can_tell {
                 self.accreting = false;
             }
         } else {

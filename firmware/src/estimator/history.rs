@@ -19,6 +19,7 @@
 //! share of the probability restarts anywhere (what the model does not
 //! know: a rate beyond the grid, melting, a face cleaned).
 
+use super::change::Change;
 use super::fast_math;
 use super::params::HistoryParams;
 use super::response::{ROWS, STEP_MM};
@@ -35,8 +36,9 @@ pub const RATE_MIN_MM_PER_H: f32 = 0.3;
 /// See [`RATE_MIN_MM_PER_H`].
 pub const RATE_MAX_MM_PER_H: f32 = 13.0;
 
-/// The stage at which the prediction is done and waits for its look.
-pub const READY_TO_LOOK: u8 = 7;
+/// The stage at which the prediction and the change look are done and
+/// the level look waits.
+pub const READY_TO_LOOK: u8 = 11;
 
 /// A level's probability below this (relative to the sum) is set to zero.
 const FLOOR: f32 = 1e-20;
@@ -91,11 +93,16 @@ pub(crate) struct History {
     walk: f32,
     /// Pause, resume, shed, restart probabilities and the restart's share
     /// per state, over the prediction.
-    switch: [f32; 5],
+    switch: [f32; 6],
     /// The look's factor per level.
     factor: [f32; LEVELS],
     /// The levels' sums being gathered over parts.
     scratch: [f32; LEVELS],
+    /// The change look (the currents' windows).
+    change: Change,
+    /// The bank's gain and P(rime) for the change look.
+    gain: f32,
+    p_rime: f32,
     /// The history has its first state.
     pub initialised: bool,
 }
@@ -116,9 +123,12 @@ impl History {
             pending_s: 0.0,
             stage: 0,
             walk: 0.0,
-            switch: [0.0; 5],
+            switch: [0.0; 6],
             factor: [1.0; LEVELS],
             scratch: [0.0; LEVELS],
+            change: Change::new(),
+            gain: 1.0,
+            p_rime: 0.5,
             initialised: false,
         }
     }
@@ -182,6 +192,7 @@ impl History {
         self.pending_s = 0.0;
         self.stage = 0;
         self.scratch = [0.0; LEVELS];
+        self.change.clear();
         self.initialised = true;
         self.update_marginal();
     }
@@ -214,10 +225,11 @@ impl History {
     /// The next part of the update; at 10 Hz one part per second, so that
     /// no second carries more than one (the budget's worst second). The
     /// prediction: 1 growth; 2, 3 pause, resume, shed and restarts (half
-    /// the rate bins each); 4, 5 the rate walk (growing, paused); 6, 7 the
+    /// the rate bins each); 4, 5 the rate walk (growing, paused); 6–9 the
+    /// change look (a quarter of the rate bins each); 10, 11 the
     /// prediction's marginal ([`READY_TO_LOOK`]: the caller looks with
-    /// [`Self::look`]). The look applied: 9 every state times its level's
-    /// factor, 10 normalised, 0 the marginal. Returns the stage reached.
+    /// [`Self::look`]). The look applied: 13 every state times its level's
+    /// factor, 14 normalised, 0 the marginal. Returns the stage reached.
     pub fn advance(&mut self, p: &HistoryParams) -> u8 {
         match self.stage {
             0 => self.predict_growth(p),
@@ -225,11 +237,27 @@ impl History {
             2 => self.predict_switches(1),
             3 => self.predict_rate(0),
             4 => self.predict_rate(1),
-            5 => {
-                self.sum_levels(0);
-                self.stage = 6;
+            5..=8 => {
+                let part = usize::from(self.stage - 5);
+                if part == 0 {
+                    self.change.start();
+                }
+                let per = RATE_BINS / 4;
+                for b in part * per..(part + 1) * per {
+                    if let (Some(g), Some(&r)) = (self.grow.get_mut(b), self.rates.get(b)) {
+                        self.change.weigh(g, r, self.gain, self.p_rime, p);
+                    }
+                }
+                if part == 3 {
+                    self.change.end();
+                }
+                self.stage += 1;
             }
-            6 => {
+            9 => {
+                self.sum_levels(0);
+                self.stage = 10;
+            }
+            10 => {
                 self.sum_levels(1);
                 let m = self.scratch;
                 let s: f32 = m.iter().sum();
@@ -238,9 +266,9 @@ impl History {
                 self.set_marginal(m.map(|a| a * inv));
                 self.stage = READY_TO_LOOK;
             }
-            8 => self.apply_factor(),
-            9 => self.normalise_applied(),
-            10 => {
+            12 => self.apply_factor(),
+            13 => self.normalise_applied(),
+            14 => {
                 let m = self.scratch;
                 self.scratch = [0.0; LEVELS];
                 self.set_marginal(m);
@@ -249,6 +277,30 @@ impl History {
             _ => {}
         }
         self.stage
+    }
+
+    /// The currents of an update (`None`: the bank did not measure) and
+    /// its time, for the change look's windows; `gain` and `p_rime` the
+    /// bank's, for its next look.
+    pub fn gather_currents(
+        &mut self,
+        dt_s: f32,
+        x_na: Option<[f32; 2]>,
+        gain: f32,
+        p_rime: f32,
+        p: &HistoryParams,
+    ) {
+        self.change.gather(dt_s, x_na, p);
+        self.gain = gain;
+        self.p_rime = p_rime;
+    }
+
+    /// Expected information of the change looks of `tell_window_s` about
+    /// growth as the history believes it, nats (`None`: no change look yet).
+    pub fn discern_nats(&self, p: &HistoryParams) -> Option<f32> {
+        self.change
+            .discern()
+            .map(|d| d * p.tell_window_s / p.change_window_s)
     }
 
     /// Add the levels of the growing (`mode` 0) or paused states to the
@@ -309,6 +361,7 @@ impl History {
             prob(p.shed_per_h),
             restart,
             restart * (total / (2 * RATE_BINS * LEVELS) as f32),
+            prob(p.resume_ice_per_h),
         ];
     }
 
@@ -316,7 +369,7 @@ impl History {
     /// the rate bins.
     fn predict_switches(&mut self, half: usize) {
         self.stage = 2 + half as u8;
-        let [pause, resume, shed, restart, restart_each] = self.switch;
+        let [pause, resume_dry, shed, restart, restart_each, resume_ice] = self.switch;
         let bins = if half == 0 {
             0..RATE_BINS / 2
         } else {
@@ -327,6 +380,7 @@ impl History {
             let mut shed_sum = 0.0f32;
             for (j, (gv, qv)) in g.iter_mut().zip(q.iter_mut()).enumerate() {
                 let (a, c) = (*gv, *qv);
+                let resume = if j == 0 { resume_dry } else { resume_ice };
                 let mut ng = a * (1.0 - pause) + c * resume;
                 let mut nq = c * (1.0 - resume) + a * pause;
                 if j > 0 {
@@ -368,12 +422,12 @@ impl History {
         }
     }
 
-    /// The look (at [`READY_TO_LOOK`], → 8): the bank's thickness likelihood `lik` (sums to
+    /// The look (at [`READY_TO_LOOK`], → 12): the bank's thickness likelihood `lik` (sums to
     /// 1), tempered by the looks it is worth; `p_rime` the bank's
     /// probability of rime (the early trust). Also how well the
     /// prediction foresaw it (the history's credibility).
     pub fn look(&mut self, lik: &[f32; LEVELS], p_rime: f32, p: &HistoryParams) {
-        self.stage = 8;
+        self.stage = 12;
         let mut o = 0.0f32;
         for (l, m) in lik.iter().zip(self.marginal.iter()) {
             o += l * m;
@@ -406,10 +460,10 @@ impl History {
         }
     }
 
-    /// The look applied (stage 8 → 9): every state times its level's
+    /// The look applied (stage 12 → 13): every state times its level's
     /// factor, the levels' sums in the scratch.
     fn apply_factor(&mut self) {
-        self.stage = 9;
+        self.stage = 13;
         let mut m = [0.0f32; LEVELS];
         for row in self.grow.iter_mut().chain(self.pause.iter_mut()) {
             for ((v, f), a) in row.iter_mut().zip(self.factor.iter()).zip(m.iter_mut()) {
@@ -420,9 +474,9 @@ impl History {
         self.scratch = m;
     }
 
-    /// Normalised (stage 9 → 10); the scratch holds the marginal.
+    /// Normalised (stage 13 → 14); the scratch holds the marginal.
     fn normalise_applied(&mut self) {
-        self.stage = 10;
+        self.stage = 14;
         let total: f32 = self.scratch.iter().sum();
         if !(total.is_finite() && total > 0.0) {
             self.reset_flat();

@@ -67,6 +67,7 @@
 //! reads only [`table_entry`]. This file declares them and re-exports their
 //! items.
 
+mod change;
 pub(crate) mod fast_math;
 pub mod filter;
 pub mod gain_bank;
@@ -79,7 +80,7 @@ pub mod response;
 pub mod table;
 pub mod table_entry;
 
-pub use filter::{ACCRETING_OFF, ACCRETING_ON, Estimator, MAX_PENDING};
+pub use filter::{ACCRETING_OFF, ACCRETING_ON, Estimator, IcingState, MAX_PENDING};
 pub use gain_bank::{GAIN_REF_TEMP_C, GAINS, Gain, UNKNOWN_GAIN_SD};
 pub use history::{RATE_BINS, RATE_MAX_MM_PER_H, RATE_MIN_MM_PER_H, Rate};
 pub use params::{EstimatorParams, HistoryParams};

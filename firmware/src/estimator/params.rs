@@ -141,9 +141,12 @@ pub struct HistoryParams {
     /// Growth pauses at this rate, per hour (default 0.2; 0: no pause
     /// state — the design without it).
     pub pause_per_h: f32,
-    /// Paused growth (and a dry face) starts growing at this rate, per hour
-    /// (default 1).
+    /// A dry face starts growing at this rate, per hour (default 1: the
+    /// onset of an icing event).
     pub resume_per_h: f32,
+    /// Paused growth on ice resumes at this rate, per hour (default 0.3:
+    /// ice stays on the face for hours after an icing event ends).
+    pub resume_ice_per_h: f32,
     /// The ice sheds to a dry face at this rate, per hour (default 0.5).
     pub shed_per_h: f32,
     /// Share of the probability that restarts anywhere, per hour (default
@@ -170,6 +173,25 @@ pub struct HistoryParams {
     /// weight its product with the bank's narrow, wrong branches (rime read
     /// as glaze at 1–3 mm) was confident.
     pub output_weight: f32,
+    /// Length of the change look's windows, s (default 240): the currents'
+    /// mean over one window against the previous one's.
+    pub change_window_s: f32,
+    /// Noise of the change between two windows' means (flicker, baseline
+    /// drift), per channel, µA (default 0.05).
+    pub change_noise_ua: f32,
+    /// Relative drift of the gain between two windows (default 0.002: the
+    /// temperature model's residual), a change along the currents.
+    pub change_drift: f32,
+    /// Relative spread of an accretion's slope dμ/dd against the table's
+    /// (default 0.3).
+    pub change_slope_sd: f32,
+    /// The node can tell growth from a pause when the change looks of
+    /// `tell_window_s` are worth at least this many nats if the ice grew as
+    /// the history believes (default 2); below, the icing state is
+    /// "uncertain" and the icing period ends.
+    pub tell_nats: f32,
+    /// See [`Self::tell_nats`] (default 1200 s: the goal's 20 min).
+    pub tell_window_s: f32,
 }
 
 impl Default for HistoryParams {
@@ -180,6 +202,7 @@ impl Default for HistoryParams {
             rate_walk_per_h: 1.0,
             pause_per_h: 0.2,
             resume_per_h: 1.0,
+            resume_ice_per_h: 0.3,
             shed_per_h: 0.5,
             restart_per_h: 0.1,
             looks_per_mm: 0.3,
@@ -188,6 +211,12 @@ impl Default for HistoryParams {
             looks_per_h: 1.0,
             escape: 0.05,
             output_weight: 0.35,
+            change_window_s: 240.0,
+            change_noise_ua: 0.05,
+            change_drift: 0.002,
+            change_slope_sd: 0.3,
+            tell_nats: 2.0,
+            tell_window_s: 1200.0,
         }
     }
 }
@@ -202,6 +231,7 @@ impl HistoryParams {
             rate_walk_per_h: within(self.rate_walk_per_h, 0.0, 100.0, d.rate_walk_per_h),
             pause_per_h: within(self.pause_per_h, 0.0, 100.0, d.pause_per_h),
             resume_per_h: within(self.resume_per_h, 0.0, 100.0, d.resume_per_h),
+            resume_ice_per_h: within(self.resume_ice_per_h, 0.0, 100.0, d.resume_ice_per_h),
             shed_per_h: within(self.shed_per_h, 0.0, 100.0, d.shed_per_h),
             restart_per_h: within(self.restart_per_h, 0.0, 100.0, d.restart_per_h),
             looks_per_mm: within(self.looks_per_mm, 0.0, 100.0, d.looks_per_mm),
@@ -215,6 +245,12 @@ impl HistoryParams {
             looks_per_h: within(self.looks_per_h, 0.0, 3600.0, d.looks_per_h),
             escape: within(self.escape, 1e-4, 1.0, d.escape),
             output_weight: within(self.output_weight, 0.0, 1.0, d.output_weight),
+            change_window_s: within(self.change_window_s, 1.0, 3600.0, d.change_window_s),
+            change_noise_ua: within(self.change_noise_ua, 0.001, 100.0, d.change_noise_ua),
+            change_drift: within(self.change_drift, 0.0, 1.0, d.change_drift),
+            change_slope_sd: within(self.change_slope_sd, 0.0, 10.0, d.change_slope_sd),
+            tell_nats: within(self.tell_nats, 0.0, 1000.0, d.tell_nats),
+            tell_window_s: within(self.tell_window_s, 1.0, 86_400.0, d.tell_window_s),
         }
     }
 }
