@@ -124,13 +124,16 @@ impl Change {
         self.discern
     }
 
-    /// The change look on the growing states of rate `rate_mm_per_h`
-    /// (`grow`, one per level, the dry face first): each times its
-    /// likelihood ratio against a paused state at its level. `gain` the
+    /// The change look on the growing states of rate `rate_mm_per_h` at
+    /// the levels `grow` (one per level from level `first`; 0 the dry
+    /// face): each times its likelihood ratio against a paused state at its
+    /// level. `gain` the
     /// bank's gain, `p_rime` its probability of rime (glazed the rest).
+    #[inline(never)]
     pub fn weigh(
         &mut self,
         grow: &mut [f32],
+        first: usize,
         rate_mm_per_h: f32,
         gain: f32,
         p_rime: f32,
@@ -149,6 +152,10 @@ impl Change {
         let d = self.delta_na;
         let p_rime = p_rime.clamp(0.0, 1.0);
         for (j, g) in grow.iter_mut().enumerate() {
+            let j = j + first;
+            if *g <= 0.0 {
+                continue;
+            }
             let at = j as f32;
             let mut lr = 0.0f32;
             let mut info = 0.0f32;
@@ -158,17 +165,32 @@ impl Change {
                 }
                 let now = mu_at(k, at);
                 let before = mu_at(k, at - rows);
-                let ahead = mu_at(k, at + look_rows);
+                // What the next window would show: from the dry face the
+                // table ahead; on ice, as the last one (the slope varies
+                // slowly there).
+                let ahead = if j == 0 {
+                    mu_at(k, look_rows)
+                } else {
+                    let s = look_rows / rows.max(1e-6);
+                    [
+                        now[0] + s * (now[0] - before[0]),
+                        now[1] + s * (now[1] - before[1]),
+                    ]
+                };
                 let (mut ln, mut inf) = (0.0f32, 0.0f32);
                 let mut var_ratio = 1.0f32;
                 for c in 0..2 {
                     let u = gain * (now[c] - before[c]);
-                    let v0 = s0_2 + eps2 * (gain * now[c]) * (gain * now[c]);
-                    let v = v0 + k2 * u * u;
-                    var_ratio *= v / v0;
-                    ln += d[c] * d[c] / v0 - (d[c] - u) * (d[c] - u) / v;
+                    let m = gain * now[c];
+                    let inv_v0 = 1.0 / (s0_2 + eps2 * m * m);
+                    // v / v0 of the growing state, and 1 / v.
+                    let ratio = 1.0 + k2 * u * u * inv_v0;
+                    let inv_v = inv_v0 / ratio;
+                    var_ratio *= ratio;
+                    ln += d[c] * d[c] * inv_v0 - (d[c] - u) * (d[c] - u) * inv_v;
                     let f = gain * (ahead[c] - now[c]);
-                    inf += f * f / (v0 + k2 * f * f);
+                    let ratio_f = 1.0 + k2 * f * f * inv_v0;
+                    inf += f * f * inv_v0 / ratio_f;
                 }
                 let ln = 0.5 * (ln - fast_math::ln(var_ratio));
                 lr += w * fast_math::exp(ln.clamp(-MAX_LN_LR, MAX_LN_LR));
@@ -183,6 +205,7 @@ impl Change {
 
 /// The table's mean of medium `k` at level `at` (rows from the dry face,
 /// fractional; below 0 the dry face), nA, linearly between rows.
+#[inline(never)]
 fn mu_at(k: usize, at: f32) -> [f32; 2] {
     if at <= 0.0 {
         return [0.0; 2];

@@ -38,7 +38,7 @@ pub const RATE_MAX_MM_PER_H: f32 = 13.0;
 
 /// The stage at which the prediction and the change look are done and
 /// the level look waits.
-pub const READY_TO_LOOK: u8 = 11;
+pub const READY_TO_LOOK: u8 = 23;
 
 /// A level's probability below this (relative to the sum) is set to zero.
 const FLOOR: f32 = 1e-20;
@@ -225,11 +225,11 @@ impl History {
     /// The next part of the update; at 10 Hz one part per second, so that
     /// no second carries more than one (the budget's worst second). The
     /// prediction: 1 growth; 2, 3 pause, resume, shed and restarts (half
-    /// the rate bins each); 4, 5 the rate walk (growing, paused); 6–9 the
-    /// change look (a quarter of the rate bins each); 10, 11 the
+    /// the rate bins each); 4, 5 the rate walk (growing, paused); 6–21 the
+    /// change look (half a rate bin's levels each); 22, 23 the
     /// prediction's marginal ([`READY_TO_LOOK`]: the caller looks with
-    /// [`Self::look`]). The look applied: 13 every state times its level's
-    /// factor, 14 normalised, 0 the marginal. Returns the stage reached.
+    /// [`Self::look`]). The look applied: 25 every state times its level's
+    /// factor, 26 normalised, 0 the marginal. Returns the stage reached.
     pub fn advance(&mut self, p: &HistoryParams) -> u8 {
         match self.stage {
             0 => self.predict_growth(p),
@@ -237,27 +237,31 @@ impl History {
             2 => self.predict_switches(1),
             3 => self.predict_rate(0),
             4 => self.predict_rate(1),
-            5..=8 => {
+            5..=20 => {
+                // Half a rate bin's levels a part.
                 let part = usize::from(self.stage - 5);
+                let (b, half) = (part / 2, part % 2);
                 if part == 0 {
                     self.change.start();
                 }
-                let per = RATE_BINS / 4;
-                for b in part * per..(part + 1) * per {
-                    if let (Some(g), Some(&r)) = (self.grow.get_mut(b), self.rates.get(b)) {
-                        self.change.weigh(g, r, self.gain, self.p_rime, p);
-                    }
+                let first = half * (LEVELS / 2);
+                let last = if half == 0 { LEVELS / 2 } else { LEVELS };
+                if let (Some(g), Some(&r)) = (
+                    self.grow.get_mut(b).and_then(|g| g.get_mut(first..last)),
+                    self.rates.get(b),
+                ) {
+                    self.change.weigh(g, first, r, self.gain, self.p_rime, p);
                 }
-                if part == 3 {
+                if part + 1 == 2 * RATE_BINS {
                     self.change.end();
                 }
                 self.stage += 1;
             }
-            9 => {
+            21 => {
                 self.sum_levels(0);
-                self.stage = 10;
+                self.stage = 22;
             }
-            10 => {
+            22 => {
                 self.sum_levels(1);
                 let m = self.scratch;
                 let s: f32 = m.iter().sum();
@@ -266,9 +270,9 @@ impl History {
                 self.set_marginal(m.map(|a| a * inv));
                 self.stage = READY_TO_LOOK;
             }
-            12 => self.apply_factor(),
-            13 => self.normalise_applied(),
-            14 => {
+            24 => self.apply_factor(),
+            25 => self.normalise_applied(),
+            26 => {
                 let m = self.scratch;
                 self.scratch = [0.0; LEVELS];
                 self.set_marginal(m);
@@ -422,12 +426,12 @@ impl History {
         }
     }
 
-    /// The look (at [`READY_TO_LOOK`], → 12): the bank's thickness likelihood `lik` (sums to
+    /// The look (at [`READY_TO_LOOK`], → 24): the bank's thickness likelihood `lik` (sums to
     /// 1), tempered by the looks it is worth; `p_rime` the bank's
     /// probability of rime (the early trust). Also how well the
     /// prediction foresaw it (the history's credibility).
     pub fn look(&mut self, lik: &[f32; LEVELS], p_rime: f32, p: &HistoryParams) {
-        self.stage = 12;
+        self.stage = 24;
         let mut o = 0.0f32;
         for (l, m) in lik.iter().zip(self.marginal.iter()) {
             o += l * m;
@@ -460,10 +464,10 @@ impl History {
         }
     }
 
-    /// The look applied (stage 12 → 13): every state times its level's
+    /// The look applied (stage 24 → 25): every state times its level's
     /// factor, the levels' sums in the scratch.
     fn apply_factor(&mut self) {
-        self.stage = 13;
+        self.stage = 25;
         let mut m = [0.0f32; LEVELS];
         for row in self.grow.iter_mut().chain(self.pause.iter_mut()) {
             for ((v, f), a) in row.iter_mut().zip(self.factor.iter()).zip(m.iter_mut()) {
@@ -474,9 +478,9 @@ impl History {
         self.scratch = m;
     }
 
-    /// Normalised (stage 13 → 14); the scratch holds the marginal.
+    /// Normalised (stage 25 → 26); the scratch holds the marginal.
     fn normalise_applied(&mut self) {
-        self.stage = 14;
+        self.stage = 26;
         let total: f32 = self.scratch.iter().sum();
         if !(total.is_finite() && total > 0.0) {
             self.reset_flat();

@@ -82,6 +82,7 @@ impl Default for EstimatorParams {
 }
 
 /// `x` if finite and within `lo..=hi`, else `default`.
+#[inline(never)]
 pub(super) fn within(x: f32, lo: f32, hi: f32, default: f32) -> f32 {
     if x.is_finite() && x >= lo && x <= hi {
         x
@@ -93,6 +94,7 @@ pub(super) fn within(x: f32, lo: f32, hi: f32, default: f32) -> f32 {
 impl EstimatorParams {
     /// Every field in its valid range; a field that is not (NaN, negative,
     /// absurd) takes its default.
+    #[inline(never)]
     pub fn sanitized(self) -> Self {
         let d = EstimatorParams::default();
         EstimatorParams {
@@ -223,6 +225,7 @@ impl Default for HistoryParams {
 
 impl HistoryParams {
     /// Every field in its valid range; a field that is not takes its default.
+    #[inline(never)]
     pub fn sanitized(self) -> Self {
         let d = HistoryParams::default();
         HistoryParams {
