@@ -247,9 +247,6 @@ fn params_from_env() -> EstimatorParams {
     if let Some(v) = get("EST_CNOISE") {
         p.history.change_noise_ua = v;
     }
-    if let Some(v) = get("EST_CDRIFT") {
-        p.history.change_drift = v;
-    }
     if let Some(v) = get("EST_CSLOPE") {
         p.history.change_slope_sd = v;
     }

@@ -258,9 +258,11 @@ fn the_icing_period_ends_within_20_min_of_the_growth_stopping() {
     // gain of 1.08 the node is not told, 1 Hz), then the ice stays: the
     // icing period starts within 10 min of the growth and ends within
     // 20 min of its end, to "not accreting" (P(accreting) ≤ 0.3; where the
-    // currents still move with the thickness, the change looks tell). Ice
-    // that stops at 11 mm (where they barely move) leaves the period within
-    // 20 min as well, to "uncertain" at least, never "accreting".
+    // currents still move with the thickness, the change looks tell). Rime
+    // that stops at 11 mm (0.25 µA/mm: the slow rates' hypotheses move the
+    // currents by less than the noise of one window) leaves the period
+    // within 30 min (the goal restated for thick ice, firmware/README), to
+    // "uncertain" at least, never "accreting".
     for (kind, temp, rate, stop_mm) in [
         (IceKind::Rime, -8.0, 2.0, 3.0),
         (IceKind::Rime, -8.0, 10.0, 3.0),
@@ -301,9 +303,10 @@ fn the_icing_period_ends_within_20_min_of_the_growth_stopping() {
         println!("{kind:?} {rate} mm/h to {stop_mm} mm: on after {on:.0} s, off after {off:?} s");
         assert!(on <= 600.0, "{kind:?} {rate} mm/h: on after {on} s");
         let off = off.expect("the period ends");
-        assert!(off <= 1200.0, "{kind:?} {rate} mm/h: off after {off} s");
+        let limit_s = if stop_mm < 10.0 { 1200.0 } else { 1800.0 };
+        assert!(off <= limit_s, "{kind:?} {rate} mm/h: off after {off} s");
         // And it stays off while the ice stays.
-        let late = frames.iter().filter(|f| f.t_s >= stop_s + 1500.0);
+        let late = frames.iter().filter(|f| f.t_s > stop_s + off);
         assert!(
             late.clone().all(|f| !f.accreting),
             "{kind:?} {rate} mm/h: the period came back"

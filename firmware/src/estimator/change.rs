@@ -18,6 +18,14 @@ use super::response::{ROWS, STEP_MM, table_of};
 /// (a shed, a wiped face) fits neither hypothesis.
 const MAX_LN_LR: f32 = 6.0;
 
+/// Relative drift of the gain between two windows (the temperature model's
+/// residual): a change along the currents that is not growth.
+const DRIFT: f32 = 0.002;
+
+/// The time over which the change looks must be able to tell growth from
+/// a pause, s (the clearing goal's 20 min).
+pub(crate) const TELL_WINDOW_S: f32 = 1200.0;
+
 /// The window of currents and the change between the last two.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Change {
@@ -94,8 +102,8 @@ impl Change {
     }
 
     /// Start a look: the pending change, if any, is weighed by the next
-    /// [`Self::weigh`] parts.
-    pub fn start(&mut self) {
+    /// [`Self::weigh`] parts (true: there is one).
+    pub fn start(&mut self) -> bool {
         self.active = false;
         self.discern_part = 0.0;
         self.grow_part = 0.0;
@@ -104,6 +112,7 @@ impl Change {
             self.delta_h = h;
             self.active = true;
         }
+        self.active
     }
 
     /// End a look: the expected information of the growing states.
@@ -126,8 +135,8 @@ impl Change {
 
     /// The change look on the growing states of rate `rate_mm_per_h` at
     /// the levels `grow` (one per level from level `first`; 0 the dry
-    /// face): each times its likelihood ratio against a paused state at its
-    /// level. `gain` the
+    /// face): each times its likelihood ratio against a paused state at
+    /// its level. `gain` the
     /// bank's gain, `p_rime` its probability of rime (glazed the rest).
     #[inline(never)]
     pub fn weigh(
@@ -145,7 +154,7 @@ impl Change {
         let rows = rate_mm_per_h * self.delta_h / STEP_MM;
         let look_rows = rate_mm_per_h * p.change_window_s / 3600.0 / STEP_MM;
         let s0 = p.change_noise_ua * 1000.0;
-        let (s0_2, eps2, k2) = (s0 * s0, p.change_drift * p.change_drift, {
+        let (s0_2, eps2, k2) = (s0 * s0, DRIFT * DRIFT, {
             let k = p.change_slope_sd;
             k * k
         });

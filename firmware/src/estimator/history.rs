@@ -19,7 +19,7 @@
 //! share of the probability restarts anywhere (what the model does not
 //! know: a rate beyond the grid, melting, a face cleaned).
 
-use super::change::Change;
+use super::change::{Change, TELL_WINDOW_S};
 use super::fast_math;
 use super::params::HistoryParams;
 use super::response::{ROWS, STEP_MM};
@@ -38,7 +38,7 @@ pub const RATE_MAX_MM_PER_H: f32 = 13.0;
 
 /// The stage at which the prediction and the change look are done and
 /// the level look waits.
-pub const READY_TO_LOOK: u8 = 23;
+pub const READY_TO_LOOK: u8 = 25;
 
 /// A level's probability below this (relative to the sum) is set to zero.
 const FLOOR: f32 = 1e-20;
@@ -100,6 +100,8 @@ pub(crate) struct History {
     scratch: [f32; LEVELS],
     /// The change look (the currents' windows).
     change: Change,
+    /// The change look weighed a change this update.
+    changed: bool,
     /// The bank's gain and P(rime) for the change look.
     gain: f32,
     p_rime: f32,
@@ -127,6 +129,7 @@ impl History {
             factor: [1.0; LEVELS],
             scratch: [0.0; LEVELS],
             change: Change::new(),
+            changed: false,
             gain: 1.0,
             p_rime: 0.5,
             initialised: false,
@@ -225,11 +228,13 @@ impl History {
     /// The next part of the update; at 10 Hz one part per second, so that
     /// no second carries more than one (the budget's worst second). The
     /// prediction: 1 growth; 2, 3 pause, resume, shed and restarts (half
-    /// the rate bins each); 4, 5 the rate walk (growing, paused); 6–21 the
-    /// change look (half a rate bin's levels each); 22, 23 the
-    /// prediction's marginal ([`READY_TO_LOOK`]: the caller looks with
-    /// [`Self::look`]). The look applied: 25 every state times its level's
-    /// factor, 26 normalised, 0 the marginal. Returns the stage reached.
+    /// the rate bins each); 4, 5 the rate walk (growing, paused); 6 the
+    /// change look's start, 7–22 the change look (half a rate bin's levels
+    /// each); 23, 24 the levels' sums (then the levels restored to their
+    /// masses before the change look); 25 the prediction's marginal
+    /// ([`READY_TO_LOOK`]: the caller looks with [`Self::look`]). The look
+    /// applied: 27 every state times its level's factor, 28 normalised, 0
+    /// the marginal. Returns the stage reached.
     pub fn advance(&mut self, p: &HistoryParams) -> u8 {
         match self.stage {
             0 => self.predict_growth(p),
@@ -237,13 +242,25 @@ impl History {
             2 => self.predict_switches(1),
             3 => self.predict_rate(0),
             4 => self.predict_rate(1),
-            5..=20 => {
-                // Half a rate bin's levels a part.
-                let part = usize::from(self.stage - 5);
-                let (b, half) = (part / 2, part % 2);
-                if part == 0 {
-                    self.change.start();
+            5 => {
+                self.changed = self.change.start();
+                if self.changed {
+                    // Each level's mass before the change look: it moves
+                    // probability between growing, paused and the rates
+                    // within a level, never between levels.
+                    self.factor = [0.0; LEVELS];
+                    for row in self.grow.iter().chain(self.pause.iter()) {
+                        for (a, v) in self.factor.iter_mut().zip(row) {
+                            *a += v;
+                        }
+                    }
                 }
+                self.stage = 6;
+            }
+            6..=21 => {
+                // Half a rate bin's levels a part.
+                let part = usize::from(self.stage - 6);
+                let (b, half) = (part / 2, part % 2);
                 let first = half * (LEVELS / 2);
                 let last = if half == 0 { LEVELS / 2 } else { LEVELS };
                 if let (Some(g), Some(&r)) = (
@@ -257,12 +274,19 @@ impl History {
                 }
                 self.stage += 1;
             }
-            21 => {
-                self.sum_levels(0);
-                self.stage = 22;
-            }
             22 => {
+                self.sum_levels(0);
+                self.stage = 23;
+            }
+            23 => {
                 self.sum_levels(1);
+                if self.changed {
+                    self.changed = false;
+                    self.restore_levels();
+                }
+                self.stage = 24;
+            }
+            24 => {
                 let m = self.scratch;
                 let s: f32 = m.iter().sum();
                 self.scratch = [0.0; LEVELS];
@@ -270,9 +294,9 @@ impl History {
                 self.set_marginal(m.map(|a| a * inv));
                 self.stage = READY_TO_LOOK;
             }
-            24 => self.apply_factor(),
-            25 => self.normalise_applied(),
-            26 => {
+            26 => self.apply_factor(),
+            27 => self.normalise_applied(),
+            28 => {
                 let m = self.scratch;
                 self.scratch = [0.0; LEVELS];
                 self.set_marginal(m);
@@ -299,12 +323,30 @@ impl History {
         self.p_rime = p_rime;
     }
 
-    /// Expected information of the change looks of `tell_window_s` about
+    /// Expected information of the change looks of 20 min about
     /// growth as the history believes it, nats (`None`: no change look yet).
     pub fn discern_nats(&self, p: &HistoryParams) -> Option<f32> {
         self.change
             .discern()
-            .map(|d| d * p.tell_window_s / p.change_window_s)
+            .map(|d| d * TELL_WINDOW_S / p.change_window_s)
+    }
+
+    /// After the change look: every level back to its mass before it
+    /// (held in `factor`; the scratch holds the masses after it, and then
+    /// the ones before).
+    fn restore_levels(&mut self) {
+        let mut ratio = [1.0f32; LEVELS];
+        for ((r, &before), &after) in ratio.iter_mut().zip(&self.factor).zip(&self.scratch) {
+            if after > 0.0 {
+                *r = before / after;
+            }
+        }
+        for row in self.grow.iter_mut().chain(self.pause.iter_mut()) {
+            for (v, r) in row.iter_mut().zip(&ratio) {
+                *v *= r;
+            }
+        }
+        self.scratch = self.factor;
     }
 
     /// Add the levels of the growing (`mode` 0) or paused states to the
@@ -426,12 +468,12 @@ impl History {
         }
     }
 
-    /// The look (at [`READY_TO_LOOK`], → 24): the bank's thickness likelihood `lik` (sums to
+    /// The look (at [`READY_TO_LOOK`], → 26): the bank's thickness likelihood `lik` (sums to
     /// 1), tempered by the looks it is worth; `p_rime` the bank's
     /// probability of rime (the early trust). Also how well the
     /// prediction foresaw it (the history's credibility).
     pub fn look(&mut self, lik: &[f32; LEVELS], p_rime: f32, p: &HistoryParams) {
-        self.stage = 24;
+        self.stage = 26;
         let mut o = 0.0f32;
         for (l, m) in lik.iter().zip(self.marginal.iter()) {
             o += l * m;
@@ -464,10 +506,10 @@ impl History {
         }
     }
 
-    /// The look applied (stage 24 → 25): every state times its level's
+    /// The look applied (stage 26 → 27): every state times its level's
     /// factor, the levels' sums in the scratch.
     fn apply_factor(&mut self) {
-        self.stage = 25;
+        self.stage = 27;
         let mut m = [0.0f32; LEVELS];
         for row in self.grow.iter_mut().chain(self.pause.iter_mut()) {
             for ((v, f), a) in row.iter_mut().zip(self.factor.iter()).zip(m.iter_mut()) {
@@ -478,9 +520,9 @@ impl History {
         self.scratch = m;
     }
 
-    /// Normalised (stage 25 → 26); the scratch holds the marginal.
+    /// Normalised (stage 27 → 28); the scratch holds the marginal.
     fn normalise_applied(&mut self) {
-        self.stage = 26;
+        self.stage = 28;
         let total: f32 = self.scratch.iter().sum();
         if !(total.is_finite() && total > 0.0) {
             self.reset_flat();
