@@ -30,7 +30,7 @@
 mod eval;
 
 use eval::*;
-use fois_firmware::estimator::EstimatorParams;
+use fois_firmware::estimator::{ACCRETING_OFF, EstimatorParams};
 use fois_protocol::Medium;
 use fois_sim::IceKind;
 
@@ -47,6 +47,9 @@ enum Shape {
     Step,
     /// To 6 mm, shed, 20 min dry, regrow to 8 mm.
     Shed,
+    /// To this thickness, mm, then the ice stays (the icing flag's
+    /// clearing per thickness).
+    Stop(f64),
 }
 
 /// One class of runs.
@@ -78,6 +81,13 @@ struct Score {
     flag_on_s: Vec<f64>,
     /// Seconds from the growth's end to the flag's clearing (NaN: never).
     flag_off_s: Vec<f64>,
+    /// Seconds from the growth's end to "not accreting" (P(accreting) ≤
+    /// the off threshold; NaN: never — "uncertain" at most).
+    not_acc_s: Vec<f64>,
+    /// Seconds from a resumed growth to the flag (NaN: never).
+    resume_on_s: Vec<f64>,
+    /// Frames of growth, and those flagged accreting.
+    grow_flagged: (u64, u64),
     /// Seconds from the shed to the medium "dry" (NaN: never).
     shed_dry_s: Vec<f64>,
     /// Frames with ice ≥ 1 mm, and those whose medium is right.
@@ -122,6 +132,19 @@ fn classes() -> Vec<Class> {
         learned: false,
         shape,
     };
+    for (kind, kname) in [(IceKind::Rime, "rime"), (IceKind::Glazed, "glazed")] {
+        for rate in [2.0, 10.0] {
+            for at in [3.0, 6.0] {
+                out.push(scenario(
+                    &format!("{kname} {rate} mm/h g 1.08 stops at {at} mm"),
+                    kind,
+                    rate,
+                    1.08,
+                    Shape::Stop(at),
+                ));
+            }
+        }
+    }
     out.push(scenario(
         "rime 2 mm/h g 1.08 paused 2 h at 5 mm",
         IceKind::Rime,
@@ -218,6 +241,21 @@ fn params_from_env() -> EstimatorParams {
     if let Some(v) = get("EST_ESCAPE") {
         p.history.escape = v;
     }
+    if let Some(v) = get("EST_CWIN") {
+        p.history.change_window_s = v;
+    }
+    if let Some(v) = get("EST_CNOISE") {
+        p.history.change_noise_ua = v;
+    }
+    if let Some(v) = get("EST_CSLOPE") {
+        p.history.change_slope_sd = v;
+    }
+    if let Some(v) = get("EST_RESUME") {
+        p.history.resume_ice_per_h = v;
+    }
+    if let Some(v) = get("EST_TELL") {
+        p.history.tell_nats = v;
+    }
     p
 }
 
@@ -252,6 +290,10 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
             segments.push(Segment::grow(c.kind, 4.0, 11.0, 5.0 * r, temp));
             (11.0, 11.0)
         }
+        Shape::Stop(at) => {
+            segments.push(Segment::grow(c.kind, 0.0, at, r, temp));
+            (at, at)
+        }
         Shape::Shed => {
             segments.push(Segment::grow(c.kind, 0.0, 6.0, r, temp));
             segments.push(Segment::dry(1200.0, temp));
@@ -262,7 +304,13 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
     let _ = top_mm;
     // 40 min with the ice staying after the growth stops.
     segments.push(Segment::pause(c.kind, 2400.0, temp));
-    let growth_end_s: f64 = segments.iter().map(|s| s.duration_s).sum::<f64>() - 2400.0;
+    let mut growth_end_s: f64 = segments.iter().map(|s| s.duration_s).sum::<f64>() - 2400.0;
+    // Paused growth: the clearing at the pause, the flag again after the
+    // resume.
+    let resume_s: Option<f64> = (c.shape == Shape::Pause).then(|| {
+        growth_end_s = segments.iter().take(2).map(|s| s.duration_s).sum();
+        growth_end_s + 7200.0
+    });
     let shed_at_s: Option<f64> =
         (c.shape == Shape::Shed).then(|| segments.iter().take(3).map(|s| s.duration_s).sum());
     let _ = stop_mm;
@@ -277,6 +325,8 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
     let frames = simulate(&run, params);
     let mut s = Score::default();
     let (mut on, mut off, mut dry) = (f64::NAN, f64::NAN, f64::NAN);
+    let mut not_acc = f64::NAN;
+    let mut resumed_on = f64::NAN;
     let mut rate_done = false;
     if std::env::var("EST_TRACE").is_ok() {
         for f in frames.iter().filter(|f| (f.t_s as u64).is_multiple_of(300)) {
@@ -301,8 +351,27 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
         if on.is_nan() && f.accreting {
             on = f.t_s - skip_s;
         }
+        if let Some(t0) = resume_s
+            && f.t_s >= t0
+            && resumed_on.is_nan()
+            && f.accreting
+        {
+            resumed_on = f.t_s - t0;
+        }
+        if f.rate_mm_per_h > 0.0 && f.thickness_mm > 0.0 {
+            s.grow_flagged.1 += 1;
+            if f.accreting {
+                s.grow_flagged.0 += 1;
+            }
+        }
         if f.t_s >= growth_end_s && off.is_nan() && !f.accreting {
             off = f.t_s - growth_end_s;
+        }
+        if f.t_s >= growth_end_s
+            && not_acc.is_nan()
+            && f.est_rate.is_some_and(|r| r.p_accreting <= ACCRETING_OFF)
+        {
+            not_acc = f.t_s - growth_end_s;
         }
         if let (Some(t0), Some(p)) = (shed_at_s, f.est)
             && f.t_s >= t0
@@ -362,7 +431,11 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
         }
     }
     s.flag_on_s.push(on);
+    if resume_s.is_some() {
+        s.resume_on_s.push(resumed_on);
+    }
     s.flag_off_s.push(off);
+    s.not_acc_s.push(not_acc);
     if shed_at_s.is_some() {
         s.shed_dry_s.push(dry);
     }
@@ -424,9 +497,11 @@ fn main() {
         }
     );
     println!(
-        "| class | within 2σ | RMS 2 mm | RMS 5 mm | RMS 10 mm | confidently thin | medium right ≥ 1 mm | gain RMS at 10 mm | rate at 60 min: RMS ln(est/true) | rate within 2σ | icing flag on, median / worst min | off after stop, median / worst min | shed → dry, worst min |"
+        "| class | within 2σ | RMS 2 mm | RMS 5 mm | RMS 10 mm | confidently thin | medium right ≥ 1 mm | gain RMS at 10 mm | rate at 60 min: RMS ln(est/true) | rate within 2σ | icing flag on, median / worst min | off after stop, median / worst min | not accreting after stop, median / worst min | on after resume, worst min | growth flagged | shed → dry, worst min |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!(
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    );
     // FILTER ending in `$`: that class only.
     let keep = |name: &str| match filter.strip_suffix('$') {
         Some(exact) => name == exact,
@@ -464,12 +539,16 @@ fn main() {
             all.rate_within.1 += s.rate_within.1;
             all.flag_on_s.extend(s.flag_on_s);
             all.flag_off_s.extend(s.flag_off_s);
+            all.not_acc_s.extend(s.not_acc_s);
+            all.resume_on_s.extend(s.resume_on_s);
+            all.grow_flagged.0 += s.grow_flagged.0;
+            all.grow_flagged.1 += s.grow_flagged.1;
             all.shed_dry_s.extend(s.shed_dry_s);
             all.medium.0 += s.medium.0;
             all.medium.1 += s.medium.1;
         }
         println!(
-            "| {} | {:.1} % | {:.2} | {:.2} | {:.2} | {} | {:.1} % | {:.3} | {:.2} | {:.0} % | {} / {} | {} / {} | {} |",
+            "| {} | {:.1} % | {:.2} | {:.2} | {:.2} | {} | {:.1} % | {:.3} | {:.2} | {:.0} % | {} / {} | {} / {} | {} / {} | {} | {:.0} % | {} |",
             c.name,
             100.0 * all.within.0 as f64 / all.within.1.max(1) as f64,
             rms(&all.err2[0]),
@@ -484,6 +563,10 @@ fn main() {
             worst_min(&all.flag_on_s),
             median_min(&all.flag_off_s),
             worst_min(&all.flag_off_s),
+            median_min(&all.not_acc_s),
+            worst_min(&all.not_acc_s),
+            worst_min(&all.resume_on_s),
+            100.0 * all.grow_flagged.0 as f64 / all.grow_flagged.1.max(1) as f64,
             worst_min(&all.shed_dry_s),
         );
     }

@@ -20,7 +20,7 @@
 mod estimator_eval;
 
 use estimator_eval::*;
-use fois_firmware::estimator::EstimatorParams;
+use fois_firmware::estimator::{EstimatorParams, IcingState};
 use fois_sim::IceKind;
 
 const SEEDS: std::ops::RangeInclusive<u64> = 101..=106;
@@ -250,6 +250,68 @@ fn the_icing_rate_is_honest_and_the_icing_period_starts_with_the_growth() {
         frames.iter().all(|f| !f.accreting),
         "water at +5 °C called icing"
     );
+}
+
+#[test]
+fn the_icing_period_ends_within_20_min_of_the_growth_stopping() {
+    // Rime and glazed at 2 and 10 mm/h grow from a dry face to 3 mm (a
+    // gain of 1.08 the node is not told, 1 Hz), then the ice stays: the
+    // icing period starts within 10 min of the growth and ends within
+    // 20 min of its end, to "not accreting" (P(accreting) ≤ 0.3; where the
+    // currents still move with the thickness, the change looks tell). Rime
+    // that stops at 11 mm (0.25 µA/mm: the slow rates' hypotheses move the
+    // currents by less than the noise of one window) leaves the period
+    // within 30 min (the goal restated for thick ice, firmware/README), to
+    // "uncertain" at least, never "accreting".
+    for (kind, temp, rate, stop_mm) in [
+        (IceKind::Rime, -8.0, 2.0, 3.0),
+        (IceKind::Rime, -8.0, 10.0, 3.0),
+        (IceKind::Glazed, -5.0, 2.0, 3.0),
+        (IceKind::Glazed, -5.0, 10.0, 3.0),
+        (IceKind::Rime, -8.0, 10.0, 11.0),
+    ] {
+        let seed = 104;
+        let mut run = Run::new(
+            seed,
+            vec![
+                Segment::dry(60.0, temp),
+                Segment::grow(kind, 0.0, stop_mm, rate, temp),
+                Segment::pause(kind, 1800.0, temp),
+            ],
+        );
+        run.frame_s = 1.0;
+        run.led = 1.08;
+        let stop_s = 60.0 + stop_mm / rate * 3600.0;
+        let frames = simulate(&run, EstimatorParams::default());
+        let on = frames
+            .iter()
+            .find(|f| f.accreting)
+            .map(|f| f.t_s - 60.0)
+            .expect("the icing period starts");
+        let cleared = |f: &&FrameRecord| {
+            if stop_mm < 10.0 {
+                f.icing == Some(IcingState::NotAccreting)
+            } else {
+                f.icing != Some(IcingState::Accreting)
+            }
+        };
+        let off = frames
+            .iter()
+            .filter(|f| f.t_s >= stop_s)
+            .find(cleared)
+            .map(|f| f.t_s - stop_s);
+        println!("{kind:?} {rate} mm/h to {stop_mm} mm: on after {on:.0} s, off after {off:?} s");
+        assert!(on <= 600.0, "{kind:?} {rate} mm/h: on after {on} s");
+        let off = off.expect("the period ends");
+        let limit_s = if stop_mm < 10.0 { 1200.0 } else { 1800.0 };
+        assert!(off <= limit_s, "{kind:?} {rate} mm/h: off after {off} s");
+        // And it stays off while the ice stays.
+        let late = frames.iter().filter(|f| f.t_s > stop_s + off);
+        assert!(
+            late.clone().all(|f| !f.accreting),
+            "{kind:?} {rate} mm/h: the period came back"
+        );
+    }
 }
 
 #[test]

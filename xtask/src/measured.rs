@@ -186,7 +186,7 @@ pub fn qemu_table(f: &QemuFigures) -> String {
          | one output frame (default config: K = 8, streaming, the `MeasurementV5` frame encoded, the ice estimator included) | {} |\n\
          | the ice estimator, per 10 Hz frame on average (nine frames gathered, one update of the gain hypotheses a second; rime at 5 mm) | {} |\n\
          | the ice estimator, per second of 10 Hz operation (budget {budget}) | {} |\n\
-         | the ice estimator, worst second of 24 ({}; the growth history's parts one a second; budget {budget}) | {} |\n\
+         | the ice estimator, worst second of 48 ({}; the growth history's parts one a second; budget {budget}) | {} |\n\
          | SysTick calibration: a loop of known length, instructions in ticks | {} in {} |\n\
          \n\
          The run's tests: {} passed on the emulated M4F.\n",

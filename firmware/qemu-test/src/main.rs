@@ -733,12 +733,17 @@ fn main() -> ! {
     for _ in 0..20 {
         let _ = est.step(3_600.0, None, Some(0.0));
     }
+    // Two windows of the change look, the second a frame short: its change
+    // is weighed within the seconds measured (the history's parts with it).
+    let window_s = est.params().history.change_window_s;
+    let _ = est.step(window_s, Some([0.4, 0.5]), Some(0.0));
+    let _ = est.step(window_s - 0.1, Some([0.4, 0.5]), Some(0.0));
     let mut worst = 0u32;
     let mut alive = 0usize;
     paint_stack(sp);
-    // 24 seconds: more than two periods of the growth history, whose parts
-    // fall in different seconds.
-    for _ in 0..24 {
+    // 48 seconds: more than one period of the growth history, whose parts
+    // (the change look's among them) fall in different seconds.
+    for _ in 0..48 {
         // One second of 10 Hz frames: nine gathered, one update of the bank.
         let t0 = ticks();
         for _ in 0..10 {
@@ -757,7 +762,7 @@ fn main() -> ! {
         fois_firmware::estimator::GAINS
     );
     hprintln!(
-        "stack high-water mark below main's frame: {} bytes in the node's frames (610), {} bytes in the estimator's worst seconds (24)",
+        "stack high-water mark below main's frame: {} bytes in the node's frames (610), {} bytes in the estimator's worst seconds (48)",
         stack_node,
         stack_high_water(sp)
     );

@@ -6,14 +6,15 @@
 //! learns the gain and the output posterior is the weighted mixture of the
 //! grids'.
 
-use fois_protocol::{IceEstimate, IcingEstimate};
+use fois_protocol::IceEstimate;
 
 use super::fast_math;
-use super::gain_bank::{GAINS, Gain, GainBank, UNKNOWN_GAIN_SD};
-use super::grid::{self, Grid, Moments, Shared};
-use super::history::{self, History, LEVELS, READY_TO_LOOK, Rate};
+use super::gain_bank::{GAINS, GainBank};
+use super::grid::{self, Grid, Shared};
+use super::grid_summary::Moments;
+use super::history::{History, LEVELS, READY_TO_LOOK, Rate};
 use super::params::{EstimatorParams, within};
-use super::posterior::{Posterior, Update, to_u16};
+use super::posterior::{Posterior, Update};
 use super::response::{ROWS, STEP_MM, row_mm};
 
 /// Prior probability of the dry face; the three media share the rest.
@@ -25,12 +26,6 @@ const MAX_DT_S: f32 = 86_400.0;
 /// Largest |current| that counts as a measurement, µA (far beyond the
 /// 330 µA full scale of the default front end).
 const MAX_CURRENT_UA: f32 = 10_000.0;
-
-/// P(accreting) above which an icing period starts.
-pub const ACCRETING_ON: f32 = 0.7;
-
-/// P(accreting) below which an icing period ends.
-pub const ACCRETING_OFF: f32 = 0.3;
 
 /// Most frames averaged into one update.
 pub const MAX_PENDING: usize = 16;
@@ -59,34 +54,36 @@ fn softplus(x: f32) -> f32 {
 /// the optical gain, weighted by how well each foresaw the currents.
 #[derive(Debug, Clone)]
 pub struct Estimator {
-    params: EstimatorParams,
-    grids: [Grid; GAINS],
+    pub(super) params: EstimatorParams,
+    pub(super) grids: [Grid; GAINS],
     /// The gain hypotheses, their weights and the temperature model.
-    bank: GainBank,
+    pub(super) bank: GainBank,
     /// ln of the normalising sum of the water prior exp(−d/scale).
-    water_log_norm: f32,
+    pub(super) water_log_norm: f32,
     /// Air temperature of the last frame, °C (`None`: no NTC).
-    air_temp_c: Option<f32>,
+    pub(super) air_temp_c: Option<f32>,
     /// Frames waiting for the next update (currents in nA).
-    pending: [[f32; 2]; MAX_PENDING],
-    pending_n: usize,
+    pub(super) pending: [[f32; 2]; MAX_PENDING],
+    pub(super) pending_n: usize,
     /// Frames since the last update that read far below zero.
-    pending_negative: usize,
+    pub(super) pending_negative: usize,
     /// Time since the last update, s.
-    pending_dt_s: f32,
-    update: Update,
-    posterior: Option<Posterior>,
+    pub(super) pending_dt_s: f32,
+    pub(super) update: Update,
+    pub(super) posterior: Option<Posterior>,
     /// The growth history beside the bank.
-    history: History,
+    pub(super) history: History,
     /// The bank's P(rime) of the last summary.
-    bank_p_rime: f32,
+    pub(super) bank_p_rime: f32,
     /// The growth rate after the last step.
-    rate: Option<Rate>,
+    pub(super) rate: Option<Rate>,
     /// The bank's likelihood gathered over parts, and the part done.
-    lik: [f32; LEVELS],
-    lik_part: u8,
+    pub(super) lik: [f32; LEVELS],
+    pub(super) lik_part: u8,
     /// The icing-period flag (P(accreting) with hysteresis).
-    accreting: bool,
+    pub(super) accreting: bool,
+    /// The change looks can tell growth from a pause.
+    pub(super) can_tell: bool,
 }
 
 impl Default for Estimator {
@@ -97,7 +94,7 @@ impl Default for Estimator {
 
 impl Estimator {
     /// A filter with these settings (sanitised), waiting for its first
-    /// frame, its gain unknown (1 ± [`UNKNOWN_GAIN_SD`]).
+    /// frame, its gain unknown (1 ± [`UNKNOWN_GAIN_SD`](super::gain_bank::UNKNOWN_GAIN_SD)).
     #[inline(never)]
     pub fn new(params: EstimatorParams) -> Self {
         let params = params.sanitized();
@@ -127,6 +124,7 @@ impl Estimator {
             lik: [0.0; LEVELS],
             lik_part: 0,
             accreting: false,
+            can_tell: true,
         }
     }
 
@@ -152,6 +150,7 @@ impl Estimator {
         self.lik_part = 0;
         self.rate = None;
         self.accreting = false;
+        self.can_tell = true;
     }
 
     /// The face is known to be clean and dry (a dark calibration has just
@@ -189,30 +188,6 @@ impl Estimator {
     /// The posterior after the last step (`None` before the first valid frame).
     pub fn posterior(&self) -> Option<Posterior> {
         self.posterior
-    }
-
-    /// The growth rate and P(accreting) after the last step (`None` before
-    /// the first valid frame, or with the history off).
-    pub fn rate(&self) -> Option<Rate> {
-        self.rate
-    }
-
-    /// Meteorological icing now: P(accreting) with hysteresis — set above
-    /// [`ACCRETING_ON`], cleared below [`ACCRETING_OFF`].
-    pub fn accreting(&self) -> bool {
-        self.accreting
-    }
-
-    /// The icing rate as the protocol carries it (µm/h, ‰, the icing
-    /// period's flag); `None` before the first valid frame or with the
-    /// history off.
-    pub fn icing_estimate(&self) -> Option<IcingEstimate> {
-        self.rate.map(|r| IcingEstimate {
-            rate_um_per_h: to_u16(r.mean_mm_per_h * 1000.0),
-            sigma_um_per_h: to_u16(r.sigma_mm_per_h * 1000.0),
-            accreting_permille: to_u16(r.p_accreting * 1000.0).min(1000),
-            accreting: self.accreting,
-        })
     }
 
     /// The estimate as the protocol carries it.
@@ -334,7 +309,7 @@ impl Estimator {
 
     /// The shared factors of this update: noise, the within-hypothesis gain
     /// spread, prior × temperature per medium.
-    fn shared(&self) -> Shared {
+    pub(super) fn shared(&self) -> Shared {
         let p = &self.params;
         let (ln_water_t, ln_ice_t) = match self.air_temp_c {
             Some(t) => (
@@ -417,6 +392,10 @@ impl Estimator {
         let slow = dt_s >= 1.5;
         let mut look_now = false;
         if hp.enabled && self.history.initialised {
+            let x_change = if negative { None } else { x };
+            let gain = self.bank.gain().gain;
+            self.history
+                .gather_currents(dt_s, x_change, gain, self.bank_p_rime, &hp);
             let due = self.history.gather(dt_s, hp.period_s);
             let stage = self.history.stage();
             if stage == READY_TO_LOOK {
@@ -526,99 +505,6 @@ impl Estimator {
         }
     }
 
-    /// The output posterior: the weighted mixture of the grids', each
-    /// weighted by the history's thickness marginal (mixed with a flat
-    /// share, the history's `escape`); the bank's own marginal is kept for
-    /// the history's next measurement, and the rate is the history's,
-    /// widened towards its prior as far as the bank's evidence falls
-    /// outside what the history foresaw.
-    fn summarise(&mut self) {
-        let shared = self.shared();
-        let hp = self.params.history;
-        let use_history = hp.enabled && self.history.initialised;
-        let mut h = [1.0 / LEVELS as f32; LEVELS];
-        if use_history {
-            let flat = hp.escape / LEVELS as f32;
-            let mut top = 0.0f32;
-            for (a, m) in h.iter_mut().zip(self.history.weight()) {
-                *a = (1.0 - hp.escape) * m + flat;
-                top = top.max(*a);
-            }
-            // Dry against ice stays the bank's call: the dry face weighs
-            // as the history's likeliest level. Thick clear ice reads
-            // almost like a dry face; weighted by a history that had shed
-            // it, glaze at 10 mm/h and gain 0.85 read confidently thin in
-            // 890 frames of 10 accretions.
-            if let Some(d) = h.first_mut() {
-                *d = top;
-            }
-        }
-        let mut parts = [None; GAINS];
-        let mut p_medium = [0.0f32; 4];
-        for ((p, g), w) in parts
-            .iter_mut()
-            .zip(self.grids.iter())
-            .zip(*self.bank.weights())
-        {
-            *p = g
-                .summarise_weighted(&shared, &h, w, &mut p_medium)
-                .map(|(m, ratio)| (w * ratio, m));
-        }
-        // Thickness from the product with the history; the medium from the
-        // bank alone (the history weighs thickness, not medium: weighted,
-        // rime's broad branch lost to glaze's narrow one between 1 and 3 mm
-        // — medium right 78 % of glazed frames instead of 93 %).
-        let post = Moments::mixture(parts.iter().filter_map(|m| *m)).map(|mut p| {
-            let s: f32 = p_medium.iter().sum();
-            if s > 0.0 {
-                for (a, b) in p.p_medium.iter_mut().zip(p_medium) {
-                    *a = b / s;
-                }
-            }
-            p
-        });
-        if post.is_none() {
-            // A state that cannot be normalised (never expected) restarts
-            // the filter rather than report nonsense.
-            let update = self.update;
-            self.reset();
-            self.update = update;
-            self.posterior = None;
-            return;
-        }
-        self.bank_p_rime = p_medium[3];
-        self.posterior = post;
-        self.rate = if use_history {
-            // Credibility of the history: the share of the output's weight
-            // its own part carries against the flat escape.
-            let w = self.history.credibility();
-            let (hr, pr) = (self.history.rate(), history::prior_rate());
-            let mean = w * hr.mean_mm_per_h + (1.0 - w) * pr.mean_mm_per_h;
-            let m2 = w
-                * (hr.sigma_mm_per_h * hr.sigma_mm_per_h + hr.mean_mm_per_h * hr.mean_mm_per_h)
-                + (1.0 - w)
-                    * (pr.sigma_mm_per_h * pr.sigma_mm_per_h + pr.mean_mm_per_h * pr.mean_mm_per_h);
-            let p_water = post.map(|p| p.p_medium[1]).unwrap_or(0.0);
-            let p_acc = w * hr.p_accreting + (1.0 - w) * pr.p_accreting;
-            Some(Rate {
-                mean_mm_per_h: mean,
-                sigma_mm_per_h: fast_math::sqrt((m2 - mean * mean).max(0.0)),
-                p_accreting: (p_acc * (1.0 - p_water)).clamp(0.0, 1.0),
-            })
-        } else {
-            None
-        };
-        if let Some(r) = self.rate {
-            if r.p_accreting >= ACCRETING_ON {
-                self.accreting = true;
-            } else if r.p_accreting <= ACCRETING_OFF {
-                self.accreting = false;
-            }
-        } else {
-            self.accreting = false;
-        }
-    }
-
     /// The bank's thickness likelihood, gain and medium summed out, over
     /// the gain hypotheses `part` (each grid's normalised, times its
     /// weight): the history's measurement.
@@ -632,74 +518,5 @@ impl Estimator {
             }
         }
         lik
-    }
-
-    /// Set the gain's prior: `gain` relative to the table (at
-    /// [`GAIN_REF_TEMP_C`](super::gain_bank::GAIN_REF_TEMP_C)) with relative standard
-    /// deviation `sd` (0.02 for a calibrated gain, [`UNKNOWN_GAIN_SD`] for
-    /// none). The hypotheses are centred on it, spaced by its standard
-    /// deviation (within 0.01 … 0.153 in ln g); what the frames had taught
-    /// about the gain is forgotten. Values out of range (gain outside
-    /// 0.1 … 10, NaN) leave the prior unknown.
-    pub fn set_gain_prior(&mut self, gain: f32, sd: f32) {
-        self.bank.set_prior(gain, sd);
-        if self.posterior.is_some() {
-            self.summarise();
-        }
-    }
-
-    /// Forget the gain: back to the unknown prior 1 ± [`UNKNOWN_GAIN_SD`].
-    pub fn reset_gain(&mut self) {
-        self.set_gain_prior(1.0, UNKNOWN_GAIN_SD);
-    }
-
-    /// The gain's prior (gain at [`GAIN_REF_TEMP_C`](super::gain_bank::GAIN_REF_TEMP_C),
-    /// relative sd).
-    pub fn gain_prior(&self) -> (f32, f32) {
-        self.bank.prior()
-    }
-
-    /// The temperature model of the gain: g(T) = g₂₅ · exp(κ (T − 25 °C))
-    /// with κ = `tempco_ppm_per_k` · 10⁻⁶ (clamped to ±5 %/K) applied to
-    /// the currents, and its uncertainty (documentation of the residual the
-    /// gain state absorbs).
-    pub fn set_temperature_model(&mut self, tempco_ppm_per_k: i32, sd_ppm_per_k: u32) {
-        self.bank
-            .set_temperature_model(tempco_ppm_per_k, sd_ppm_per_k);
-    }
-
-    /// The temperature of the optoelectronics (LED, phototransistors: the
-    /// MCU's die sensor beside them), °C; `None` keeps the last one.
-    pub fn set_optics_temp_c(&mut self, t_c: Option<f32>) {
-        self.bank.set_optics_temp_c(t_c);
-    }
-
-    /// The gain factor the temperature model applies now: exp(κ (T − 25 °C))
-    /// (1 without a temperature).
-    pub fn compensation(&self) -> f32 {
-        self.bank.compensation()
-    }
-
-    /// The gain estimate (the mixture of the hypotheses, at the
-    /// temperature now); `None` before the first valid frame.
-    pub fn gain(&self) -> Option<Gain> {
-        self.posterior?;
-        Some(self.bank.gain())
-    }
-
-    /// The weight of each gain hypothesis (sums to 1).
-    pub fn gain_weights(&self) -> &[f32; GAINS] {
-        self.bank.weights()
-    }
-
-    /// The gain hypotheses (at [`GAIN_REF_TEMP_C`](super::gain_bank::GAIN_REF_TEMP_C)).
-    pub fn gain_hypotheses(&self) -> [f32; GAINS] {
-        self.bank.hypotheses()
-    }
-
-    /// Weight of the two outermost hypotheses: near 1, the gain may lie
-    /// beyond the range the bank covers.
-    pub fn gain_outside(&self) -> f32 {
-        self.bank.outside()
     }
 }

@@ -19,6 +19,7 @@
 //! share of the probability restarts anywhere (what the model does not
 //! know: a rate beyond the grid, melting, a face cleaned).
 
+use super::change::{Change, TELL_WINDOW_S};
 use super::fast_math;
 use super::params::HistoryParams;
 use super::response::{ROWS, STEP_MM};
@@ -35,8 +36,9 @@ pub const RATE_MIN_MM_PER_H: f32 = 0.3;
 /// See [`RATE_MIN_MM_PER_H`].
 pub const RATE_MAX_MM_PER_H: f32 = 13.0;
 
-/// The stage at which the prediction is done and waits for its look.
-pub const READY_TO_LOOK: u8 = 7;
+/// The stage at which the prediction and the change look are done and
+/// the level look waits.
+pub const READY_TO_LOOK: u8 = 25;
 
 /// A level's probability below this (relative to the sum) is set to zero.
 const FLOOR: f32 = 1e-20;
@@ -91,11 +93,18 @@ pub(crate) struct History {
     walk: f32,
     /// Pause, resume, shed, restart probabilities and the restart's share
     /// per state, over the prediction.
-    switch: [f32; 5],
+    switch: [f32; 6],
     /// The look's factor per level.
     factor: [f32; LEVELS],
     /// The levels' sums being gathered over parts.
     scratch: [f32; LEVELS],
+    /// The change look (the currents' windows).
+    change: Change,
+    /// The change look weighed a change this update.
+    changed: bool,
+    /// The bank's gain and P(rime) for the change look.
+    gain: f32,
+    p_rime: f32,
     /// The history has its first state.
     pub initialised: bool,
 }
@@ -116,9 +125,13 @@ impl History {
             pending_s: 0.0,
             stage: 0,
             walk: 0.0,
-            switch: [0.0; 5],
+            switch: [0.0; 6],
             factor: [1.0; LEVELS],
             scratch: [0.0; LEVELS],
+            change: Change::new(),
+            changed: false,
+            gain: 1.0,
+            p_rime: 0.5,
             initialised: false,
         }
     }
@@ -182,6 +195,7 @@ impl History {
         self.pending_s = 0.0;
         self.stage = 0;
         self.scratch = [0.0; LEVELS];
+        self.change.clear();
         self.initialised = true;
         self.update_marginal();
     }
@@ -214,10 +228,13 @@ impl History {
     /// The next part of the update; at 10 Hz one part per second, so that
     /// no second carries more than one (the budget's worst second). The
     /// prediction: 1 growth; 2, 3 pause, resume, shed and restarts (half
-    /// the rate bins each); 4, 5 the rate walk (growing, paused); 6, 7 the
-    /// prediction's marginal ([`READY_TO_LOOK`]: the caller looks with
-    /// [`Self::look`]). The look applied: 9 every state times its level's
-    /// factor, 10 normalised, 0 the marginal. Returns the stage reached.
+    /// the rate bins each); 4, 5 the rate walk (growing, paused); 6 the
+    /// change look's start, 7–22 the change look (half a rate bin's levels
+    /// each); 23, 24 the levels' sums (then the levels restored to their
+    /// masses before the change look); 25 the prediction's marginal
+    /// ([`READY_TO_LOOK`]: the caller looks with [`Self::look`]). The look
+    /// applied: 27 every state times its level's factor, 28 normalised, 0
+    /// the marginal. Returns the stage reached.
     pub fn advance(&mut self, p: &HistoryParams) -> u8 {
         match self.stage {
             0 => self.predict_growth(p),
@@ -226,11 +243,50 @@ impl History {
             3 => self.predict_rate(0),
             4 => self.predict_rate(1),
             5 => {
-                self.sum_levels(0);
+                self.changed = self.change.start();
+                if self.changed {
+                    // Each level's mass before the change look: it moves
+                    // probability between growing, paused and the rates
+                    // within a level, never between levels.
+                    self.factor = [0.0; LEVELS];
+                    for row in self.grow.iter().chain(self.pause.iter()) {
+                        for (a, v) in self.factor.iter_mut().zip(row) {
+                            *a += v;
+                        }
+                    }
+                }
                 self.stage = 6;
             }
-            6 => {
+            6..=21 => {
+                // Half a rate bin's levels a part.
+                let part = usize::from(self.stage - 6);
+                let (b, half) = (part / 2, part % 2);
+                let first = half * (LEVELS / 2);
+                let last = if half == 0 { LEVELS / 2 } else { LEVELS };
+                if let (Some(g), Some(&r)) = (
+                    self.grow.get_mut(b).and_then(|g| g.get_mut(first..last)),
+                    self.rates.get(b),
+                ) {
+                    self.change.weigh(g, first, r, self.gain, self.p_rime, p);
+                }
+                if part + 1 == 2 * RATE_BINS {
+                    self.change.end();
+                }
+                self.stage += 1;
+            }
+            22 => {
+                self.sum_levels(0);
+                self.stage = 23;
+            }
+            23 => {
                 self.sum_levels(1);
+                if self.changed {
+                    self.changed = false;
+                    self.restore_levels();
+                }
+                self.stage = 24;
+            }
+            24 => {
                 let m = self.scratch;
                 let s: f32 = m.iter().sum();
                 self.scratch = [0.0; LEVELS];
@@ -238,9 +294,9 @@ impl History {
                 self.set_marginal(m.map(|a| a * inv));
                 self.stage = READY_TO_LOOK;
             }
-            8 => self.apply_factor(),
-            9 => self.normalise_applied(),
-            10 => {
+            26 => self.apply_factor(),
+            27 => self.normalise_applied(),
+            28 => {
                 let m = self.scratch;
                 self.scratch = [0.0; LEVELS];
                 self.set_marginal(m);
@@ -249,6 +305,48 @@ impl History {
             _ => {}
         }
         self.stage
+    }
+
+    /// The currents of an update (`None`: the bank did not measure) and
+    /// its time, for the change look's windows; `gain` and `p_rime` the
+    /// bank's, for its next look.
+    pub fn gather_currents(
+        &mut self,
+        dt_s: f32,
+        x_na: Option<[f32; 2]>,
+        gain: f32,
+        p_rime: f32,
+        p: &HistoryParams,
+    ) {
+        self.change.gather(dt_s, x_na, p);
+        self.gain = gain;
+        self.p_rime = p_rime;
+    }
+
+    /// Expected information of the change looks of 20 min about
+    /// growth as the history believes it, nats (`None`: no change look yet).
+    pub fn discern_nats(&self, p: &HistoryParams) -> Option<f32> {
+        self.change
+            .discern()
+            .map(|d| d * TELL_WINDOW_S / p.change_window_s)
+    }
+
+    /// After the change look: every level back to its mass before it
+    /// (held in `factor`; the scratch holds the masses after it, and then
+    /// the ones before).
+    fn restore_levels(&mut self) {
+        let mut ratio = [1.0f32; LEVELS];
+        for ((r, &before), &after) in ratio.iter_mut().zip(&self.factor).zip(&self.scratch) {
+            if after > 0.0 {
+                *r = before / after;
+            }
+        }
+        for row in self.grow.iter_mut().chain(self.pause.iter_mut()) {
+            for (v, r) in row.iter_mut().zip(&ratio) {
+                *v *= r;
+            }
+        }
+        self.scratch = self.factor;
     }
 
     /// Add the levels of the growing (`mode` 0) or paused states to the
@@ -309,6 +407,7 @@ impl History {
             prob(p.shed_per_h),
             restart,
             restart * (total / (2 * RATE_BINS * LEVELS) as f32),
+            prob(p.resume_ice_per_h),
         ];
     }
 
@@ -316,7 +415,7 @@ impl History {
     /// the rate bins.
     fn predict_switches(&mut self, half: usize) {
         self.stage = 2 + half as u8;
-        let [pause, resume, shed, restart, restart_each] = self.switch;
+        let [pause, resume_dry, shed, restart, restart_each, resume_ice] = self.switch;
         let bins = if half == 0 {
             0..RATE_BINS / 2
         } else {
@@ -327,6 +426,7 @@ impl History {
             let mut shed_sum = 0.0f32;
             for (j, (gv, qv)) in g.iter_mut().zip(q.iter_mut()).enumerate() {
                 let (a, c) = (*gv, *qv);
+                let resume = if j == 0 { resume_dry } else { resume_ice };
                 let mut ng = a * (1.0 - pause) + c * resume;
                 let mut nq = c * (1.0 - resume) + a * pause;
                 if j > 0 {
@@ -368,12 +468,12 @@ impl History {
         }
     }
 
-    /// The look (at [`READY_TO_LOOK`], → 8): the bank's thickness likelihood `lik` (sums to
+    /// The look (at [`READY_TO_LOOK`], → 26): the bank's thickness likelihood `lik` (sums to
     /// 1), tempered by the looks it is worth; `p_rime` the bank's
     /// probability of rime (the early trust). Also how well the
     /// prediction foresaw it (the history's credibility).
     pub fn look(&mut self, lik: &[f32; LEVELS], p_rime: f32, p: &HistoryParams) {
-        self.stage = 8;
+        self.stage = 26;
         let mut o = 0.0f32;
         for (l, m) in lik.iter().zip(self.marginal.iter()) {
             o += l * m;
@@ -406,10 +506,10 @@ impl History {
         }
     }
 
-    /// The look applied (stage 8 → 9): every state times its level's
+    /// The look applied (stage 26 → 27): every state times its level's
     /// factor, the levels' sums in the scratch.
     fn apply_factor(&mut self) {
-        self.stage = 9;
+        self.stage = 27;
         let mut m = [0.0f32; LEVELS];
         for row in self.grow.iter_mut().chain(self.pause.iter_mut()) {
             for ((v, f), a) in row.iter_mut().zip(self.factor.iter()).zip(m.iter_mut()) {
@@ -420,9 +520,9 @@ impl History {
         self.scratch = m;
     }
 
-    /// Normalised (stage 9 → 10); the scratch holds the marginal.
+    /// Normalised (stage 27 → 28); the scratch holds the marginal.
     fn normalise_applied(&mut self) {
-        self.stage = 10;
+        self.stage = 28;
         let total: f32 = self.scratch.iter().sum();
         if !(total.is_finite() && total > 0.0) {
             self.reset_flat();

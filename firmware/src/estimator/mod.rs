@@ -59,19 +59,29 @@
 //! # Files
 //!
 //! The files import in one direction: [`filter`] (the [`Estimator`] and its
-//! driver) reads [`gain_bank`], `grid`, [`history`], [`posterior`],
-//! [`response`], [`params`]; `grid` reads the response table through
-//! [`response`] and [`table_entry`], and the history's level count;
-//! [`history`] (the growth history: thickness × rate × growing/paused, the
-//! icing rate) reads [`params`] and [`response`]; the generated [`table`]
+//! driver: frames, updates, the history's parts) reads [`gain_bank`], `grid`,
+//! `grid_summary`, [`history`], [`posterior`], [`response`], [`params`];
+//! [`output`] (the posterior, the icing rate, period and state) and
+//! `gain_settings` (the gain's prior and temperature model as API) add
+//! methods to the [`Estimator`] and read [`filter`] (which reads neither);
+//! `grid_summary` (a grid's moments, the mixture, the history's likelihood)
+//! reads `grid` (the grid filter: predict, update), which reads the response
+//! table through [`response`] and [`table_entry`]; [`history`] (the growth
+//! history: thickness × rate × growing/paused, the icing rate) reads
+//! [`params`], [`response`] and `change` (the change look: the currents'
+//! windows against paused and growing states); the generated [`table`]
 //! reads only [`table_entry`]. This file declares them and re-exports their
 //! items.
 
+mod change;
 pub(crate) mod fast_math;
 pub mod filter;
 pub mod gain_bank;
+mod gain_settings;
 mod grid;
+mod grid_summary;
 pub mod history;
+pub mod output;
 pub mod params;
 pub mod posterior;
 pub mod response;
@@ -79,9 +89,10 @@ pub mod response;
 pub mod table;
 pub mod table_entry;
 
-pub use filter::{ACCRETING_OFF, ACCRETING_ON, Estimator, MAX_PENDING};
+pub use filter::{Estimator, MAX_PENDING};
 pub use gain_bank::{GAIN_REF_TEMP_C, GAINS, Gain, UNKNOWN_GAIN_SD};
 pub use history::{RATE_BINS, RATE_MAX_MM_PER_H, RATE_MIN_MM_PER_H, Rate};
+pub use output::{ACCRETING_OFF, ACCRETING_ON, IcingState};
 pub use params::{EstimatorParams, HistoryParams};
 pub use posterior::{Posterior, Update};
 pub use response::{MEDIA, ROWS, STEP_MM};

@@ -82,6 +82,7 @@ impl Default for EstimatorParams {
 }
 
 /// `x` if finite and within `lo..=hi`, else `default`.
+#[inline(never)]
 pub(super) fn within(x: f32, lo: f32, hi: f32, default: f32) -> f32 {
     if x.is_finite() && x >= lo && x <= hi {
         x
@@ -93,6 +94,7 @@ pub(super) fn within(x: f32, lo: f32, hi: f32, default: f32) -> f32 {
 impl EstimatorParams {
     /// Every field in its valid range; a field that is not (NaN, negative,
     /// absurd) takes its default.
+    #[inline(never)]
     pub fn sanitized(self) -> Self {
         let d = EstimatorParams::default();
         EstimatorParams {
@@ -141,9 +143,12 @@ pub struct HistoryParams {
     /// Growth pauses at this rate, per hour (default 0.2; 0: no pause
     /// state — the design without it).
     pub pause_per_h: f32,
-    /// Paused growth (and a dry face) starts growing at this rate, per hour
-    /// (default 1).
+    /// A dry face starts growing at this rate, per hour (default 1: the
+    /// onset of an icing event).
     pub resume_per_h: f32,
+    /// Paused growth on ice resumes at this rate, per hour (default 0.3:
+    /// ice stays on the face for hours after an icing event ends).
+    pub resume_ice_per_h: f32,
     /// The ice sheds to a dry face at this rate, per hour (default 0.5).
     pub shed_per_h: f32,
     /// Share of the probability that restarts anywhere, per hour (default
@@ -170,6 +175,22 @@ pub struct HistoryParams {
     /// weight its product with the bank's narrow, wrong branches (rime read
     /// as glaze at 1–3 mm) was confident.
     pub output_weight: f32,
+    /// Length of the change look's windows, s (default 240): the currents'
+    /// mean over one window against the previous one's.
+    pub change_window_s: f32,
+    /// Noise of the change between two windows' means (flicker, baseline
+    /// drift), per channel, µA (default 0.05).
+    pub change_noise_ua: f32,
+    /// Relative spread of an accretion's slope dμ/dd against the table's
+    /// (default 0.8: at 0.3 the icing period's worst clearing after
+    /// 2 mm/h of rime or glaze stopped at 6 mm, or 10 mm/h of rime at
+    /// 11 mm, took 27–35 min instead of 19–23 min).
+    pub change_slope_sd: f32,
+    /// The node can tell growth from a pause when the change looks of
+    /// 20 min (the clearing goal) are worth at least this many nats if the ice grew as
+    /// the history believes (default 2); below, the icing state is
+    /// "uncertain" and the icing period ends.
+    pub tell_nats: f32,
 }
 
 impl Default for HistoryParams {
@@ -180,6 +201,7 @@ impl Default for HistoryParams {
             rate_walk_per_h: 1.0,
             pause_per_h: 0.2,
             resume_per_h: 1.0,
+            resume_ice_per_h: 0.3,
             shed_per_h: 0.5,
             restart_per_h: 0.1,
             looks_per_mm: 0.3,
@@ -188,12 +210,17 @@ impl Default for HistoryParams {
             looks_per_h: 1.0,
             escape: 0.05,
             output_weight: 0.35,
+            change_window_s: 240.0,
+            change_noise_ua: 0.05,
+            change_slope_sd: 0.8,
+            tell_nats: 2.0,
         }
     }
 }
 
 impl HistoryParams {
     /// Every field in its valid range; a field that is not takes its default.
+    #[inline(never)]
     pub fn sanitized(self) -> Self {
         let d = HistoryParams::default();
         HistoryParams {
@@ -202,6 +229,7 @@ impl HistoryParams {
             rate_walk_per_h: within(self.rate_walk_per_h, 0.0, 100.0, d.rate_walk_per_h),
             pause_per_h: within(self.pause_per_h, 0.0, 100.0, d.pause_per_h),
             resume_per_h: within(self.resume_per_h, 0.0, 100.0, d.resume_per_h),
+            resume_ice_per_h: within(self.resume_ice_per_h, 0.0, 100.0, d.resume_ice_per_h),
             shed_per_h: within(self.shed_per_h, 0.0, 100.0, d.shed_per_h),
             restart_per_h: within(self.restart_per_h, 0.0, 100.0, d.restart_per_h),
             looks_per_mm: within(self.looks_per_mm, 0.0, 100.0, d.looks_per_mm),
@@ -215,6 +243,10 @@ impl HistoryParams {
             looks_per_h: within(self.looks_per_h, 0.0, 3600.0, d.looks_per_h),
             escape: within(self.escape, 1e-4, 1.0, d.escape),
             output_weight: within(self.output_weight, 0.0, 1.0, d.output_weight),
+            change_window_s: within(self.change_window_s, 1.0, 3600.0, d.change_window_s),
+            change_noise_ua: within(self.change_noise_ua, 0.001, 100.0, d.change_noise_ua),
+            change_slope_sd: within(self.change_slope_sd, 0.0, 10.0, d.change_slope_sd),
+            tell_nats: within(self.tell_nats, 0.0, 1000.0, d.tell_nats),
         }
     }
 }

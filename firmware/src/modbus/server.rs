@@ -26,7 +26,7 @@ use fois_protocol::registers::{
     LINK_PROTOCOL, MODBUS_ADDRESS, NODE_BASE, NODE_REGISTERS, NODE_TABLE, ONSET_FRAMES, PARITY,
     REGISTERS, THAW_LIMIT, WRITE_ENABLE, WRITE_ENABLE_KEY, WRITE_ENABLE_MS,
 };
-use fois_protocol::{Command, LinkProtocol, Parity};
+use fois_protocol::{LinkProtocol, Parity};
 use rmodbus::consts::ModbusFunction;
 use rmodbus::server::{ModbusFrame, Read};
 use rmodbus::{ErrorKind, ModbusProto};
@@ -306,10 +306,10 @@ impl RtuServer {
             queue(Action::SetConfig(config))?;
         }
         if ack {
-            queue(Action::Command(Command::AckAlarmV4))?;
+            queue(Action::AckAlarm)?;
         }
         if dark {
-            queue(Action::Command(Command::CalibrateDarkV4 { force: false }))?;
+            queue(Action::CalibrateDark)?;
         }
         if link != view.link {
             queue(Action::SetLink(link))?;

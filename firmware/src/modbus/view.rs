@@ -54,8 +54,10 @@ impl ModbusView {
 /// What a write asks the node to do, after the answer.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Action {
-    /// A command (alarm acknowledge, dark calibration).
-    Command(Command),
+    /// Acknowledge the alarm (`AckAlarmV4`).
+    AckAlarm,
+    /// A guarded dark calibration (`CalibrateDarkV4`, not forced).
+    CalibrateDark,
     /// A new config (setpoints written), already validated.
     SetConfig(Config),
     /// New link settings (protocol, address, parity), already validated.
@@ -66,7 +68,8 @@ impl Action {
     /// The node command that carries it out.
     pub fn command(self) -> Command {
         match self {
-            Action::Command(c) => c,
+            Action::AckAlarm => Command::AckAlarmV4,
+            Action::CalibrateDark => Command::CalibrateDarkV4 { force: false },
             Action::SetConfig(c) => Command::SetConfigV3(c),
             Action::SetLink(l) => Command::SetLinkSettings(l),
         }

@@ -7,7 +7,7 @@
 //! `examples/estimator_eval.rs`.
 #![allow(dead_code)]
 
-use fois_firmware::estimator::{Estimator, EstimatorParams, Gain, Posterior, Rate};
+use fois_firmware::estimator::{Estimator, EstimatorParams, Gain, IcingState, Posterior, Rate};
 use fois_protocol::Medium;
 use fois_sim::{Curve, Geometry, IceKind, SensorKind, SimConfig, accretion_curve};
 use rand_core::Rng;
@@ -121,6 +121,8 @@ pub struct FrameRecord {
     pub est_rate: Option<Rate>,
     /// The estimator's icing-period flag after the frame.
     pub accreting: bool,
+    /// The estimator's icing state after the frame.
+    pub icing: Option<IcingState>,
 }
 
 pub fn medium_of(kind: Option<IceKind>) -> Medium {
@@ -230,6 +232,7 @@ pub fn simulate(run: &Run, params: EstimatorParams) -> Vec<FrameRecord> {
                 rate_mm_per_h: if seg.cover.is_some() { rate_now } else { 0.0 },
                 est_rate: est.rate(),
                 accreting: est.accreting(),
+                icing: est.icing_state(),
             });
             t += run.frame_s;
             if seg.cover.is_some() {
