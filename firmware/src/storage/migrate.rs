@@ -9,9 +9,9 @@
 //! `storage::record::decode`), into the new store; once it reads back
 //! there, the old region is erased, so the copy happens once.
 //!
-//! Power cuts: the old region is only read (through [`ReadOnly`]: not even
-//! sequential-storage's repair may erase in it) until the new record is
-//! complete and read back; a cut anywhere before leaves the old record
+//! Power cuts: the old region is only read (by `storage::old_store`, a
+//! read-only reader of sequential-storage's format: no repair may erase in
+//! it) until the new record is complete and read back; a cut anywhere before leaves the old record
 //! where it was and the next boot copies again (the new store's partial
 //! item is overwritten: `Storage::overwrite`). A cut during the old
 //! region's erase leaves a valid new record, so the next boot does nothing.
@@ -27,11 +27,9 @@
 
 use core::ops::Range;
 
-use embedded_storage::nor_flash::{
-    ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
-};
+use embedded_storage::nor_flash::NorFlash;
 
-use crate::storage::flash_store::FlashStore;
+use crate::storage::old_store;
 use crate::storage::record::{self, MAX_RECORD};
 use crate::storage::{Storage, StorageError};
 
@@ -55,60 +53,6 @@ pub enum Migration {
         /// The old region was erased after the copy.
         old_erased: bool,
     },
-}
-
-/// A flash seen read-only: erase and write fail without touching it.
-#[derive(Debug)]
-pub struct ReadOnly<'a, F>(&'a mut F);
-
-impl<'a, F> ReadOnly<'a, F> {
-    /// Wrap `flash`.
-    pub fn new(flash: &'a mut F) -> Self {
-        ReadOnly(flash)
-    }
-}
-
-/// The error of a [`ReadOnly`] flash.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum ReadOnlyError<E> {
-    /// The flash's own read error.
-    Flash(E),
-    /// An erase or write was refused.
-    Refused,
-}
-
-impl<E: NorFlashError> NorFlashError for ReadOnlyError<E> {
-    fn kind(&self) -> NorFlashErrorKind {
-        match self {
-            ReadOnlyError::Flash(e) => e.kind(),
-            ReadOnlyError::Refused => NorFlashErrorKind::Other,
-        }
-    }
-}
-
-impl<F: ErrorType> ErrorType for ReadOnly<'_, F> {
-    type Error = ReadOnlyError<F::Error>;
-}
-
-impl<F: ReadNorFlash> ReadNorFlash for ReadOnly<'_, F> {
-    const READ_SIZE: usize = F::READ_SIZE;
-    fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), Self::Error> {
-        self.0.read(offset, bytes).map_err(ReadOnlyError::Flash)
-    }
-    fn capacity(&self) -> usize {
-        self.0.capacity()
-    }
-}
-
-impl<F: NorFlash> NorFlash for ReadOnly<'_, F> {
-    const WRITE_SIZE: usize = F::WRITE_SIZE;
-    const ERASE_SIZE: usize = F::ERASE_SIZE;
-    fn erase(&mut self, _from: u32, _to: u32) -> Result<(), Self::Error> {
-        Err(ReadOnlyError::Refused)
-    }
-    fn write(&mut self, _offset: u32, _bytes: &[u8]) -> Result<(), Self::Error> {
-        Err(ReadOnlyError::Refused)
-    }
 }
 
 /// The layout version of a valid record in `bytes`, `None` if they hold none.
@@ -139,8 +83,9 @@ where
         return Ok(Migration::NotNeeded);
     }
     let mut record = [0xFFu8; MAX_RECORD];
-    let found = FlashStore::new(ReadOnly::new(old), old_range.clone())?.read(&mut record);
-    let Ok(n) = found else {
+    let Some(n) =
+        old_store::newest_record(old, old_range.clone(), O::ERASE_SIZE as u32, &mut record)
+    else {
         return Ok(Migration::NothingToMove);
     };
     let bytes = record.get(..n).unwrap_or(&[]);
