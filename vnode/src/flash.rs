@@ -1,13 +1,13 @@
-//! The virtual node's flash: the board's two 128 KiB store sectors in RAM
+//! The virtual node's flash: the board's two 16 KiB store sectors in RAM
 //! (the firmware's [`RamFlash`]), with the board's stall: while the F446
 //! erases or programs its one flash bank the CPU stops, so each operation
 //! moves the virtual clock on by the datasheet's worst-case time. A save
-//! that erases a sector holds the node for 2 s of virtual time, as on the
+//! that erases a sector holds the node for 0.5 s of virtual time, as on the
 //! board (x32 parallelism, V_DDA ≥ 2.7 V), and the frame schedule, the
 //! `Hello` cadence and the host's command timeout see it.
 
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
-use fois_firmware::platform::watchdog::ERASE_128K_X32_MAX_MS;
+use fois_firmware::platform::watchdog::ERASE_16K_X32_MAX_MS;
 use fois_firmware::storage::flash_store::{BOARD_SECTOR_BYTES, STORE_PAGES};
 use fois_firmware::storage::ram_flash::{RamFlash, RamFlashError};
 
@@ -15,6 +15,9 @@ use crate::VirtualClock;
 
 /// The RAM flash under [`VirtualFlash`].
 pub type BoardRamFlash = RamFlash<Vec<u8>, BOARD_SECTOR_BYTES, STORE_PAGES>;
+
+// The stall per page is the 16 KiB sector's erase time.
+const _: () = assert!(BOARD_SECTOR_BYTES == 16 * 1024);
 
 /// Bytes of the virtual flash (and of a state file).
 pub const FLASH_BYTES: usize = BOARD_SECTOR_BYTES * STORE_PAGES;
@@ -84,7 +87,7 @@ impl NorFlash for VirtualFlash {
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), Self::Error> {
         let pages = u64::from(to.saturating_sub(from)) / BOARD_SECTOR_BYTES as u64;
-        self.stall_ns(pages * u64::from(ERASE_128K_X32_MAX_MS) * 1_000_000);
+        self.stall_ns(pages * u64::from(ERASE_16K_X32_MAX_MS) * 1_000_000);
         self.flash.erase(from, to)
     }
 
@@ -107,7 +110,7 @@ mod tests {
         // 12 words × 100 µs.
         assert_eq!(clock.now_ns(), 1_200_000);
         f.erase(0, BOARD_SECTOR_BYTES as u32).unwrap();
-        assert_eq!(clock.now_ns(), 1_200_000 + 2_000_000_000);
+        assert_eq!(clock.now_ns(), 1_200_000 + 500_000_000);
         assert!(f.bytes()[..48].iter().all(|&b| b == 0xFF));
         let mut g = VirtualFlash::new(vec![0xFF; FLASH_BYTES], None);
         g.erase(0, FLASH_BYTES as u32).unwrap();

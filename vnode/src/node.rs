@@ -9,7 +9,7 @@
 //! `Node` and a fresh `Schedule` on the same flash. The flash is the
 //! board's too: the firmware's [`FlashStore`] (sequential-storage) over a
 //! [`VirtualFlash`] (the firmware's `RamFlash` of the board's geometry, two
-//! 128 KiB sectors, whose erases stall the virtual clock as the board's do).
+//! 16 KiB sectors, whose erases stall the virtual clock as the board's do).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

@@ -13,6 +13,7 @@
 //! | `fois-gateway` holds no vnode, sim, firmware, plotters, indicatif | a service on a site computer, not the simulator |
 //! | `fois-hil` holds no clap, serialport, plotters, indicatif | the suite runs the node, not the CLI |
 //! | `xtask` depends on no FOIS crate | it runs cargo |
+//! | `fois-boot` depends on no FOIS crate, no sequential-storage, postcard or defmt (default features) | the bootloader cannot be updated over the link: small, no log, the flash layout shared by its source file |
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -40,7 +41,7 @@ pub struct Rule {
 }
 
 /// Every downward rule of ARCHITECTURE.md.
-pub const RULES: [Rule; 8] = [
+pub const RULES: [Rule; 9] = [
     Rule {
         package: "fois-sim",
         edges: "normal,build",
@@ -120,6 +121,15 @@ pub const RULES: [Rule; 8] = [
         forbidden: &["fois-*"],
         allowed: &[],
         why: "xtask runs cargo, it links no FOIS crate",
+    },
+    Rule {
+        package: "fois-boot",
+        edges: "normal,build",
+        target: Some("thumbv7em-none-eabihf"),
+        forbidden: &["fois-*", "sequential-storage", "postcard", "defmt"],
+        allowed: &[],
+        why: "the bootloader is never updated in the field: it stays small and links no FOIS crate \
+              (it shares the flash layout's source file) and no log by default",
     },
 ];
 

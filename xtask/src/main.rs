@@ -25,9 +25,13 @@
 //!   the recorded pass (what `ci` runs).
 //! - `cargo xtask size [--write]` — cross-build the firmware's two link
 //!   variants (the ST-LINK's virtual COM port; `field-link`: RS-485 on
-//!   USART6), lint the field one on thumb, check both against the size
-//!   budget and firmware/README.md's size table against them (stale: fails;
-//!   `--write`: rewrites it; [`generated_docs`]).
+//!   USART6) and the bootloader (`fois-boot`), lint the field one on thumb,
+//!   check each against its size budget (application 128 KiB, bootloader
+//!   24 KiB) and firmware/README.md's size table against them (stale:
+//!   fails; `--write`: rewrites it; [`generated_docs`]).
+//! - `cargo xtask image [--features field-link]` — cross-build the
+//!   application and write its raw binary `fois-node.bin` next to the ELF
+//!   (llvm-objcopy): the input of `foisctl sign`.
 //! - `cargo xtask qemu [--write]` — run the firmware logic under
 //!   qemu-system-arm, and check (or with `--write` rewrite)
 //!   firmware/README.md's table of its instruction counts.
@@ -60,6 +64,15 @@ const RAM_BUDGET_BYTES: u64 = 32 * 1024;
 /// Both, for the size table.
 const BUDGET: measured::Budget = measured::Budget {
     flash_bytes: FLASH_BUDGET_BYTES,
+    ram_bytes: RAM_BUDGET_BYTES,
+};
+/// Flash budget of the bootloader (`fois-boot`, sectors 0–1: 32 KiB, a
+/// quarter kept free); the same number as firmware/src/platform/
+/// flash_layout.rs's `BOOTLOADER_BUDGET_BYTES` (checked by a test here).
+const BOOT_FLASH_BUDGET_BYTES: u64 = 24 * 1024;
+/// The bootloader's budgets, for the size table (RAM: the same 32 KiB).
+const BOOT_BUDGET: measured::Budget = measured::Budget {
+    flash_bytes: BOOT_FLASH_BUDGET_BYTES,
     ram_bytes: RAM_BUDGET_BYTES,
 };
 const THUMB: &str = "thumbv7em-none-eabihf";
@@ -100,8 +113,9 @@ fn main() -> Result<()> {
         "size" => {
             let mode = Mode::from_args("size", &std::env::args().skip(2).collect::<Vec<_>>())?;
             let sizes = firmware_variants()?;
-            measured::sync_sizes(&sizes, BUDGET, mode)
+            measured::sync_sizes(&sizes, mode)
         }
+        "image" => image(&std::env::args().skip(2).collect::<Vec<_>>()),
         "qemu" => qemu(
             true,
             Mode::from_args("qemu", &std::env::args().skip(2).collect::<Vec<_>>())?,
@@ -123,8 +137,11 @@ fn main() -> Result<()> {
                  ha-check [--if-changed]  the gateway's Home Assistant discovery checked by Home Assistant\n         \
                  2024.1.6 and 2024.3.3 (installed into virtualenvs under ~/.cache/fois/home-assistant);\n         \
                  records a pass; --if-changed: only when its inputs changed since the recorded pass\n  \
-                 size [--write]  cross-build both firmware link variants (release), check flash <= 128 KiB,\n         \
-                 RAM <= 32 KiB and firmware/README.md's size table; --write: rewrite the table\n  \
+                 size [--write]  cross-build both firmware link variants and the bootloader (release), check\n         \
+                 flash <= 128 KiB (bootloader 24 KiB), RAM <= 32 KiB and firmware/README.md's size table;\n         \
+                 --write: rewrite the table\n  \
+                 image [--features field-link]  cross-build the application and write its raw binary\n         \
+                 target/thumbv7em-none-eabihf/firmware/fois-node.bin (the input of `foisctl sign`)\n  \
                  qemu [--write]  run the firmware logic tests on qemu-system-arm (mps2-an386), check\n         \
                  firmware/README.md's instruction-count table; --write: rewrite the table\n  \
                  fuzz   [--runs N] [--target NAME] run every fuzz target (or one) N times (default 10^7; installs nightly + cargo-fuzz)"
@@ -187,15 +204,19 @@ fn ci() -> Result<()> {
             ],
         )
     })?;
-    step("clippy (firmware, thumb)", &mut || {
-        run("cargo", &["fw-clippy", "--", "-D", "warnings"])
+    step("clippy (firmware and bootloader, thumb)", &mut || {
+        run("cargo", &["fw-clippy", "--", "-D", "warnings"])?;
+        run("cargo", &["boot-clippy", "--", "-D", "warnings"])
     })?;
     step("tests", &mut || run("cargo", &["test", "--workspace"]))?;
     let mut sizes = Vec::new();
-    step("firmware size (both link variants)", &mut || {
-        sizes = firmware_variants()?;
-        measured::sync_sizes(&sizes, BUDGET, Mode::Check)
-    })?;
+    step(
+        "firmware size (both link variants, bootloader)",
+        &mut || {
+            sizes = firmware_variants()?;
+            measured::sync_sizes(&sizes, Mode::Check)
+        },
+    )?;
     step("firmware on emulated Cortex-M4F", &mut || {
         qemu(true, Mode::Check)
     })?;
@@ -228,14 +249,14 @@ fn ci() -> Result<()> {
     for (name, secs) in &steps {
         eprintln!("  {name:<34} {secs:>7.1} s");
     }
-    for (variant, flash, ram) in &sizes {
+    for (variant, flash, ram, budget) in &sizes {
         let (flash, ram) = (*flash, *ram);
         eprintln!(
             "  firmware image ({variant}): flash {flash} B ({:.1} KiB of {} KiB), static RAM {ram} B ({:.1} KiB of {} KiB)",
             flash as f64 / 1024.0,
-            FLASH_BUDGET_BYTES / 1024,
+            budget.flash_bytes / 1024,
             ram as f64 / 1024.0,
-            RAM_BUDGET_BYTES / 1024
+            budget.ram_bytes / 1024
         );
     }
     eprintln!(
@@ -253,11 +274,12 @@ const FIRMWARE_VARIANTS: [(&str, &[&str]); 2] = [
     ("bench link", &[]),
 ];
 
-/// Both link variants of the board image: the field link linted on its
-/// thumb target (the bench image is linted by `cargo fw-clippy` in CI's
-/// clippy step), each cross-built and checked against the size budget.
-/// Returns (variant, flash bytes, static RAM bytes) per variant.
-fn firmware_variants() -> Result<Vec<(&'static str, u64, u64)>> {
+/// Both link variants of the board image and the bootloader: the field
+/// link linted on its thumb target (the bench image and the bootloader are
+/// linted by `cargo fw-clippy` and `cargo boot-clippy` in CI's clippy step),
+/// each cross-built and checked against its size budget. Returns (image,
+/// flash bytes, static RAM bytes, budget) per image.
+fn firmware_variants() -> Result<Vec<measured::SizeRow<'static>>> {
     let mut sizes = Vec::new();
     for (variant, args) in FIRMWARE_VARIANTS {
         if !args.is_empty() {
@@ -266,20 +288,20 @@ fn firmware_variants() -> Result<Vec<(&'static str, u64, u64)>> {
             clippy.extend_from_slice(&["--", "-D", "warnings"]);
             run("cargo", &clippy)?;
         }
-        let (flash, ram) =
-            firmware_size(args).with_context(|| format!("firmware image ({variant})"))?;
-        sizes.push((variant, flash, ram));
+        let mut fw = vec!["fw"];
+        fw.extend_from_slice(args);
+        let (flash, ram) = image_size(&fw, "fois-node", BUDGET)
+            .with_context(|| format!("firmware image ({variant})"))?;
+        sizes.push((variant, flash, ram, BUDGET));
     }
+    let (flash, ram) =
+        image_size(&["boot"], "fois-boot", BOOT_BUDGET).context("bootloader image")?;
+    sizes.push(("bootloader", flash, ram, BOOT_BUDGET));
     Ok(sizes)
 }
 
-/// Cross-build the release image (with `args`, e.g. features) and check it
-/// against the budget. Returns (flash bytes, static RAM bytes).
-fn firmware_size(args: &[&str]) -> Result<(u64, u64)> {
-    let mut fw = vec!["fw"];
-    fw.extend_from_slice(args);
-    run("cargo", &fw)?;
-    let elf = PathBuf::from(format!("target/{THUMB}/firmware/fois-node"));
+/// A tool of the llvm-tools component (`llvm-size`, `llvm-objcopy`).
+fn llvm_tool(name: &str) -> Result<PathBuf> {
     let sysroot = String::from_utf8(
         Command::new("rustc")
             .args(["--print", "sysroot"])
@@ -287,10 +309,25 @@ fn firmware_size(args: &[&str]) -> Result<(u64, u64)> {
             .stdout,
     )?;
     let host = host_triple()?;
-    let size_tool = PathBuf::from(sysroot.trim())
+    Ok(PathBuf::from(sysroot.trim())
         .join("lib/rustlib")
         .join(host)
-        .join("bin/llvm-size");
+        .join("bin")
+        .join(name))
+}
+
+/// The ELF `cargo fw` / `cargo boot` leave for `bin`.
+fn elf_of(bin: &str) -> PathBuf {
+    PathBuf::from(format!("target/{THUMB}/firmware/{bin}"))
+}
+
+/// Cross-build an image (`cargo` with `cargo_args`, e.g. `fw --features
+/// field-link`) and check its ELF (`bin`) against `budget`. Returns (flash
+/// bytes, static RAM bytes).
+fn image_size(cargo_args: &[&str], bin: &str, budget: measured::Budget) -> Result<(u64, u64)> {
+    run("cargo", cargo_args)?;
+    let elf = elf_of(bin);
+    let size_tool = llvm_tool("llvm-size")?;
     let out = Command::new(&size_tool)
         .args(["-A", "-d"])
         .arg(&elf)
@@ -306,20 +343,70 @@ fn firmware_size(args: &[&str]) -> Result<(u64, u64)> {
     }
     let (flash, ram) = parse_sizes(&String::from_utf8(out.stdout)?);
     println!(
-        "firmware image {}: flash {flash} B ({:.1} KiB, budget {} KiB), static RAM {ram} B ({:.1} KiB, budget {} KiB)",
+        "image {}: flash {flash} B ({:.1} KiB, budget {} KiB), static RAM {ram} B ({:.1} KiB, budget {} KiB)",
         elf.display(),
         flash as f64 / 1024.0,
-        FLASH_BUDGET_BYTES / 1024,
+        budget.flash_bytes / 1024,
         ram as f64 / 1024.0,
-        RAM_BUDGET_BYTES / 1024
+        budget.ram_bytes / 1024
     );
-    if flash > FLASH_BUDGET_BYTES {
-        bail!("flash {flash} B is over the budget of {FLASH_BUDGET_BYTES} B");
+    if flash > budget.flash_bytes {
+        bail!(
+            "flash {flash} B is over the budget of {} B",
+            budget.flash_bytes
+        );
     }
-    if ram > RAM_BUDGET_BYTES {
-        bail!("static RAM {ram} B is over the budget of {RAM_BUDGET_BYTES} B");
+    if ram > budget.ram_bytes {
+        bail!(
+            "static RAM {ram} B is over the budget of {} B",
+            budget.ram_bytes
+        );
     }
     Ok((flash, ram))
+}
+
+/// `cargo xtask image [--features field-link]`: cross-build the application
+/// and write its raw binary (what the active slot holds from 0x0802_0000,
+/// `llvm-objcopy -O binary`) next to the ELF as `fois-node.bin`: the input
+/// of `foisctl sign`.
+fn image(args: &[String]) -> Result<()> {
+    let mut fw = vec!["fw"];
+    match args {
+        [] => {}
+        [flag, features] if flag == "--features" => {
+            fw.extend_from_slice(&["--features", features.as_str()]);
+        }
+        _ => bail!("usage: cargo xtask image [--features field-link]"),
+    }
+    let (flash, _) = image_size(&fw, "fois-node", BUDGET)?;
+    let elf = elf_of("fois-node");
+    let bin = elf.with_extension("bin");
+    let objcopy = llvm_tool("llvm-objcopy")?;
+    let status = Command::new(&objcopy)
+        .args(["-O", "binary"])
+        .arg(&elf)
+        .arg(&bin)
+        .status()
+        .with_context(|| {
+            format!(
+                "could not run {} (rustup component llvm-tools)",
+                objcopy.display()
+            )
+        })?;
+    if !status.success() {
+        bail!("llvm-objcopy failed ({status})");
+    }
+    let written = std::fs::metadata(&bin)?.len();
+    // The raw binary spans the programmed sections from the vector table on.
+    if written < flash || written > BUDGET.flash_bytes {
+        bail!(
+            "{} is {written} B: expected between the image's {flash} B and the slot's {} B",
+            bin.display(),
+            BUDGET.flash_bytes
+        );
+    }
+    println!("{}: {written} B (for `foisctl sign`)", bin.display());
+    Ok(())
 }
 
 /// Flash = what is programmed (vector table, code, read-only data, the
@@ -482,7 +569,21 @@ fn run_echoed(program: &str, args: &[&str]) -> Result<String> {
 
 #[cfg(test)]
 mod tests {
-    use super::parse_sizes;
+    use super::{BOOT_FLASH_BUDGET_BYTES, parse_sizes, project_root};
+
+    /// xtask depends on no FOIS crate: the bootloader's budget is checked
+    /// against the firmware's flash layout by its text.
+    #[test]
+    fn the_bootloader_budget_is_the_flash_layouts() {
+        let layout =
+            std::fs::read_to_string(project_root().join("firmware/src/platform/flash_layout.rs"))
+                .unwrap();
+        assert_eq!(BOOT_FLASH_BUDGET_BYTES, 24 * 1024);
+        assert!(
+            layout.contains("pub const BOOTLOADER_BUDGET_BYTES: u32 = 24 * 1024;"),
+            "flash_layout.rs changed the bootloader's budget: change xtask's too"
+        );
+    }
 
     #[test]
     fn sizes_from_llvm_size_output() {

@@ -6,7 +6,8 @@
 //!    flash store (sequential-storage through `block_on` on a RAM flash, with
 //!    a power cut mid-save), the ice rule, and the whole `Node` on a
 //!    simulated board (currents, ambient flicker, ice onset → alarm pin +
-//!    event, commands in, garbage in).
+//!    event, commands in, garbage in), and the bootloader's swap and
+//!    rollback (`boot_swap`).
 //! 2. A measurement loop that counts the instructions of one output frame:
 //!    SysTick runs from the core clock and QEMU drives it from the virtual
 //!    clock, which under `-icount shift=0` advances exactly 1 ns per guest
@@ -154,6 +155,9 @@ macro_rules! check {
         }
     };
 }
+
+// After `check!`, which it uses.
+mod boot_swap;
 
 fn t_ntc_and_vref() -> TestResult {
     let cases: [(u16, i16); 4] = [(3337, -500), (3156, 0), (2997, 400), (2738, 1_000)];
@@ -627,7 +631,7 @@ fn main() -> ! {
     cp.SYST.enable_interrupt();
     cp.SYST.enable_counter();
 
-    let tests: [Test; 8] = [
+    let tests: [Test; 9] = [
         ("ntc_and_vref", t_ntc_and_vref),
         ("persist", t_persist),
         ("flash_store", t_flash_store),
@@ -641,6 +645,10 @@ fn main() -> ! {
         (
             "estimator_rime_and_bad_input",
             t_estimator_rime_and_bad_input,
+        ),
+        (
+            "bootloader_swap_and_rollback",
+            boot_swap::t_bootloader_swap_and_rollback,
         ),
     ];
     hprintln!("running {} tests on the emulated Cortex-M4F", tests.len());
@@ -676,6 +684,14 @@ fn main() -> ! {
         2 * LOOP,
         loop_ticks,
         insn_per_tick
+    );
+
+    // The bootloader's swap and rollback of one 128 KiB page (RAM flash).
+    let insn = |t: u32| (t as f32 * insn_per_tick + 0.5) as u64;
+    hprintln!(
+        "bootloader swap of a 128 KiB image: {} instructions; rollback: {} instructions (RAM flash, 2 KiB copy buffer)",
+        insn(boot_swap::SWAP_TICKS.load(Ordering::Relaxed)),
+        insn(boot_swap::REVERT_TICKS.load(Ordering::Relaxed))
     );
 
     // The measurement loop: default config (K = 8), streaming, frames encoded.

@@ -38,6 +38,9 @@ mod rtu;
 #[cfg(target_os = "none")]
 #[path = "fois-node/safety.rs"]
 mod safety;
+#[cfg(target_os = "none")]
+#[path = "fois-node/slots.rs"]
+mod slots;
 
 #[cfg(target_os = "none")]
 mod app {
@@ -63,11 +66,13 @@ mod app {
     use fois_firmware::platform::boot::{self, RuleSnapshot, SkippableStorage, StoreRead};
     use fois_firmware::platform::clock_retry::HseRetry;
     use fois_firmware::platform::field_link;
+    use fois_firmware::platform::flash_layout::OLD_CONFIG_STORE;
     use fois_firmware::platform::reply_time::{RESET_DRAIN_BYTES, drain_ms};
     use fois_firmware::platform::schedule::Schedule;
     use fois_firmware::platform::uptime::{self, Uptime};
     use fois_firmware::platform::watchdog::MAX_SLEEP_MS;
     use fois_firmware::storage::flash_store::FlashStore;
+    use fois_firmware::storage::migrate::{self, Migration};
     use fois_firmware::storage::supply::{self, BOOT_SUPPLY_STEP_MS, BootRead};
     use static_cell::StaticCell;
 
@@ -75,6 +80,7 @@ mod app {
     use crate::link;
     use crate::rtu;
     use crate::safety::{self, Watchdog};
+    use crate::slots::DfuSlot;
 
     bind_interrupts!(struct Irqs {
         EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
@@ -88,6 +94,25 @@ mod app {
         Delay,
         SkippableStorage<FlashStore<BoardFlash>>,
     >;
+
+    /// Copy the old layout's record into the new store if it has none
+    /// (`fois_firmware::storage::migrate`), and log what happened. Not
+    /// inlined: the boot's task holds it once, not copies of the store's
+    /// code.
+    #[inline(never)]
+    fn migrate_store(store: &mut FlashStore<BoardFlash>, dfu: &mut DfuSlot) {
+        match migrate::migrate(store, dfu, 0..OLD_CONFIG_STORE.bytes()) {
+            Ok(Migration::NotNeeded) | Ok(Migration::NothingToMove) => {}
+            Ok(Migration::Moved { layout, old_erased }) => defmt::info!(
+                "store moved from sectors 6-7 (record layout {=u16}, old erased {=bool})",
+                layout,
+                old_erased
+            ),
+            Err(_) => {
+                defmt::warn!("store move from sectors 6-7 failed: tried again at the next boot")
+            }
+        }
+    }
 
     /// The node, once built: a reference into [`NODE_CELL`], so this static
     /// is all zeros (.bss). An `Option<BoardNode>` here would be `.data`: its
@@ -244,11 +269,18 @@ mod app {
         // would sit in this task's future as well as in NODE (14 KiB of
         // static RAM twice with the growth history).
         let (link_settings, modbus, button) = {
-            let flash = BoardFlash::new(Flash::new_blocking(p.FLASH), wdg);
-            let store = match FlashStore::new(flash, BoardFlash::RANGE) {
+            let regions = Flash::new_blocking(p.FLASH).into_blocking_regions();
+            let flash = BoardFlash::new(regions.bank1_region1, wdg);
+            let mut store = match FlashStore::new(flash, BoardFlash::RANGE) {
                 Ok(s) => s,
-                Err(_) => defmt::panic!("flash store: sectors 6-7 are not two equal pages"),
+                Err(_) => defmt::panic!("flash store: sectors 2-3 are not two equal pages"),
             };
+            // The store of the layout before the bootloader (sectors 6-7,
+            // now the DFU slot) moves once, before anything erases the slot.
+            let mut dfu = DfuSlot::new(regions.bank1_region3, wdg);
+            if store_read == StoreRead::Read {
+                migrate_store(&mut store, &mut dfu);
+            }
             let store = SkippableStorage::new(store, store_read);
             let mut node = Node::new(adc, led, alarm, ld2, Delay, store, info);
             node.set_clock_fallback(hse.is_none());

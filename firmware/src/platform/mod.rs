@@ -4,11 +4,13 @@
 //! clock across the timer's wrap ([`uptime`]), when the external clock is
 //! tried again ([`clock_retry`]), the watchdog's timing ([`watchdog`]), the link's baud rates and RS-485
 //! turn-taking ([`field_link`]), the worst time to answer a command
-//! ([`reply_time`]).
+//! ([`reply_time`]), the flash's partitions for the bootloader, the store
+//! and the update's slots ([`flash_layout`]).
 
 pub mod boot;
 pub mod clock_retry;
 pub mod field_link;
+pub mod flash_layout;
 pub mod reply_time;
 pub mod schedule;
 pub mod uptime;

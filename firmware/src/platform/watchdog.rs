@@ -44,6 +44,16 @@ pub const ERASE_128K_X32_MAX_MS: u32 = 2_000;
 pub const ERASE_128K_X16_MAX_MS: u32 = 2_600;
 /// ... at x8 (what embassy-stm32 0.6 would do), ms.
 pub const ERASE_128K_X8_MAX_MS: u32 = 4_000;
+/// Worst-case 16 KiB sector erase at x32 (t_ERASE16KB max; the config
+/// store's sectors 2 and 3), ms.
+pub const ERASE_16K_X32_MAX_MS: u32 = 500;
+/// ... at x16, ms.
+pub const ERASE_16K_X16_MAX_MS: u32 = 600;
+/// Worst-case 64 KiB sector erase at x32 (t_ERASE64KB max; the boot
+/// state's sector 4), ms.
+pub const ERASE_64K_X32_MAX_MS: u32 = 1_100;
+/// ... at x16, ms.
+pub const ERASE_64K_X16_MAX_MS: u32 = 1_400;
 /// The measure loop's longest sleep between feeds, ms.
 pub const MAX_SLEEP_MS: u32 = 500;
 /// The longest frame the config rule allows: K = 64 cycles × 2 × 5 ms

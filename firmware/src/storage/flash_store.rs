@@ -1,6 +1,6 @@
 //! The node's [`Storage`] on NOR flash: the versioned record of [`super::record`]
 //! kept as the one value of a `sequential-storage` map over two flash
-//! pages (sectors 6 and 7 of the F446 on the board, a [`RamFlash`] in
+//! pages (sectors 2 and 3 of the F446 on the board, a [`RamFlash`] in
 //! tests).
 //!
 //! Why this layout (the field failures it removes):
@@ -10,7 +10,7 @@
 //!   newest value. A cut at any point leaves the old or the new record (the
 //!   power-loss test in `tests/storage.rs` cuts at every operation and every
 //!   byte of saves, page changes included).
-//! - **Wear.** A 128 KiB page holds thousands of records before it is
+//! - **Wear.** A 16 KiB page holds hundreds of records before it is
 //!   erased once, and the two pages are used in turn (figures in
 //!   `firmware/README.md`).
 //! - **First boot vs. damage.** A range that is entirely erased is *empty*
@@ -50,6 +50,7 @@ use sequential_storage::cache::page_pointers::ArrayPagePointers;
 use sequential_storage::cache::page_states::ArrayPageStates;
 use sequential_storage::map::{MapConfig, MapStorage};
 
+use crate::platform::flash_layout::{CONFIG_STORE, OLD_CONFIG_STORE};
 use crate::storage::record::MAX_RECORD;
 use crate::storage::{Storage, StorageError};
 
@@ -60,9 +61,17 @@ use crate::storage::ram_flash::RamFlash;
 /// two, one always kept free to move into.
 pub const STORE_PAGES: usize = 2;
 /// Bytes in each of the board's two store pages: the STM32F446's flash
-/// sectors 6 and 7 are 128 KiB each (RM0390, flash organisation). The
-/// virtual node's flash has the same geometry.
-pub const BOARD_SECTOR_BYTES: usize = 128 * 1024;
+/// sectors 2 and 3 are 16 KiB each (RM0390, flash organisation;
+/// `platform::flash_layout::CONFIG_STORE`). The virtual node's flash has
+/// the same geometry.
+pub const BOARD_SECTOR_BYTES: usize = CONFIG_STORE.largest_sector_bytes() as usize;
+/// Bytes in each page of the store before the bootloader (sectors 6 and 7,
+/// 128 KiB each: `platform::flash_layout::OLD_CONFIG_STORE`), which
+/// `storage::migrate` reads once.
+pub const OLD_BOARD_SECTOR_BYTES: usize = OLD_CONFIG_STORE.largest_sector_bytes() as usize;
+const _: () = assert!(CONFIG_STORE.sectors as usize == STORE_PAGES && CONFIG_STORE.uniform());
+const _: () =
+    assert!(OLD_CONFIG_STORE.sectors as usize == STORE_PAGES && OLD_CONFIG_STORE.uniform());
 /// The one key of the map.
 const RECORD_KEY: u8 = 0;
 /// Work buffer: key + the largest record, rounded up to flash words, with room.
@@ -123,9 +132,21 @@ type StoreCache = Cache<
     u8,
 >;
 
+type Map<F> = MapStorage<u8, Blocking<F>, StoreCache>;
+
+fn fresh_cache() -> StoreCache {
+    Cache::new(
+        ArrayPageStates::new(),
+        ArrayPagePointers::new(),
+        ArrayKeyPointers::new(),
+    )
+}
+
 /// The config/baseline record in a sequential-storage map on NOR flash.
 pub struct FlashStore<F: NorFlash> {
-    map: MapStorage<u8, Blocking<F>, StoreCache>,
+    /// Always `Some`: taken only inside [`Self::erase_afresh`], which puts
+    /// a map back on every path.
+    map: Option<Map<F>>,
     range: Range<u32>,
     saves: u32,
 }
@@ -140,26 +161,48 @@ impl<F: NorFlash> FlashStore<F> {
             return Err(StorageError::Layout);
         }
         let config = MapConfig::try_new(range.clone()).map_err(|_| StorageError::Layout)?;
-        let cache = Cache::new(
-            ArrayPageStates::new(),
-            ArrayPagePointers::new(),
-            ArrayKeyPointers::new(),
-        );
         Ok(FlashStore {
-            map: MapStorage::new(Blocking::new(flash), config, cache),
+            map: Some(MapStorage::new(Blocking::new(flash), config, fresh_cache())),
             range,
             saves: 0,
         })
     }
 
+    fn map(&mut self) -> &mut Map<F> {
+        match self.map.as_mut() {
+            Some(map) => map,
+            // `erase_afresh` puts the map back before it returns.
+            None => unreachable!("the store's map is always present"),
+        }
+    }
+
     /// The flash back (e.g. to "reboot" on the same flash in a test).
     pub fn into_flash(self) -> F {
-        self.map.destroy().0.into_inner()
+        match self.map {
+            Some(map) => map.destroy().0.into_inner(),
+            None => unreachable!("the store's map is always present"),
+        }
     }
 
     /// The flash (e.g. to look at its counters).
     pub fn flash_mut(&mut self) -> &mut F {
-        self.map.flash().inner_mut()
+        self.map().flash().inner_mut()
+    }
+
+    /// Erase both pages and start sequential-storage over with an empty
+    /// cache: its `erase_all` leaves the cache as it was (the page states
+    /// and item positions of before the erase), and a record stored through
+    /// that stale cache would land without its page's marker, found by this
+    /// store's read-back but by no store made at the next boot.
+    fn erase_afresh(&mut self) -> Result<(), StorageError> {
+        let erased = block_on(self.map().erase_all()).map_err(|_| StorageError::Write);
+        if let Some(map) = self.map.take() {
+            let (flash, _stale) = map.destroy();
+            // The range `new` accepted (MapConfig::try_new): valid.
+            let config = MapConfig::new(self.range.clone());
+            self.map = Some(MapStorage::new(flash, config, fresh_cache()));
+        }
+        erased
     }
 
     /// Records saved (successfully) through this store since it was made.
@@ -170,10 +213,11 @@ impl<F: NorFlash> FlashStore<F> {
     /// True if every byte of the range reads 0xFF (never written, or erased).
     fn range_is_erased(&mut self) -> Result<bool, StorageError> {
         let mut chunk = [0u8; SCAN_CHUNK];
-        let mut at = self.range.start;
-        let flash = self.map.flash().inner_mut();
-        while at < self.range.end {
-            let n = (self.range.end - at).min(SCAN_CHUNK as u32) as usize;
+        let range = self.range.clone();
+        let mut at = range.start;
+        let flash = self.map().flash().inner_mut();
+        while at < range.end {
+            let n = (range.end - at).min(SCAN_CHUNK as u32) as usize;
             let part = chunk.get_mut(..n).ok_or(StorageError::Read)?;
             flash.read(at, part).map_err(|_| StorageError::Read)?;
             if part.iter().any(|&b| b != 0xFF) {
@@ -192,7 +236,7 @@ impl<F: NorFlash> Storage for FlashStore<F> {
         // Look before sequential-storage repairs (and maybe erases) anything.
         let erased = self.range_is_erased()?;
         let mut work = [0u8; WORK_LEN];
-        let found = block_on(self.map.fetch_item::<&[u8]>(&mut work, &RECORD_KEY));
+        let found = block_on(self.map().fetch_item::<&[u8]>(&mut work, &RECORD_KEY));
         match found {
             Ok(Some(bytes)) => {
                 let dst = buf.get_mut(..bytes.len()).ok_or(StorageError::Read)?;
@@ -210,7 +254,7 @@ impl<F: NorFlash> Storage for FlashStore<F> {
             return Err(StorageError::TooLarge);
         }
         let mut work = [0u8; WORK_LEN];
-        match block_on(self.map.store_item(&mut work, &RECORD_KEY, &data)) {
+        match block_on(self.map().store_item(&mut work, &RECORD_KEY, &data)) {
             Ok(()) => {}
             // The flash itself failed (or the power went): nothing more to try.
             Err(sequential_storage::Error::Storage { .. }) => return Err(StorageError::Write),
@@ -219,8 +263,8 @@ impl<F: NorFlash> Storage for FlashStore<F> {
             // the record in it was already unreadable (the node booted with
             // CONFIG_DEFAULTED), so start the store afresh with this record.
             Err(_) => {
-                block_on(self.map.erase_all()).map_err(|_| StorageError::Write)?;
-                block_on(self.map.store_item(&mut work, &RECORD_KEY, &data))
+                self.erase_afresh()?;
+                block_on(self.map().store_item(&mut work, &RECORD_KEY, &data))
                     .map_err(|_| StorageError::Write)?;
             }
         }
@@ -236,8 +280,8 @@ impl<F: NorFlash> Storage for FlashStore<F> {
             return Err(StorageError::TooLarge);
         }
         let mut work = [0u8; WORK_LEN];
-        block_on(self.map.erase_all()).map_err(|_| StorageError::Write)?;
-        block_on(self.map.store_item(&mut work, &RECORD_KEY, &data))
+        self.erase_afresh()?;
+        block_on(self.map().store_item(&mut work, &RECORD_KEY, &data))
             .map_err(|_| StorageError::Write)?;
         self.read_back(data)
     }
@@ -247,7 +291,7 @@ impl<F: NorFlash> FlashStore<F> {
     /// Read the record back after a save: it must be `data`.
     fn read_back(&mut self, data: &[u8]) -> Result<(), StorageError> {
         let mut work = [0u8; WORK_LEN];
-        let back = block_on(self.map.fetch_item::<&[u8]>(&mut work, &RECORD_KEY))
+        let back = block_on(self.map().fetch_item::<&[u8]>(&mut work, &RECORD_KEY))
             .map_err(|_| StorageError::Read)?;
         if back != Some(data) {
             return Err(StorageError::Write);

@@ -8,12 +8,17 @@
 //! - [`flash_store`]: the [`Storage`] on NOR flash (power-fail safe,
 //!   wear-levelled over two sectors);
 //! - [`ram_flash`]: a NOR flash in RAM that can lose power mid-operation;
-//! - [`supply`]: flash writes wait for a healthy supply.
+//! - [`supply`]: flash writes wait for a healthy supply;
+//! - [`migrate`]: the store's one move from the layout before the
+//!   bootloader (sectors 6–7) to sectors 2–3, reading the old one with
+//!   [`old_store`].
 //!
 //! When the node saves (coalescing, rate limit) is `crate::node::saving`;
 //! booting without the store after panic resets is `crate::platform::boot`.
 
 pub mod flash_store;
+pub mod migrate;
+pub mod old_store;
 pub mod ram_flash;
 pub mod record;
 pub mod supply;

@@ -9,7 +9,7 @@ use core::sync::atomic::{AtomicBool, AtomicU16, Ordering};
 
 use embassy_stm32::Peri;
 use embassy_stm32::adc::{Adc, SampleTime, Temperature, VrefInt};
-use embassy_stm32::flash::{Blocking, Error as FlashError, Flash};
+use embassy_stm32::flash::{BANK1_REGION1, Bank1Region1, Blocking, Error as FlashError};
 use embassy_stm32::gpio::Output;
 use embassy_stm32::pac;
 use embassy_stm32::pac::flash::vals::Psize;
@@ -18,6 +18,7 @@ use embassy_stm32::peripherals::{ADC1, PA0, PA1, PA4};
 use embedded_storage::nor_flash::{ErrorType, NorFlash, ReadNorFlash};
 use fois_firmware::hal::{FactoryCal, PhotoAdc};
 use fois_firmware::platform::field_link::LONG_CABLE_BAUD;
+use fois_firmware::platform::flash_layout::{CONFIG_STORE, Partition};
 use fois_firmware::platform::reply_time::{RESET_DRAIN_BYTES, drain_ms};
 use fois_protocol::ResetReason;
 
@@ -249,12 +250,15 @@ impl PhotoAdc for BoardAdc {
 
 // ---- Flash: the config store ----
 
-/// The store's two sectors: 6 and 7, 0x0804_0000..0x0808_0000 (memory.x
-/// keeps the program in sectors 0–5).
-const STORE_OFFSET: u32 = 0x0004_0000;
+/// The store's two sectors: 2 and 3, 0x0800_8000..0x0801_0000
+/// (`fois_firmware::platform::flash_layout::CONFIG_STORE`), in the first of
+/// embassy-stm32's flash regions (sectors 0–3, based at 0x0800_0000).
+const STORE: Partition = CONFIG_STORE;
 const STORE_SECTOR_BYTES: u32 = fois_firmware::storage::flash_store::BOARD_SECTOR_BYTES as u32;
-const STORE_FIRST_SECTOR: u8 = 6;
-const STORE_SECTORS: u32 = 2;
+const _: () = assert!(STORE.largest_sector_bytes() == STORE_SECTOR_BYTES);
+// The store lies in the first region, which starts at the flash's start.
+const _: () =
+    assert!(BANK1_REGION1.offset == 0 && STORE.offset() + STORE.bytes() <= BANK1_REGION1.size);
 /// x32 parallelism needs V_DD ≥ 2.7 V (RM0390 §3.5, program/erase
 /// parallelism); the node starts a save only above it (`storage::supply`).
 const X32_MIN_VDDA_MV: u16 = fois_firmware::storage::supply::FLASH_WRITE_MIN_VDDA_MV;
@@ -283,82 +287,114 @@ fn wait_for_link_idle() {
     }
 }
 
-/// Sectors 6 and 7 as one `NorFlash` of two 128 KiB pages (offset 0 =
-/// 0x0804_0000). Reads and programming go through embassy-stm32 (which
-/// programs at x32); erases through the PAC at x32 (x16 below 2.7 V or
-/// before the first V_DDA reading), because embassy-stm32 0.6 leaves PSIZE
-/// at x8 for erases (up to 4 s per sector instead of 2 s). The watchdog is
-/// fed right before each sector erase.
+/// Erase sector `snb` through the PAC at x32 (x16 below 2.7 V or before
+/// the first V_DDA reading), because embassy-stm32 0.6 leaves PSIZE at x8
+/// for erases (up to 4 s per 128 KiB sector instead of 2 s). The watchdog
+/// is fed right before the erase (after the link's burst ended) and right
+/// after it. Every erase of the board's flash (the store, the update's
+/// slots: `slots.rs`) goes through here.
+pub fn erase_sector(snb: u8, wdg: Watchdog) -> Result<(), FlashError> {
+    let psize = if LAST_VDDA_MV.load(Ordering::Relaxed) >= X32_MIN_VDDA_MV {
+        Psize::PSIZE32
+    } else {
+        Psize::PSIZE16
+    };
+    let flash = pac::FLASH;
+    wdg.pet();
+    wait_for_link_idle();
+    wdg.pet();
+    while flash.sr().read().bsy() {}
+    if flash.cr().read().lock() {
+        flash.keyr().write_value(0x4567_0123);
+        flash.keyr().write_value(0xCDEF_89AB);
+    }
+    // Clear old error flags (write 1 to clear).
+    flash.sr().write(|w| {
+        w.set_eop(true);
+        w.set_operr(true);
+        w.set_wrperr(true);
+        w.set_pgaerr(true);
+        w.set_pgperr(true);
+        w.set_pgserr(true);
+    });
+    flash.cr().write(|w| {
+        w.set_ser(true);
+        w.set_snb(snb);
+        w.set_psize(psize);
+    });
+    flash.cr().modify(|w| w.set_strt(true));
+    // The CPU stalls here on its next instruction fetch until the erase
+    // ends (one bank): 1–2 s at x32 for 128 KiB, 0.25–0.5 s for 16 KiB.
+    while flash.sr().read().bsy() {}
+    let sr = flash.sr().read();
+    flash.cr().write(|w| w.set_ser(false));
+    flash.cr().modify(|w| w.set_lock(true));
+    // Stale lines of the erased sector must not be served from the data
+    // cache (if anything enabled it).
+    if flash.acr().read().dcen() {
+        flash.acr().modify(|w| w.set_dcen(false));
+        flash.acr().modify(|w| w.set_dcrst(true));
+        flash.acr().modify(|w| w.set_dcrst(false));
+        flash.acr().modify(|w| w.set_dcen(true));
+    }
+    wdg.pet();
+    if sr.pgserr() {
+        Err(FlashError::Seq)
+    } else if sr.pgperr() {
+        Err(FlashError::Parallelism)
+    } else if sr.pgaerr() {
+        Err(FlashError::Unaligned)
+    } else if sr.wrperr() {
+        Err(FlashError::Protected)
+    } else {
+        Ok(())
+    }
+}
+
+/// Erase the sectors of `part` that hold `from..to` (offsets from the
+/// partition's start, whole sectors of `sector_bytes`), one at a time.
+pub fn erase_partition(
+    part: Partition,
+    sector_bytes: u32,
+    from: u32,
+    to: u32,
+    wdg: Watchdog,
+) -> Result<(), FlashError> {
+    if !from.is_multiple_of(sector_bytes) || !to.is_multiple_of(sector_bytes) {
+        return Err(FlashError::Unaligned);
+    }
+    if from > to || to > part.bytes() {
+        return Err(FlashError::Size);
+    }
+    let mut at = from;
+    while at < to {
+        let snb = part.sector_at(at).ok_or(FlashError::Size)?;
+        erase_sector(snb, wdg)?;
+        at += sector_bytes;
+    }
+    Ok(())
+}
+
+/// Sectors 2 and 3 as one `NorFlash` of two 16 KiB pages (offset 0 =
+/// 0x0800_8000). Reads and programming go through embassy-stm32's first
+/// flash region (which programs at x32); erases through [`erase_sector`].
 pub struct BoardFlash {
-    flash: Flash<'static, Blocking>,
+    region: Bank1Region1<'static, Blocking>,
     wdg: Watchdog,
 }
 
 impl BoardFlash {
-    /// Take the flash controller.
-    pub fn new(flash: Flash<'static, Blocking>, wdg: Watchdog) -> Self {
-        BoardFlash { flash, wdg }
+    /// Over embassy-stm32's first flash region (sectors 0–3).
+    pub fn new(region: Bank1Region1<'static, Blocking>, wdg: Watchdog) -> Self {
+        BoardFlash { region, wdg }
     }
 
     /// The store's range in this flash's addresses.
-    pub const RANGE: core::ops::Range<u32> = 0..STORE_SECTORS * STORE_SECTOR_BYTES;
+    pub const RANGE: core::ops::Range<u32> = 0..STORE.bytes();
 
-    fn erase_sector(&mut self, snb: u8) -> Result<(), FlashError> {
-        let psize = if LAST_VDDA_MV.load(Ordering::Relaxed) >= X32_MIN_VDDA_MV {
-            Psize::PSIZE32
-        } else {
-            Psize::PSIZE16
-        };
-        let flash = pac::FLASH;
-        self.wdg.pet();
-        wait_for_link_idle();
-        self.wdg.pet();
-        while flash.sr().read().bsy() {}
-        if flash.cr().read().lock() {
-            flash.keyr().write_value(0x4567_0123);
-            flash.keyr().write_value(0xCDEF_89AB);
-        }
-        // Clear old error flags (write 1 to clear).
-        flash.sr().write(|w| {
-            w.set_eop(true);
-            w.set_operr(true);
-            w.set_wrperr(true);
-            w.set_pgaerr(true);
-            w.set_pgperr(true);
-            w.set_pgserr(true);
-        });
-        flash.cr().write(|w| {
-            w.set_ser(true);
-            w.set_snb(snb);
-            w.set_psize(psize);
-        });
-        flash.cr().modify(|w| w.set_strt(true));
-        // The CPU stalls here on its next instruction fetch until the erase
-        // ends (one bank): 1–2 s at x32.
-        while flash.sr().read().bsy() {}
-        let sr = flash.sr().read();
-        flash.cr().write(|w| w.set_ser(false));
-        flash.cr().modify(|w| w.set_lock(true));
-        // Stale lines of the erased sector must not be served from the data
-        // cache (if anything enabled it).
-        if flash.acr().read().dcen() {
-            flash.acr().modify(|w| w.set_dcen(false));
-            flash.acr().modify(|w| w.set_dcrst(true));
-            flash.acr().modify(|w| w.set_dcrst(false));
-            flash.acr().modify(|w| w.set_dcen(true));
-        }
-        self.wdg.pet();
-        if sr.pgserr() {
-            Err(FlashError::Seq)
-        } else if sr.pgperr() {
-            Err(FlashError::Parallelism)
-        } else if sr.pgaerr() {
-            Err(FlashError::Unaligned)
-        } else if sr.wrperr() {
-            Err(FlashError::Protected)
-        } else {
-            Ok(())
-        }
+    /// Offset in the region of the store's byte `offset`.
+    const fn in_region(offset: u32) -> u32 {
+        STORE.offset() - BANK1_REGION1.offset + offset
     }
 }
 
@@ -369,10 +405,13 @@ impl ErrorType for BoardFlash {
 impl ReadNorFlash for BoardFlash {
     const READ_SIZE: usize = 1;
     fn read(&mut self, offset: u32, bytes: &mut [u8]) -> Result<(), FlashError> {
-        self.flash.blocking_read(STORE_OFFSET + offset, bytes)
+        if offset.saturating_add(bytes.len() as u32) > STORE.bytes() {
+            return Err(FlashError::Size);
+        }
+        self.region.blocking_read(Self::in_region(offset), bytes)
     }
     fn capacity(&self) -> usize {
-        (STORE_SECTORS * STORE_SECTOR_BYTES) as usize
+        STORE.bytes() as usize
     }
 }
 
@@ -381,26 +420,14 @@ impl NorFlash for BoardFlash {
     const ERASE_SIZE: usize = STORE_SECTOR_BYTES as usize;
 
     fn erase(&mut self, from: u32, to: u32) -> Result<(), FlashError> {
-        if !from.is_multiple_of(STORE_SECTOR_BYTES) || !to.is_multiple_of(STORE_SECTOR_BYTES) {
-            return Err(FlashError::Unaligned);
-        }
-        if from > to || to > STORE_SECTORS * STORE_SECTOR_BYTES {
-            return Err(FlashError::Size);
-        }
-        let mut at = from;
-        while at < to {
-            let snb = STORE_FIRST_SECTOR + (at / STORE_SECTOR_BYTES) as u8;
-            self.erase_sector(snb)?;
-            at += STORE_SECTOR_BYTES;
-        }
-        Ok(())
+        erase_partition(STORE, STORE_SECTOR_BYTES, from, to, self.wdg)
     }
 
     fn write(&mut self, offset: u32, bytes: &[u8]) -> Result<(), FlashError> {
-        if offset.saturating_add(bytes.len() as u32) > STORE_SECTORS * STORE_SECTOR_BYTES {
+        if offset.saturating_add(bytes.len() as u32) > STORE.bytes() {
             return Err(FlashError::Size);
         }
-        self.flash.blocking_write(STORE_OFFSET + offset, bytes)
+        self.region.blocking_write(Self::in_region(offset), bytes)
     }
 }
 
