@@ -113,8 +113,14 @@ impl<DFU: NorFlash, STATE: NorFlash> FlashUpdater<DFU, STATE> {
         };
         u.image_state = match boot {
             Some(State::Swap) => ImageState::Trial,
-            Some(State::Revert) => ImageState::RolledBack {
-                failed: stored.map_or([0; 3], |s| u.failed_version(&s.header)),
+            // Rolled back when the DFU slot holds another version than
+            // the one running. (A cut in `mark_booted` after it invalidated
+            // the swap's progress leaves the new image running with the
+            // revert magic: embassy-boot's revert then copies nothing. That
+            // image is confirmed.)
+            Some(State::Revert) => match stored.map(|s| u.failed_version(&s.header)) {
+                Some(failed) if failed != u.running => ImageState::RolledBack { failed },
+                _ => ImageState::Confirmed,
             },
             _ => ImageState::Confirmed,
         };
