@@ -1,6 +1,8 @@
 //! The node with update slots: the whole update over its commands, the
 //! reset into the trial, the self-test that confirms it, the self-test that
 //! fails and is rolled back without a person, and a node without slots.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
 mod update_common;
@@ -69,7 +71,7 @@ fn update_over_commands(node: &mut UpNode, w: &World, b: &Image) {
     let mut at = st.next_offset as usize;
     while at < b.bytes.len() {
         // Frames go on between the chunks.
-        if at % 2_048 == 0 {
+        if at.is_multiple_of(2_048) {
             node.run_frame(w.now_ms(), &mut |_| {});
         }
         match answer(node, w, Command::UpdateChunk(chunk(b, at, 256))) {

@@ -4,6 +4,8 @@
 //! bootloader's revert: after every cut the node boots an image, the old
 //! or the new, never neither; the config store is never touched; and the
 //! host, resuming, gets the new image confirmed in the end.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod update_common;
 

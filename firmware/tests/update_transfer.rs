@@ -2,6 +2,8 @@
 //! flash) and embassy-boot's bootloader: a whole update, each refusal with
 //! its reason and nothing changed, resuming after a link drop and after a
 //! power cut.
+// A test crate: unwrap and expect are assertions here (helpers included).
+#![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod update_common;
 

@@ -3,7 +3,8 @@
 //! of the slot and the ed25519 check) and committed (embassy-boot's
 //! `verify_and_mark_updated`: the same again, then the boot-state mark).
 //! Prints the instructions of the worst chunk, of the verify, of the
-//! signature check alone and of the commit.
+//! signature check alone and of the commit (`cargo xtask qemu` reads them
+//! into firmware/README.md's table).
 
 use cortex_m_semihosting::hprintln;
 use fois_firmware::storage::ram_flash::RamFlash;
@@ -117,7 +118,11 @@ pub fn run(insn_per_tick: f32) -> bool {
         if u.write_chunk(&chunk).is_err() {
             return false;
         }
-        worst_chunk = worst_chunk.max(ticks() - t0);
+        // A chunk that enters a page erases it first: the RAM flash's
+        // byte loop, where the board's flash erases by itself.
+        if start % PAGE != 0 {
+            worst_chunk = worst_chunk.max(ticks() - t0);
+        }
     }
     let board = Hello::board_from_str("qemu");
     let t0 = ticks();
@@ -130,12 +135,12 @@ pub fn run(insn_per_tick: f32) -> bool {
     let t0 = ticks();
     let committed = u.commit_image();
     let commit = ticks() - t0;
+    hprintln!("update image: {} B in 256 B chunks", LEN);
+    hprintln!("update chunk worst (no page erase): {}", insn(worst_chunk));
+    hprintln!("update verify (SHA-512 and signature): {}", insn(verify));
+    hprintln!("update signature check alone: {}", insn(signature_only));
     hprintln!(
-        "update: {} B image in 256 B chunks: worst chunk {} instructions; verify {} instructions (signature alone {}); commit {} instructions",
-        LEN,
-        insn(worst_chunk),
-        insn(verify),
-        insn(signature_only),
+        "update commit (verify_and_mark_updated, state mark): {}",
         insn(commit)
     );
     verified.is_ok() && alone && committed == Ok([0, 9, 0])
