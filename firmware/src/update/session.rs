@@ -30,6 +30,8 @@
 
 use embedded_storage::nor_flash::NorFlash;
 use fois_protocol::FirmwareVersion;
+// CRC-32 ISO-HDLC: the frames' own (one table in the image).
+use fois_protocol::framing::CRC;
 
 /// Image bytes one progress mark covers (the protocol's chunk size).
 pub const GRANULE: u32 = fois_protocol::UPDATE_CHUNK_MAX as u32;
@@ -53,8 +55,6 @@ pub struct SessionHeader {
     /// The first 32 bytes of the image's SHA-512.
     pub digest: [u8; 32],
 }
-
-const CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 impl SessionHeader {
     /// The header's bytes.

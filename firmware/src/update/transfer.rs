@@ -28,6 +28,8 @@ use embassy_boot::{
     FirmwareUpdaterError, State,
 };
 use embedded_storage::nor_flash::NorFlash;
+// A chunk's CRC: ISO-HDLC, the frames' own (one table in the image).
+use fois_protocol::framing::CRC as CHUNK_CRC;
 use fois_protocol::update::{SIGNATURE_LEN, TRAILER_LEN, version_allowed};
 use fois_protocol::{
     FirmwareVersion, ImageSignature, ImageState, ImageTrailer, UPDATE_CHUNK_MAX, UpdateBegin,
@@ -66,9 +68,6 @@ enum Phase {
     Receiving(Session),
     Verified(Session, [u8; SIGNATURE_LEN]),
 }
-
-/// CRC of a chunk (ISO-HDLC, as the frames').
-const CHUNK_CRC: crc::Crc<u32> = crc::Crc::<u32>::new(&crc::CRC_32_ISO_HDLC);
 
 /// Bytes hashed per flash read while verifying.
 const HASH_BLOCK: usize = 256;
