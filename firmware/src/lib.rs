@@ -46,6 +46,7 @@ pub mod platform;
 #[cfg(feature = "sim-board")]
 pub mod sim_board;
 pub mod storage;
+pub mod update;
 
 pub use hal::{BoardInfo, FactoryCal, PhotoAdc};
 pub use node::Node;

@@ -39,6 +39,7 @@ use rand_pcg::Pcg32;
 use crate::hal::{BoardInfo, FactoryCal, PhotoAdc};
 use crate::node::Node;
 use crate::storage::Storage;
+use crate::update::{NoUpdates, UpdateSlots};
 
 /// The noise stream's PCG state and stream constants (any fixed values).
 const NOISE_STATE: u64 = 0xcafe_f00d_d15e_a5e5;
@@ -264,10 +265,11 @@ impl SimBoard {
     /// Run one frame of `node` now, then move the clock to the end of its
     /// frame period (or of the frame, if that took longer): as the board's
     /// ticker runs the node.
-    pub fn run_frame<B, S>(&self, node: &mut SimNode<B, S>, tx: &mut impl FnMut(&[u8]))
+    pub fn run_frame<B, S, U>(&self, node: &mut SimNode<B, S, U>, tx: &mut impl FnMut(&[u8]))
     where
         B: Deref<Target = SimBoard>,
         S: Storage,
+        U: UpdateSlots,
     {
         let start = self.t_ns.get();
         node.run_frame(self.now_ms(), tx);
@@ -399,8 +401,10 @@ impl<B: Deref<Target = SimBoard>> DelayNs for BoardDelay<B> {
     }
 }
 
-/// The node on a simulated board `B` with storage `S`.
-pub type SimNode<B, S> = Node<BoardAdc<B>, BoardPin<B>, BoardPin<B>, BoardPin<B>, BoardDelay<B>, S>;
+/// The node on a simulated board `B` with storage `S` (and update slots
+/// `U`, none by default).
+pub type SimNode<B, S, U = NoUpdates> =
+    Node<BoardAdc<B>, BoardPin<B>, BoardPin<B>, BoardPin<B>, BoardDelay<B>, S, U>;
 
 /// A node on `board` (typical factory calibration, power-on reset) named
 /// `name` in its `Hello`.
@@ -409,7 +413,22 @@ where
     B: Deref<Target = SimBoard> + Clone,
     S: Storage,
 {
-    Node::new(
+    sim_node_with_updates(board, storage, name, NoUpdates)
+}
+
+/// A node as [`sim_node`] with the update slots `updates`.
+pub fn sim_node_with_updates<B, S, U>(
+    board: B,
+    storage: S,
+    name: &'static str,
+    updates: U,
+) -> SimNode<B, S, U>
+where
+    B: Deref<Target = SimBoard> + Clone,
+    S: Storage,
+    U: UpdateSlots,
+{
+    Node::new_with_updates(
         BoardAdc(board.clone()),
         BoardPin::new(board.clone(), Line::Led),
         BoardPin::new(board.clone(), Line::Alarm),
@@ -417,5 +436,6 @@ where
         BoardDelay(board),
         storage,
         BoardInfo::simulated(name),
+        updates,
     )
 }

@@ -43,6 +43,8 @@ use fois_protocol::{
     EventKind, FrameDecoder, HostFrame, MAX_FRAME, encode, flags,
 };
 
+mod update_bench;
+
 // ---------------------------------------------------------------- timing --
 
 static WRAPS: AtomicU32 = AtomicU32::new(0);
@@ -784,6 +786,12 @@ fn main() -> ! {
     );
     if est_frame * 10 > ESTIMATOR_BUDGET_PER_S || worst > ESTIMATOR_BUDGET_PER_S {
         hprintln!("error: the estimator is over its budget");
+        failed += 1;
+    }
+
+    // The firmware updater: a chunk, the verify and the commit of a 90 KiB image.
+    if !update_bench::run(insn_per_tick) {
+        hprintln!("error: the update bench failed");
         failed += 1;
     }
 

@@ -52,6 +52,9 @@ impl ModbusView {
 }
 
 /// What a write asks the node to do, after the answer.
+// A `Command` can carry an update chunk (256 bytes): an `Action` lives on
+// the stack for one write only, and there is no heap to box it on.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug, Clone, PartialEq)]
 pub enum Action {
     /// Acknowledge the alarm (`AckAlarmV4`).

@@ -12,9 +12,11 @@ use fois_protocol::{
 };
 
 use super::Node;
+use super::updating::refusal_code;
 use crate::calibration::{dark, gain};
 use crate::hal::PhotoAdc;
 use crate::storage::Storage;
+use crate::update::UpdateSlots;
 
 /// Id of the unsolicited [`fois_protocol::Ack`] frames that report what the
 /// user button did (no host command has this id unless the host chooses it).
@@ -57,7 +59,7 @@ pub fn stream_period(cfg: &Config, requested: Option<u32>) -> Result<u32, ErrorC
     }
 }
 
-impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
+impl<A, L, AL, IND, D, S, U> Node<A, L, AL, IND, D, S, U>
 where
     A: PhotoAdc,
     L: OutputPin,
@@ -65,6 +67,7 @@ where
     IND: OutputPin,
     D: DelayNs,
     S: Storage,
+    U: UpdateSlots,
 {
     /// Bytes received from the host link, in any chunking. Each complete
     /// frame is answered through `tx`: an `Ack`, or an `Error` (garbled,
@@ -73,7 +76,10 @@ where
         for &b in bytes {
             match self.decoder.push::<HostFrame>(b) {
                 None => {}
-                Some(Ok(frame)) => self.execute(frame, now_ms, tx),
+                Some(Ok(frame)) => {
+                    self.trial.link_answered();
+                    self.execute(frame, now_ms, tx);
+                }
                 Some(Err(e)) => {
                     self.send(DeviceMsg::Error(frame_error_reply(e)), tx);
                 }
@@ -187,14 +193,37 @@ where
                 }
                 Ok(AckResult::LinkSettings(self.link))
             }
-            // The firmware transfer (version 6) is not served by this build yet.
-            Command::UpdateBegin(_)
-            | Command::UpdateChunk(_)
-            | Command::GetUpdateStatus
-            | Command::UpdateVerify(_)
-            | Command::UpdateCommit
-            | Command::UpdateAbort
-            | Command::GetImageInfo => Err(ErrorCode::UnknownCommand),
+            // The firmware transfer (version 6): `updating`, on the update
+            // slots (a node without answers `UnknownCommand`).
+            Command::UpdateBegin(begin) => self
+                .updates
+                .begin(&begin)
+                .map(AckResult::UpdateStatus)
+                .map_err(refusal_code),
+            Command::UpdateChunk(chunk) => self
+                .updates
+                .chunk(&chunk)
+                .map(AckResult::UpdateStatus)
+                .map_err(refusal_code),
+            Command::GetUpdateStatus => self
+                .updates
+                .status()
+                .map(AckResult::UpdateStatus)
+                .map_err(refusal_code),
+            Command::UpdateVerify(signature) => {
+                let board = fois_protocol::Hello::board_from_str(self.info.board);
+                self.updates
+                    .verify(&signature, &board)
+                    .map(AckResult::UpdateStatus)
+                    .map_err(refusal_code)
+            }
+            Command::UpdateCommit => self.commit_update(now_ms),
+            Command::UpdateAbort => self
+                .updates
+                .abort()
+                .map(AckResult::UpdateStatus)
+                .map_err(refusal_code),
+            Command::GetImageInfo => Ok(AckResult::ImageInfo(self.image_info())),
         }
     }
 

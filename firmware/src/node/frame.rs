@@ -14,6 +14,7 @@ use crate::measure::ntc::{self, NtcReading};
 use crate::measure::photocurrent::{self, Currents};
 use crate::measure::vref;
 use crate::storage::Storage;
+use crate::update::UpdateSlots;
 
 /// Everything one frame measured (also what a [`Measurement`] carries).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -31,7 +32,7 @@ pub struct FrameValues {
     pub flags: u16,
 }
 
-impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
+impl<A, L, AL, IND, D, S, U> Node<A, L, AL, IND, D, S, U>
 where
     A: PhotoAdc,
     L: OutputPin,
@@ -39,6 +40,7 @@ where
     IND: OutputPin,
     D: DelayNs,
     S: Storage,
+    U: UpdateSlots,
 {
     /// One output frame: K LED-off/LED-on cycles (settle waits through the
     /// delay), currents, temperature, V_DDA, the ice rule, the outputs, the
@@ -136,6 +138,10 @@ where
                 line,
                 resets_in_row,
             };
+            self.send(DeviceMsg::Event(event(kind, 1)), tx);
+        }
+        // The trial boot: confirmed, or a rollback reported (`updating`).
+        if let Some(kind) = self.trial_after_frame(now_ms, valid, self.streaming) {
             self.send(DeviceMsg::Event(event(kind, 1)), tx);
         }
         self.last = Some(m);

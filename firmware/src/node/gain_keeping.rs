@@ -12,8 +12,9 @@ use super::Node;
 use crate::calibration::gain;
 use crate::hal::PhotoAdc;
 use crate::storage::Storage;
+use crate::update::UpdateSlots;
 
-impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
+impl<A, L, AL, IND, D, S, U> Node<A, L, AL, IND, D, S, U>
 where
     A: PhotoAdc,
     L: OutputPin,
@@ -21,6 +22,7 @@ where
     IND: OutputPin,
     D: DelayNs,
     S: Storage,
+    U: UpdateSlots,
 {
     /// The estimator's temperature model from the config, and its gain
     /// prior: the kept learned gain (widened), else the last calibration,

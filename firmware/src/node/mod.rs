@@ -13,13 +13,17 @@
 //! - [`gain_keeping`]: the learned optical gain — the estimator's prior, the
 //!   out-of-band flag, when it is worth keeping;
 //! - [`modbus_view`]: the node as its Modbus registers show it, and a
-//!   Modbus write's actions carried out.
+//!   Modbus write's actions carried out;
+//! - [`updating`]: the firmware transfer's commands and the trial boot
+//!   (self-test, confirmation, rollback report) on the node's
+//!   [`UpdateSlots`].
 
 pub mod dispatch;
 pub mod frame;
 pub mod gain_keeping;
 pub mod modbus_view;
 pub mod saving;
+pub mod updating;
 
 use embedded_hal::delay::DelayNs;
 use embedded_hal::digital::OutputPin;
@@ -34,24 +38,11 @@ use crate::ice_rule::Rule;
 use crate::platform::boot::RuleSnapshot;
 use crate::storage::Storage;
 use crate::storage::record::{self, LoadError, MAX_RECORD, Record};
+use crate::update::{NoUpdates, Trial, UpdateSlots};
 
-/// Firmware version sent in [`Hello`] (the crate's version).
-pub const FIRMWARE_VERSION: [u8; 3] = [
-    parse_u8(env!("CARGO_PKG_VERSION_MAJOR")),
-    parse_u8(env!("CARGO_PKG_VERSION_MINOR")),
-    parse_u8(env!("CARGO_PKG_VERSION_PATCH")),
-];
-
-const fn parse_u8(s: &str) -> u8 {
-    let b = s.as_bytes();
-    let mut i = 0;
-    let mut v: u8 = 0;
-    while i < b.len() {
-        v = v.wrapping_mul(10).wrapping_add(b[i].wrapping_sub(b'0'));
-        i += 1;
-    }
-    v
-}
+/// Firmware version sent in [`Hello`] (the crate's version; it lives with
+/// the updater, whose version rule compares against it).
+pub use crate::update::FIRMWARE_VERSION;
 
 /// An unsaved change: when the first and the last one came (when it is
 /// written: [`saving`]).
@@ -78,7 +69,7 @@ pub struct Report {
 
 /// The node. Type parameters: ADC, LED (PB0), alarm output (PA9), indicator
 /// (LD2, PA5), delay (settle waits), storage (config + baseline record).
-pub struct Node<A, L, AL, IND, D, S>
+pub struct Node<A, L, AL, IND, D, S, U = NoUpdates>
 where
     A: PhotoAdc,
     L: OutputPin,
@@ -86,6 +77,7 @@ where
     IND: OutputPin,
     D: DelayNs,
     S: Storage,
+    U: UpdateSlots,
 {
     adc: A,
     led: L,
@@ -137,9 +129,13 @@ where
     /// The last measurement frame's estimate, gain and sequence number
     /// (what the Modbus registers show with [`Node::last_measurement`]).
     last_report: Option<Report>,
+    /// The update slots (firmware transfer, boot state: [`updating`]).
+    updates: U,
+    /// The running image's trial boot (self-test, confirmation, rollback).
+    trial: Trial,
 }
 
-impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
+impl<A, L, AL, IND, D, S, U> Node<A, L, AL, IND, D, S, U>
 where
     A: PhotoAdc,
     L: OutputPin,
@@ -147,12 +143,14 @@ where
     IND: OutputPin,
     D: DelayNs,
     S: Storage,
+    U: UpdateSlots,
 {
-    /// Build the node: loads config + baseline from `storage`. An empty store
-    /// gives the defaults; a corrupt or old record, or a store that cannot
-    /// be read, gives the defaults and the `CONFIG_DEFAULTED` fault. The LED
-    /// and the outputs start off.
-    pub fn new(
+    /// Build the node with its update slots (see [`Node::new`]): the running
+    /// image's boot state comes from `updates` (on trial, the node confirms
+    /// it after its self-test or asks for the reset that rolls it back:
+    /// [`updating`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn new_with_updates(
         adc: A,
         led: L,
         alarm: AL,
@@ -160,6 +158,7 @@ where
         delay: D,
         mut storage: S,
         info: BoardInfo,
+        updates: U,
     ) -> Self {
         let mut buf = [0xFFu8; MAX_RECORD];
         let loaded = match storage.read(&mut buf) {
@@ -222,6 +221,12 @@ where
             gain_checked_ms: 0,
             link,
             last_report: None,
+            trial: Trial::new(
+                updates.image_state(),
+                updates.running_version(),
+                !config_defaulted,
+            ),
+            updates,
         };
         node.start_estimator();
         let _ = node.led.set_low();
@@ -233,7 +238,7 @@ where
     pub fn hello(&self) -> Hello {
         Hello {
             protocol_version: PROTOCOL_VERSION,
-            firmware_version: FIRMWARE_VERSION,
+            firmware_version: self.updates.running_version(),
             board: Hello::board_from_str(self.info.board),
             unique_id: self.info.unique_id,
             reset_reason: self.info.reset_reason,
@@ -376,13 +381,22 @@ where
 
     /// Give the parts back (tests, the virtual node's restart).
     pub fn into_parts(self) -> (A, L, AL, IND, D, S) {
+        self.into_parts_and_updates().0
+    }
+
+    /// Give the parts and the update slots back (the virtual node's
+    /// restart into a new image).
+    pub fn into_parts_and_updates(self) -> ((A, L, AL, IND, D, S), U) {
         (
-            self.adc,
-            self.led,
-            self.alarm,
-            self.indicator,
-            self.delay,
-            self.storage,
+            (
+                self.adc,
+                self.led,
+                self.alarm,
+                self.indicator,
+                self.delay,
+                self.storage,
+            ),
+            self.updates,
         )
     }
 
@@ -395,5 +409,33 @@ where
             tx(bytes);
             self.seq = self.seq.wrapping_add(1);
         }
+    }
+}
+
+impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
+where
+    A: PhotoAdc,
+    L: OutputPin,
+    AL: OutputPin,
+    IND: OutputPin,
+    D: DelayNs,
+    S: Storage,
+{
+    /// Build the node: loads config + baseline from `storage`. An empty store
+    /// gives the defaults; a corrupt or old record, or a store that cannot
+    /// be read, gives the defaults and the `CONFIG_DEFAULTED` fault. The LED
+    /// and the outputs start off. No update slots ([`NoUpdates`]): the
+    /// firmware transfer's commands are unknown to it
+    /// ([`Node::new_with_updates`] builds one that takes updates).
+    pub fn new(
+        adc: A,
+        led: L,
+        alarm: AL,
+        indicator: IND,
+        delay: D,
+        storage: S,
+        info: BoardInfo,
+    ) -> Self {
+        Self::new_with_updates(adc, led, alarm, indicator, delay, storage, info, NoUpdates)
     }
 }

@@ -13,8 +13,9 @@ use super::Node;
 use crate::hal::PhotoAdc;
 use crate::modbus::view::{Action, ModbusView, command_result};
 use crate::storage::Storage;
+use crate::update::UpdateSlots;
 
-impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
+impl<A, L, AL, IND, D, S, U> Node<A, L, AL, IND, D, S, U>
 where
     A: PhotoAdc,
     L: OutputPin,
@@ -22,6 +23,7 @@ where
     IND: OutputPin,
     D: DelayNs,
     S: Storage,
+    U: UpdateSlots,
 {
     /// The registers, config and link settings as a Modbus master reads
     /// them now. The gateway-only registers (data age, frames lost) read
@@ -56,6 +58,7 @@ where
     /// give what [`registers::LAST_RESULT`] shows. The framed link's
     /// commands do the same work (`Node::command`).
     pub fn modbus_action(&mut self, action: Action, now_ms: u64) -> CommandResult {
+        self.trial.link_answered();
         command_result(&self.command(action.command(), now_ms))
     }
 }

@@ -15,6 +15,7 @@ use crate::hal::PhotoAdc;
 use crate::measure::vref;
 use crate::storage::record::{self, MAX_RECORD, Record};
 use crate::storage::{Storage, supply};
+use crate::update::UpdateSlots;
 
 /// A change is saved once no further change came for this long, ms: a burst
 /// of config changes and calibrations is one flash write.
@@ -44,7 +45,7 @@ pub const fn save_interval_ms(failures: u32) -> u64 {
     }
 }
 
-impl<A, L, AL, IND, D, S> Node<A, L, AL, IND, D, S>
+impl<A, L, AL, IND, D, S, U> Node<A, L, AL, IND, D, S, U>
 where
     A: PhotoAdc,
     L: OutputPin,
@@ -52,6 +53,7 @@ where
     IND: OutputPin,
     D: DelayNs,
     S: Storage,
+    U: UpdateSlots,
 {
     /// When the pending change will be saved (`None`: nothing to save), ms
     /// on the `now_ms` clock. The driver calls [`Self::poll_storage`] then
