@@ -81,6 +81,14 @@ mod app {
     use crate::rtu;
     use crate::safety::{self, Watchdog};
     use crate::slots::DfuSlot;
+    #[cfg(feature = "updater")]
+    use crate::slots::StateSlot;
+    #[cfg(feature = "updater")]
+    use fois_firmware::platform::flash_layout::ACTIVE;
+    #[cfg(feature = "updater")]
+    use fois_firmware::update::transfer::UpdaterConfig;
+    #[cfg(feature = "updater")]
+    use fois_firmware::update::{FIRMWARE_VERSION, FlashUpdater, UpdateKey};
 
     bind_interrupts!(struct Irqs {
         EXTI15_10 => exti::InterruptHandler<interrupt::typelevel::EXTI15_10>;
@@ -93,7 +101,23 @@ mod app {
         HeldOutput,
         Delay,
         SkippableStorage<FlashStore<BoardFlash>>,
+        BoardUpdates,
     >;
+
+    #[cfg(feature = "updater")]
+    type BoardUpdates = FlashUpdater<DfuSlot, StateSlot>;
+    #[cfg(not(feature = "updater"))]
+    type BoardUpdates = fois_firmware::update::NoUpdates;
+
+    /// The public key images are verified with: the 32 bytes of the file
+    /// named at build time (`firmware/build.rs`: `FOIS_UPDATE_PUBLIC_KEY`
+    /// or `firmware/keys/fois-update.pub`), or none — then every image is
+    /// refused (`UpdateKey::NONE`), never accepted.
+    #[cfg(feature = "updater")]
+    const UPDATE_KEY: UpdateKey = match include!(concat!(env!("OUT_DIR"), "/update_key.rs")) {
+        Some(bytes) => UpdateKey::from_bytes(bytes),
+        None => UpdateKey::NONE,
+    };
 
     /// Copy the old layout's record into the new store if it has none
     /// (`fois_firmware::storage::migrate`), and log what happened. Not
@@ -282,7 +306,26 @@ mod app {
                 migrate_store(&mut store, &mut dfu);
             }
             let store = SkippableStorage::new(store, store_read);
-            let mut node = Node::new(adc, led, alarm, ld2, Delay, store, info);
+            // The update slots: the DFU slot and embassy-boot's state (the
+            // trial boot's mark), read once here.
+            #[cfg(feature = "updater")]
+            let updates = FlashUpdater::new(
+                dfu,
+                StateSlot::new(regions.bank1_region2, wdg),
+                UpdaterConfig {
+                    active_len: ACTIVE.bytes(),
+                    running: FIRMWARE_VERSION,
+                    key: UPDATE_KEY,
+                },
+            );
+            #[cfg(not(feature = "updater"))]
+            let updates = {
+                // The DFU slot served the store's move only.
+                let _ = dfu;
+                fois_firmware::update::NoUpdates
+            };
+            let mut node =
+                Node::new_with_updates(adc, led, alarm, ld2, Delay, store, info, updates);
             node.set_clock_fallback(hse.is_none());
             node.set_boot_faults(!bor_ok, store_read != StoreRead::Read);
             if let Some((line, resets)) = plan.panic_reset {
@@ -419,6 +462,10 @@ mod app {
                 while let Some(action) = modbus.then(rtu::next_action).flatten() {
                     rtu::set_result(node.modbus_action(action, now));
                     acted = true;
+                }
+                if modbus && rtu::take_answered() {
+                    // The trial boot's link check: reads count too.
+                    node.link_answered();
                 }
                 node.set_supply_low(safety::supply_low());
                 node.set_clock_fallback(safety::on_hsi());

@@ -10,7 +10,7 @@
 //! fuzzed); this file only moves bytes, times and the view.
 
 use core::cell::RefCell;
-use core::sync::atomic::{AtomicU16, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU16, Ordering};
 
 use embassy_stm32::gpio::Output;
 use embassy_stm32::usart::{BufferedUartRx, BufferedUartTx};
@@ -33,6 +33,14 @@ static VIEW: BlockingMutex<CriticalSectionRawMutex, RefCell<Option<ModbusView>>>
 static ACTIONS: Channel<CriticalSectionRawMutex, Action, 4> = Channel::new();
 /// The last action's result (`CommandResult as u16`; `u16::MAX`: none new).
 static LAST_RESULT: AtomicU16 = AtomicU16::new(u16::MAX);
+/// An answer went out since the measure loop last looked: the trial boot's
+/// link check (a PLC that only reads registers sends no command).
+static ANSWERED: AtomicBool = AtomicBool::new(false);
+
+/// True once after the link answered a request.
+pub fn take_answered() -> bool {
+    ANSWERED.swap(false, Ordering::Relaxed)
+}
 
 /// Publish the node's view (after a frame, after actions).
 pub fn publish(view: ModbusView) {
@@ -117,6 +125,7 @@ pub async fn link_task(
             if let Some(de) = de.as_mut() {
                 de.set_low();
             }
+            ANSWERED.store(true, Ordering::Relaxed);
         }
         let any = !answer.actions.is_empty();
         for a in answer.actions {

@@ -64,8 +64,8 @@ impl DfuSlot {
 
 impl StateSlot {
     /// Over embassy-stm32's second flash region (sector 4).
-    // Taken by the updater once it is wired into the app.
-    #[allow(dead_code)]
+    // Taken by the updater (feature `updater`).
+    #[cfg_attr(not(feature = "updater"), allow(dead_code))]
     pub fn new(region: Bank1Region2<'static, Blocking>, wdg: Watchdog) -> Self {
         Slot {
             region,
