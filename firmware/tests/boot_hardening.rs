@@ -294,8 +294,8 @@ fn failed_saves_back_off_to_an_hour() {
         }),
     );
     // Three hours of a store that never takes a write, polled every second:
-    // the attempts (each an erase on the board) come 10, 10, 20, 40, ... s
-    // apart, then hourly — 11 of them, not 1 080.
+    // the attempts (each an erase on the board) come 60, 60, 120, 240, ... s
+    // apart, then hourly — 8 of them, not 1 080.
     let t0 = w.now_ms();
     let mut attempts = Vec::new();
     let mut due = node.save_due_ms();
@@ -309,6 +309,6 @@ fn failed_saves_back_off_to_an_hour() {
     }
     assert!(node.save_pending(), "still retried");
     let gaps: Vec<u64> = attempts.windows(2).map(|p| p[1] - p[0]).collect();
-    assert_eq!(gaps, [10, 20, 40, 80, 160, 320, 640, 1_280, 2_560, 3_600]);
+    assert_eq!(gaps, [60, 120, 240, 480, 960, 1_920, 3_600]);
     assert_eq!(node.into_parts().5.writes, 0);
 }

@@ -40,11 +40,11 @@ pub fn frames(bytes: &[u8]) -> Vec<DeviceFrame> {
     out
 }
 
-/// Run frames until the node has saved what it had pending (at most 30 s of
-/// frames); returns the frames sent.
+/// Run frames until the node has saved what it had pending (at most 90 s of
+/// frames: the shortest save interval is a minute); returns the frames sent.
 pub fn run_until_saved<S: Storage>(node: &mut NodeOn<S>, w: &World) -> Vec<DeviceFrame> {
     let mut out = Vec::new();
-    for _ in 0..300 {
+    for _ in 0..900 {
         if !node.save_pending() {
             break;
         }
