@@ -11,6 +11,7 @@
 //! - [`node`]: the virtual node, its options and its storage.
 //! - [`scenario`]: the TOML scenario format.
 //! - [`overlay`]: a scenario's temporary changes laid over its segments.
+//! - [`rate_walk`]: a growth rate that varies (ln r a seeded random process).
 //! - `pty` (feature `pty`): a virtual node served on a pseudo-terminal.
 //! - [`modbus_link`]: the node's Modbus RTU link (the firmware's framer and server) between a link's bytes and the node.
 
@@ -23,6 +24,7 @@ pub mod modbus_link;
 pub mod node;
 pub mod optics;
 pub mod overlay;
+pub mod rate_walk;
 #[cfg(feature = "pty")]
 pub mod pty;
 pub mod scenario;

@@ -34,6 +34,10 @@
 //! ntc = "open"                # connected | open | short (default connected)
 //! target_ua = [25.2, 9.56]    # a reference target on the face, µA at gain 1
 //!                             # (gain calibration practice; default none)
+//! rate_ln_sd = 0.5            # a varying rate: ln r a random process around
+//! rate_ln_corr_s = 3600       # the rate (its mean), correlation time,
+//! rate_ln_step_s = 60         # held per step (default 60 s),
+//! rate_ln_seed = 7            # seeded (default 1): `crate::rate_walk`
 //!
 //! [config]                    # the node's config in its flash at first boot
 //! frame_period_ms = 1000      # (names of `foisctl config set`)
@@ -208,6 +212,16 @@ pub struct SegmentSpec {
     /// A reference target on the face (gain calibration practice), µA at
     /// gain 1 per channel.
     pub target_ua: Option<[f64; 2]>,
+    /// A varying rate: the standard deviation of ln r, an
+    /// Ornstein–Uhlenbeck process around the segment's rate (its mean)
+    /// ([`crate::rate_walk`]; default none: a constant rate).
+    pub rate_ln_sd: Option<f64>,
+    /// The walk's correlation time, s (required with `rate_ln_sd`).
+    pub rate_ln_corr_s: Option<f64>,
+    /// The walk's constant-rate steps, s (default 60).
+    pub rate_ln_step_s: Option<f64>,
+    /// The walk's seed (default 1).
+    pub rate_ln_seed: Option<u64>,
 }
 
 /// A segment's length: seconds, or `"inf"`.
@@ -302,9 +316,45 @@ pub fn timeline(specs: Vec<SegmentSpec>) -> Result<Timeline, String> {
             seg.ntc = NtcWiring::parse(w)
                 .ok_or_else(|| at(&format!("ntc = \"{w}\": expected connected, open or short")))?;
         }
-        segs.push(seg);
+        match walk((s.rate_ln_sd, s.rate_ln_corr_s, s.rate_ln_step_s, s.rate_ln_seed), &seg).map_err(|e| at(&e))? {
+            Some(w) => segs.extend(crate::rate_walk::expand(&seg, w)),
+            None => segs.push(seg),
+        }
     }
     Ok(Timeline::new(segs))
+}
+
+/// A segment's rate walk, checked (`None`: a constant rate).
+/// The keys: `rate_ln_sd`, `rate_ln_corr_s`, `rate_ln_step_s`, `rate_ln_seed`.
+type WalkKeys = (Option<f64>, Option<f64>, Option<f64>, Option<u64>);
+
+fn walk(keys: WalkKeys, seg: &Segment) -> Result<Option<crate::rate_walk::RateWalk>, String> {
+    let (sd_ln, corr_s, step_s, seed) = keys;
+    let Some(sd_ln) = sd_ln else {
+        return match (corr_s, step_s, seed) {
+            (None, None, None) => Ok(None),
+            _ => Err("rate_ln_corr_s, rate_ln_step_s and rate_ln_seed need rate_ln_sd".into()),
+        };
+    };
+    if !(sd_ln.is_finite() && (0.0..=3.0).contains(&sd_ln)) {
+        return Err(format!("rate_ln_sd = {sd_ln} is outside 0..=3"));
+    }
+    if !(seg.duration_s.is_finite() && seg.rate_mm_per_h > 0.0) {
+        return Err("rate_ln_sd needs a finite duration_s and rate_mm_per_h > 0".into());
+    }
+    let corr_s = corr_s.ok_or("rate_ln_sd needs rate_ln_corr_s (the correlation time, s)")?;
+    let step_s = step_s.unwrap_or(crate::rate_walk::DEFAULT_STEP_S);
+    for (name, v) in [("rate_ln_corr_s", corr_s), ("rate_ln_step_s", step_s)] {
+        if !(v.is_finite() && v >= 1.0) {
+            return Err(format!("{name} = {v} must be >= 1 s"));
+        }
+    }
+    Ok(Some(crate::rate_walk::RateWalk {
+        sd_ln,
+        corr_s,
+        step_s,
+        seed: seed.unwrap_or(1),
+    }))
 }
 
 /// Parse a scenario from TOML text.

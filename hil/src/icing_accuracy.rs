@@ -1,0 +1,321 @@
+//! The icing rate and the icing period against the truth, per accuracy
+//! scenario (every seed together): the columns the growth history adds to
+//! the estimator's accuracy table ([`crate::accuracy`]).
+//!
+//! - **Rate** over the frames in which ice has grown without a pause for at
+//!   least [`RATE_AFTER_S`] (60 min) since growth last started: the mean
+//!   estimate, the mean truth, the mean σ, the RMS of ln(est/true) (the
+//!   estimate floored at [`RATE_FLOOR_MM_PER_H`]: a node that reads 0 while
+//!   ice grows is wrong by a large factor, not by infinity) and the share
+//!   of those frames with |est − true| ≤ 2σ.
+//! - **Onset**: from each start of growth (a dry face or a pause that
+//!   starts to grow) to the first frame with the icing flag on, while the
+//!   ice still grows (never: `∞`).
+//! - **Clearing**: from each stop of growth with the ice staying (a pause,
+//!   the end of an event) to the first frame with the flag off, and to the
+//!   first with P(accreting) ≤ [`ACCRETING_OFF`] (*not accreting*), before
+//!   growth starts again (`None`: not within the time the run leaves).
+//! - **Shed → dry**: from each shed (ice growing, then a dry face) to the
+//!   first frame whose medium is dry.
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+
+use fois_firmware::estimator::ACCRETING_OFF;
+use fois_protocol::Medium;
+use fois_vnode::Cover;
+
+use crate::outcome::{EstSample, Outcome};
+
+/// Growth that has lasted this long counts for the rate columns, s.
+pub const RATE_AFTER_S: f64 = 3600.0;
+/// The estimate below this counts as this in ln(est/true), mm/h.
+pub const RATE_FLOOR_MM_PER_H: f64 = 0.01;
+
+/// The rate over the frames of long-enough growth.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RateStat {
+    /// Frames counted.
+    pub frames: u64,
+    /// Mean estimate, mm/h.
+    pub est_mean: f64,
+    /// Mean truth, mm/h.
+    pub true_mean: f64,
+    /// Mean σ the node reported, mm/h.
+    pub sigma_mean: f64,
+    /// RMS of ln(est/true).
+    pub rms_ln: f64,
+    /// Share of the frames with |est − true| ≤ 2σ.
+    pub within_2sigma: f64,
+}
+
+/// After one stop of growth with the ice staying.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Clearing {
+    /// True thickness at the stop, mm.
+    pub thickness_mm: f64,
+    /// The medium on the face.
+    pub cover: Cover,
+    /// Minutes to the flag off (`None`: not within `observed_min`).
+    pub flag_off_min: Option<f64>,
+    /// Minutes to P(accreting) ≤ [`ACCRETING_OFF`].
+    pub not_accreting_min: Option<f64>,
+    /// Minutes the run watched (to the next start or its end).
+    pub observed_min: f64,
+}
+
+/// One scenario's icing columns.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IcingRow {
+    /// Scenario name (without the seed).
+    pub name: String,
+    /// Seeds (runs).
+    pub runs: usize,
+    /// The rate after [`RATE_AFTER_S`] of growth (`None`: no such frame).
+    pub rate: Option<RateStat>,
+    /// Minutes from each start of growth to the flag on (∞: not while growing).
+    pub onset_min: Vec<f64>,
+    /// Each stop of growth with the ice staying.
+    pub clearings: Vec<Clearing>,
+    /// Minutes from each shed to the medium dry (`None`: not before the next
+    /// start or the end).
+    pub shed_dry_min: Vec<Option<f64>>,
+}
+
+impl IcingRow {
+    /// The worst onset, min (`None`: no start).
+    pub fn worst_onset_min(&self) -> Option<f64> {
+        self.onset_min.iter().copied().reduce(f64::max)
+    }
+}
+
+fn base_name(name: &str) -> &str {
+    name.split("@seed").next().unwrap_or(name)
+}
+
+/// The rows, one per accuracy scenario whose node sent an icing rate, in
+/// name order.
+pub fn rows(outcomes: &[Outcome]) -> Vec<IcingRow> {
+    let mut groups: BTreeMap<&str, Vec<&Outcome>> = BTreeMap::new();
+    for o in outcomes
+        .iter()
+        .filter(|o| o.estimates.iter().any(|s| s.icing.is_some()))
+    {
+        groups.entry(base_name(&o.name)).or_default().push(o);
+    }
+    groups
+        .into_iter()
+        .map(|(name, runs)| row(name, &runs))
+        .collect()
+}
+
+#[derive(Default)]
+struct RateSums {
+    n: u64,
+    est: f64,
+    truth: f64,
+    sigma: f64,
+    ln2: f64,
+    within: u64,
+}
+
+fn row(name: &str, runs: &[&Outcome]) -> IcingRow {
+    let mut r = IcingRow {
+        name: name.to_string(),
+        runs: runs.len(),
+        rate: None,
+        onset_min: Vec::new(),
+        clearings: Vec::new(),
+        shed_dry_min: Vec::new(),
+    };
+    let mut sums = RateSums::default();
+    for o in runs {
+        one_run(&o.estimates, &mut r, &mut sums);
+    }
+    if sums.n > 0 {
+        let n = sums.n as f64;
+        r.rate = Some(RateStat {
+            frames: sums.n,
+            est_mean: sums.est / n,
+            true_mean: sums.truth / n,
+            sigma_mean: sums.sigma / n,
+            rms_ln: (sums.ln2 / n).sqrt(),
+            within_2sigma: sums.within as f64 / n,
+        });
+    }
+    r
+}
+
+/// The first sample from `from` on (until growth starts again) that `hit`
+/// accepts: its delay after `t0`, min, and the minutes watched.
+fn delay_until(
+    s: &[EstSample],
+    from: usize,
+    t0: f64,
+    hit: &dyn Fn(&EstSample) -> bool,
+) -> (Option<f64>, f64) {
+    let mut last = t0;
+    for x in &s[from..] {
+        if x.true_rate_mm_per_h > 0.0 {
+            break;
+        }
+        last = x.t_s;
+        if hit(x) {
+            return (Some((x.t_s - t0) / 60.0), (x.t_s - t0) / 60.0);
+        }
+    }
+    (None, (last - t0) / 60.0)
+}
+
+fn one_run(s: &[EstSample], r: &mut IcingRow, sums: &mut RateSums) {
+    let flag = |x: &EstSample| x.icing.is_some_and(|i| i.accreting);
+    let mut growing_since: Option<f64> = None;
+    for (i, x) in s.iter().enumerate() {
+        let grows = x.true_rate_mm_per_h > 0.0;
+        match (growing_since, grows) {
+            (None, true) => {
+                growing_since = Some(x.t_s);
+                // Onset: the flag on while the ice still grows.
+                let on = s[i..]
+                    .iter()
+                    .take_while(|y| y.true_rate_mm_per_h > 0.0)
+                    .find(|y| flag(y))
+                    .map_or(f64::INFINITY, |y| (y.t_s - x.t_s) / 60.0);
+                r.onset_min.push(on);
+            }
+            (Some(_), false) => {
+                growing_since = None;
+                let prev = &s[i.saturating_sub(1)];
+                if x.cover == Cover::Dry {
+                    let (dry, _) = delay_until(s, i, x.t_s, &|y| y.medium == Medium::Dry);
+                    r.shed_dry_min.push(dry);
+                } else {
+                    let (off, watched) = delay_until(s, i, x.t_s, &|y| !flag(y));
+                    let (not_acc, _) = delay_until(s, i, x.t_s, &|y| {
+                        y.icing
+                            .is_some_and(|i| i.p_accreting <= f64::from(ACCRETING_OFF))
+                    });
+                    r.clearings.push(Clearing {
+                        thickness_mm: prev.true_mm,
+                        cover: prev.cover,
+                        flag_off_min: off,
+                        not_accreting_min: not_acc,
+                        observed_min: watched,
+                    });
+                }
+            }
+            _ => {}
+        }
+        if let (Some(t0), Some(ic)) = (growing_since, x.icing)
+            && x.t_s - t0 >= RATE_AFTER_S
+        {
+            let truth = x.true_rate_mm_per_h;
+            let est = ic.rate_mm_per_h;
+            sums.n += 1;
+            sums.est += est;
+            sums.truth += truth;
+            sums.sigma += ic.sigma_mm_per_h;
+            sums.ln2 += (est.max(RATE_FLOOR_MM_PER_H) / truth).ln().powi(2);
+            sums.within += u64::from((est - truth).abs() <= 2.0 * ic.sigma_mm_per_h);
+        }
+    }
+}
+
+fn minutes(v: Option<f64>) -> String {
+    match v {
+        Some(m) if m.is_finite() => format!("{m:.1}"),
+        Some(_) => "never".into(),
+        None => "—".into(),
+    }
+}
+
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    v.sort_by(f64::total_cmp);
+    (!v.is_empty()).then(|| v[v.len() / 2])
+}
+
+/// Median / worst of delays (`None` = not within the watched time: worst
+/// "> watched").
+fn delays(v: &[Option<f64>], watched: &[f64]) -> String {
+    if v.is_empty() {
+        return "—".into();
+    }
+    let missing: Vec<f64> = v
+        .iter()
+        .zip(watched)
+        .filter(|(d, _)| d.is_none())
+        .map(|(_, w)| *w)
+        .collect();
+    let got: Vec<f64> = v.iter().flatten().copied().collect();
+    let worst = if missing.is_empty() {
+        minutes(got.iter().copied().reduce(f64::max))
+    } else {
+        format!(
+            "none in {:.0} ({} of {})",
+            missing.iter().copied().fold(f64::INFINITY, f64::min),
+            missing.len(),
+            v.len()
+        )
+    };
+    format!("{} / {worst}", minutes(median(got)))
+}
+
+/// The Markdown table of the icing columns.
+pub fn table(rows: &[IcingRow]) -> String {
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "| scenario | seeds | rate ≥ 60 min of growth: est / true, mean (σ) mm/h | RMS ln(est/true) | rate \\|err\\| ≤ 2σ | flag on after growth starts, median / worst min | growth stops at (mm) | flag off, median / worst min | not accreting (P ≤ {ACCRETING_OFF}), median / worst min | shed → dry, worst min |"
+    );
+    let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    for r in rows {
+        let (rate, rms, within) = match r.rate {
+            Some(x) => (
+                format!(
+                    "{:.2} / {:.2} (σ {:.2})",
+                    x.est_mean, x.true_mean, x.sigma_mean
+                ),
+                format!("{:.2}", x.rms_ln),
+                format!("{:.1} %", 100.0 * x.within_2sigma),
+            ),
+            None => ("—".into(), "—".into(), "—".into()),
+        };
+        let onset = if r.onset_min.is_empty() {
+            "—".to_string()
+        } else {
+            format!(
+                "{} / {}",
+                minutes(median(r.onset_min.clone())),
+                minutes(r.worst_onset_min())
+            )
+        };
+        let at: Vec<f64> = r.clearings.iter().map(|c| c.thickness_mm).collect();
+        let stops = match (
+            at.iter().copied().reduce(f64::min),
+            at.iter().copied().reduce(f64::max),
+        ) {
+            (Some(a), Some(b)) if b - a < 0.5 => format!("{a:.1}"),
+            (Some(a), Some(b)) => format!("{a:.1}–{b:.1}"),
+            _ => "—".into(),
+        };
+        let watched: Vec<f64> = r.clearings.iter().map(|c| c.observed_min).collect();
+        let off: Vec<Option<f64>> = r.clearings.iter().map(|c| c.flag_off_min).collect();
+        let not_acc: Vec<Option<f64>> = r.clearings.iter().map(|c| c.not_accreting_min).collect();
+        let shed = if r.shed_dry_min.is_empty() {
+            "—".to_string()
+        } else if r.shed_dry_min.iter().any(Option::is_none) {
+            "never".to_string()
+        } else {
+            minutes(r.shed_dry_min.iter().flatten().copied().reduce(f64::max))
+        };
+        let _ = writeln!(
+            s,
+            "| {} | {} | {rate} | {rms} | {within} | {onset} | {stops} | {} | {} | {shed} |",
+            r.name,
+            r.runs,
+            delays(&off, &watched),
+            delays(&not_acc, &watched),
+        );
+    }
+    s
+}
