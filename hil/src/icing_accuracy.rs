@@ -75,6 +75,9 @@ pub struct IcingRow {
     pub rate: Option<RateStat>,
     /// Minutes from each start of growth to the flag on (∞: not while growing).
     pub onset_min: Vec<f64>,
+    /// At [`RATE_AFTER_S`] into each growth that lasts that long: (est,
+    /// true, σ), mm/h — the "rate at 60 min" (one look per growth).
+    pub at_60_min: Vec<(f64, f64, f64)>,
     /// Each stop of growth with the ice staying.
     pub clearings: Vec<Clearing>,
     /// Minutes from each shed to the medium dry (`None`: not before the next
@@ -83,6 +86,25 @@ pub struct IcingRow {
 }
 
 impl IcingRow {
+    /// RMS of ln(est/true) at 60 min of growth and the share of those
+    /// looks with |est − true| ≤ 2σ (`None`: no growth lasted 60 min).
+    pub fn at_60_min_stats(&self) -> Option<(f64, f64)> {
+        let n = self.at_60_min.len();
+        (n > 0).then(|| {
+            let ln2: f64 = self
+                .at_60_min
+                .iter()
+                .map(|(e, t, _)| (e.max(RATE_FLOOR_MM_PER_H) / t).ln().powi(2))
+                .sum();
+            let within = self
+                .at_60_min
+                .iter()
+                .filter(|(e, t, sd)| (e - t).abs() <= 2.0 * sd)
+                .count();
+            ((ln2 / n as f64).sqrt(), within as f64 / n as f64)
+        })
+    }
+
     /// The worst onset, min (`None`: no start).
     pub fn worst_onset_min(&self) -> Option<f64> {
         self.onset_min.iter().copied().reduce(f64::max)
@@ -125,6 +147,7 @@ fn row(name: &str, runs: &[&Outcome]) -> IcingRow {
         runs: runs.len(),
         rate: None,
         onset_min: Vec::new(),
+        at_60_min: Vec::new(),
         clearings: Vec::new(),
         shed_dry_min: Vec::new(),
     };
@@ -147,24 +170,27 @@ fn row(name: &str, runs: &[&Outcome]) -> IcingRow {
 }
 
 /// The first sample from `from` on (until growth starts again) that `hit`
-/// accepts: its delay after `t0`, min, and the minutes watched.
+/// accepts: its delay after `t0`, min.
 fn delay_until(
     s: &[EstSample],
     from: usize,
     t0: f64,
     hit: &dyn Fn(&EstSample) -> bool,
-) -> (Option<f64>, f64) {
-    let mut last = t0;
-    for x in &s[from..] {
-        if x.true_rate_mm_per_h > 0.0 {
-            break;
-        }
-        last = x.t_s;
-        if hit(x) {
-            return (Some((x.t_s - t0) / 60.0), (x.t_s - t0) / 60.0);
-        }
-    }
-    (None, (last - t0) / 60.0)
+) -> Option<f64> {
+    s[from..]
+        .iter()
+        .take_while(|x| x.true_rate_mm_per_h <= 0.0)
+        .find(|x| hit(x))
+        .map(|x| (x.t_s - t0) / 60.0)
+}
+
+/// Minutes from `t0` to the last sample before growth starts again.
+fn watched_min(s: &[EstSample], from: usize, t0: f64) -> f64 {
+    s[from..]
+        .iter()
+        .take_while(|x| x.true_rate_mm_per_h <= 0.0)
+        .last()
+        .map_or(0.0, |x| (x.t_s - t0) / 60.0)
 }
 
 fn one_run(s: &[EstSample], r: &mut IcingRow, sums: &mut RateSums) {
@@ -186,12 +212,9 @@ fn one_run(s: &[EstSample], r: &mut IcingRow, sums: &mut RateSums) {
             (Some(_), false) => {
                 growing_since = None;
                 let prev = &s[i.saturating_sub(1)];
-                if x.cover == Cover::Dry {
-                    let (dry, _) = delay_until(s, i, x.t_s, &|y| y.medium == Medium::Dry);
-                    r.shed_dry_min.push(dry);
-                } else {
-                    let (off, watched) = delay_until(s, i, x.t_s, &|y| !flag(y));
-                    let (not_acc, _) = delay_until(s, i, x.t_s, &|y| {
+                if x.cover != Cover::Dry {
+                    let off = delay_until(s, i, x.t_s, &|y| !flag(y));
+                    let not_acc = delay_until(s, i, x.t_s, &|y| {
                         y.icing
                             .is_some_and(|i| i.p_accreting <= f64::from(ACCRETING_OFF))
                     });
@@ -200,15 +223,24 @@ fn one_run(s: &[EstSample], r: &mut IcingRow, sums: &mut RateSums) {
                         cover: prev.cover,
                         flag_off_min: off,
                         not_accreting_min: not_acc,
-                        observed_min: watched,
+                        observed_min: watched_min(s, i, x.t_s),
                     });
                 }
             }
             _ => {}
         }
+        // A shed: ice on the face, then a dry one (growing or not before).
+        if i > 0 && x.cover == Cover::Dry && s[i - 1].cover != Cover::Dry {
+            r.shed_dry_min
+                .push(delay_until(s, i, x.t_s, &|y| y.medium == Medium::Dry));
+        }
         if let (Some(t0), Some(ic)) = (growing_since, x.icing)
             && x.t_s - t0 >= RATE_AFTER_S
         {
+            if i > 0 && s[i - 1].t_s - t0 < RATE_AFTER_S {
+                r.at_60_min
+                    .push((ic.rate_mm_per_h, x.true_rate_mm_per_h, ic.sigma_mm_per_h));
+            }
             let truth = x.true_rate_mm_per_h;
             let est = ic.rate_mm_per_h;
             sums.n += 1;
@@ -265,9 +297,12 @@ pub fn table(rows: &[IcingRow]) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "| scenario | seeds | rate ≥ 60 min of growth: est / true, mean (σ) mm/h | RMS ln(est/true) | rate \\|err\\| ≤ 2σ | flag on after growth starts, median / worst min | growth stops at (mm) | flag off, median / worst min | not accreting (P ≤ {ACCRETING_OFF}), median / worst min | shed → dry, worst min |"
+        "| scenario | seeds | rate at 60 min of growth: RMS ln(est/true), \\|err\\| ≤ 2σ (looks) | rate ≥ 60 min of growth: est / true, mean (σ) mm/h | RMS ln(est/true) | rate \\|err\\| ≤ 2σ | flag on after growth starts, median / worst min | growth stops at (mm) | flag off, median / worst min | not accreting (P ≤ {ACCRETING_OFF}), median / worst min | shed → dry, worst min |"
     );
-    let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    let _ = writeln!(
+        s,
+        "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+    );
     for r in rows {
         let (rate, rms, within) = match r.rate {
             Some(x) => (
@@ -279,6 +314,12 @@ pub fn table(rows: &[IcingRow]) -> String {
                 format!("{:.1} %", 100.0 * x.within_2sigma),
             ),
             None => ("—".into(), "—".into(), "—".into()),
+        };
+        let at60 = match r.at_60_min_stats() {
+            Some((rms, within)) => {
+                format!("{rms:.2}, {:.0} % ({})", 100.0 * within, r.at_60_min.len())
+            }
+            None => "—".into(),
         };
         let onset = if r.onset_min.is_empty() {
             "—".to_string()
@@ -310,7 +351,7 @@ pub fn table(rows: &[IcingRow]) -> String {
         };
         let _ = writeln!(
             s,
-            "| {} | {} | {rate} | {rms} | {within} | {onset} | {stops} | {} | {} | {shed} |",
+            "| {} | {} | {at60} | {rate} | {rms} | {within} | {onset} | {stops} | {} | {} | {shed} |",
             r.name,
             r.runs,
             delays(&off, &watched),
@@ -318,4 +359,94 @@ pub fn table(rows: &[IcingRow]) -> String {
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::outcome::IcingSample;
+
+    /// One frame a minute: `cover`, true rate, the node's rate, σ, P, flag.
+    fn frame(t_min: f64, cover: Cover, rate: f64, est: f64, p: f64, on: bool) -> EstSample {
+        EstSample {
+            t_s: 60.0 * t_min,
+            cover,
+            true_mm: if cover == Cover::Dry { 0.0 } else { 1.0 },
+            est_mm: 1.0,
+            sigma_mm: 0.3,
+            medium: if cover == Cover::Dry {
+                Medium::Dry
+            } else {
+                Medium::Rime
+            },
+            true_gain: 1.0,
+            gain: None,
+            true_rate_mm_per_h: rate,
+            icing: Some(IcingSample {
+                rate_mm_per_h: est,
+                sigma_mm_per_h: 0.5,
+                p_accreting: p,
+                accreting: on,
+            }),
+        }
+    }
+
+    #[test]
+    fn onset_rate_clearing_and_shed_against_the_truth() {
+        let mut o = crate::outcome::tests_support::outcome("h@seed1");
+        let mut s = vec![frame(0.0, Cover::Dry, 0.0, 0.0, 0.5, false)];
+        // Growth at 2 mm/h from minute 1 to 90; the flag on at minute 8;
+        // the node reads 1.5 ± 0.5 until minute 70, then 3.5.
+        for m in 1..90 {
+            let est = if m < 70 { 1.5 } else { 3.5 };
+            s.push(frame(f64::from(m), Cover::Rime, 2.0, est, 0.9, m >= 8));
+        }
+        // Stop at minute 90: the flag off at 102, P ≤ 0.3 at 110; to 120.
+        for m in 90..=120 {
+            s.push(frame(
+                f64::from(m),
+                Cover::Rime,
+                0.0,
+                0.1,
+                if m >= 110 { 0.2 } else { 0.5 },
+                m < 102,
+            ));
+        }
+        // Shed at 121: dry named at 124; then no more growth.
+        for m in 121..=130 {
+            let mut f = frame(f64::from(m), Cover::Dry, 0.0, 0.0, 0.1, false);
+            f.medium = if m >= 124 { Medium::Dry } else { Medium::Rime };
+            s.push(f);
+        }
+        o.estimates = s;
+        let r = &rows(&[o])[0];
+        assert_eq!(r.onset_min, vec![7.0]);
+        // Minutes 61–89 count (29 frames): 9 at 1.5, 20 at 3.5 (|1.5 − 2| ≤
+        // 2σ = 1, |3.5 − 2| is not).
+        let x = r.rate.unwrap();
+        assert_eq!(x.frames, 29);
+        let rms = ((9.0 * (0.75f64).ln().powi(2) + 20.0 * (1.75f64).ln().powi(2)) / 29.0).sqrt();
+        assert!((x.rms_ln - rms).abs() < 1e-12, "{x:?}");
+        assert!((x.within_2sigma - 9.0 / 29.0).abs() < 1e-12, "{x:?}");
+        // At 60 min (minute 61): 1.5 against 2, within 2σ.
+        assert_eq!(r.at_60_min, vec![(1.5, 2.0, 0.5)]);
+        let (rms60, within60) = r.at_60_min_stats().unwrap();
+        assert!((rms60 - (0.75f64).ln().abs()).abs() < 1e-12 && within60 == 1.0);
+        assert_eq!(r.clearings.len(), 1);
+        let c = r.clearings[0];
+        assert_eq!(
+            (c.flag_off_min, c.not_accreting_min),
+            (Some(12.0), Some(20.0))
+        );
+        assert_eq!(c.observed_min, 40.0);
+        assert_eq!(r.shed_dry_min, vec![Some(3.0)]);
+        let t = table(std::slice::from_ref(r));
+        assert!(
+            t.lines()
+                .nth(2)
+                .unwrap()
+                .ends_with("| 7.0 / 7.0 | 1.0 | 12.0 / 12.0 | 20.0 / 20.0 | 3.0 |"),
+            "{t}"
+        );
+    }
 }

@@ -24,9 +24,9 @@ pub mod modbus_link;
 pub mod node;
 pub mod optics;
 pub mod overlay;
-pub mod rate_walk;
 #[cfg(feature = "pty")]
 pub mod pty;
+pub mod rate_walk;
 pub mod scenario;
 
 pub use adc::SimAdc;

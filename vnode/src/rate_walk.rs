@@ -61,9 +61,13 @@ pub fn expand(seg: &Segment, walk: RateWalk) -> Vec<Segment> {
         }
         // Ramps are split into sub-ramps.
         s.air_temp_c = lerp(seg.air_temp_c, seg.air_temp_end_c, w0);
-        s.air_temp_end_c = seg.air_temp_end_c.map(|_| lerp(seg.air_temp_c, seg.air_temp_end_c, w1));
+        s.air_temp_end_c = seg
+            .air_temp_end_c
+            .map(|_| lerp(seg.air_temp_c, seg.air_temp_end_c, w1));
         s.led_factor = lerp(seg.led_factor, seg.led_factor_end, w0);
-        s.led_factor_end = seg.led_factor_end.map(|_| lerp(seg.led_factor, seg.led_factor_end, w1));
+        s.led_factor_end = seg
+            .led_factor_end
+            .map(|_| lerp(seg.led_factor, seg.led_factor_end, w1));
         s.face_transmission = lerp(seg.face_transmission, seg.face_transmission_end, w0);
         s.face_transmission_end = seg
             .face_transmission_end
@@ -82,8 +86,15 @@ mod tests {
 
     #[test]
     fn the_walk_keeps_the_mean_rate_the_spread_and_the_seed() {
-        let seg = Segment::new(400.0 * 3600.0, Cover::Rime).rate(2.0).thickness(1.0);
-        let walk = RateWalk { sd_ln: 0.5, corr_s: 3600.0, step_s: 60.0, seed: 7 };
+        let seg = Segment::new(400.0 * 3600.0, Cover::Rime)
+            .rate(2.0)
+            .thickness(1.0);
+        let walk = RateWalk {
+            sd_ln: 0.5,
+            corr_s: 3600.0,
+            step_s: 60.0,
+            seed: 7,
+        };
         let subs = expand(&seg, walk);
         assert_eq!(subs.len(), 24_000);
         assert_eq!(subs[0].start_thickness_mm, Some(1.0));
@@ -100,10 +111,16 @@ mod tests {
         assert!((sd_ln - 0.5).abs() < 0.06, "sd of ln r {sd_ln}");
         // One correlation time apart, ln r keeps ~e⁻¹ of its deviation.
         let lag = 60;
-        let c: f64 = lns.windows(lag + 1).map(|w| (w[0] - m_ln) * (w[lag] - m_ln)).sum::<f64>()
+        let c: f64 = lns
+            .windows(lag + 1)
+            .map(|w| (w[0] - m_ln) * (w[lag] - m_ln))
+            .sum::<f64>()
             / (n - lag as f64)
             / (sd_ln * sd_ln);
-        assert!((c - (-1.0f64).exp()).abs() < 0.12, "lag-1 h correlation {c}");
+        assert!(
+            (c - (-1.0f64).exp()).abs() < 0.12,
+            "lag-1 h correlation {c}"
+        );
         assert_eq!(expand(&seg, walk), subs);
         let other = expand(&seg, RateWalk { seed: 8, ..walk });
         assert_ne!(other[0].rate_mm_per_h, subs[0].rate_mm_per_h);

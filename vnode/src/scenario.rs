@@ -316,7 +316,17 @@ pub fn timeline(specs: Vec<SegmentSpec>) -> Result<Timeline, String> {
             seg.ntc = NtcWiring::parse(w)
                 .ok_or_else(|| at(&format!("ntc = \"{w}\": expected connected, open or short")))?;
         }
-        match walk((s.rate_ln_sd, s.rate_ln_corr_s, s.rate_ln_step_s, s.rate_ln_seed), &seg).map_err(|e| at(&e))? {
+        match walk(
+            (
+                s.rate_ln_sd,
+                s.rate_ln_corr_s,
+                s.rate_ln_step_s,
+                s.rate_ln_seed,
+            ),
+            &seg,
+        )
+        .map_err(|e| at(&e))?
+        {
             Some(w) => segs.extend(crate::rate_walk::expand(&seg, w)),
             None => segs.push(seg),
         }
