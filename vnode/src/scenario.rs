@@ -34,10 +34,6 @@
 //! ntc = "open"                # connected | open | short (default connected)
 //! target_ua = [25.2, 9.56]    # a reference target on the face, µA at gain 1
 //!                             # (gain calibration practice; default none)
-//! rate_ln_sd = 0.5            # a varying rate: ln r a random process around
-//! rate_ln_corr_s = 3600       # the rate (its mean), correlation time,
-//! rate_ln_step_s = 60         # held per step (default 60 s),
-//! rate_ln_seed = 7            # seeded (default 1): `crate::rate_walk`
 //!
 //! [config]                    # the node's config in its flash at first boot
 //! frame_period_ms = 1000      # (names of `foisctl config set`)
@@ -47,6 +43,12 @@
 //! duration_s = 60
 //! ambient_ua = [40.0, 40.0]
 //! ```
+//!
+//! A growth rate that varies: `rate_ln_sd = 0.5`, `rate_ln_corr_s = 3600`
+//! (and optionally `rate_ln_step_s = 60`, `rate_ln_seed = 7`) in a segment
+//! with a rate make ln r a seeded random process around it (the rate its
+//! mean), held per step ([`crate::rate_walk`]); the segment becomes one
+//! sub-segment per step.
 //!
 //! The hardware-in-loop suite reads the same files (`hil/scenarios/*.toml`)
 //! and adds keys only its checker uses: `name`, `description`, `class`,
@@ -407,6 +409,52 @@ pub fn load(path: &std::path::Path) -> anyhow::Result<Scenario> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_varying_rate_becomes_steps_and_its_keys_are_checked() {
+        let seg = |extra: &str| {
+            format!(
+                "[[segment]]\nduration_s = 600\ncover = \"rime\"\nrate_mm_per_h = 2.0\n{extra}\n"
+            )
+        };
+        let s = parse(&seg(
+            "rate_ln_sd = 0.5\nrate_ln_corr_s = 3600\nrate_ln_step_s = 100",
+        ))
+        .unwrap();
+        let segs = s.timeline.segments();
+        assert_eq!(segs.len(), 6);
+        assert!(
+            segs.iter()
+                .all(|s| s.duration_s == 100.0 && s.cover == Cover::Rime)
+        );
+        assert!(
+            segs.windows(2)
+                .all(|w| w[0].rate_mm_per_h != w[1].rate_mm_per_h)
+        );
+        let seeded = parse(&seg(
+            "rate_ln_sd = 0.5\nrate_ln_corr_s = 3600\nrate_ln_seed = 2",
+        ))
+        .unwrap();
+        assert_ne!(
+            seeded.timeline.segments()[0].rate_mm_per_h,
+            parse(&seg("rate_ln_sd = 0.5\nrate_ln_corr_s = 3600"))
+                .unwrap()
+                .timeline
+                .segments()[0]
+                .rate_mm_per_h
+        );
+        for (bad, says) in [
+            ("rate_ln_corr_s = 3600", "need rate_ln_sd"),
+            ("rate_ln_sd = 0.5", "needs rate_ln_corr_s"),
+            ("rate_ln_sd = -1.0\nrate_ln_corr_s = 3600", "outside 0..=3"),
+            ("rate_ln_sd = 0.5\nrate_ln_corr_s = 0.5", "must be >= 1 s"),
+        ] {
+            let e = parse(&seg(bad)).unwrap_err();
+            assert!(e.contains(says) && e.contains("segment 1"), "{bad}: {e}");
+        }
+        let paused = "[[segment]]\nduration_s = 600\ncover = \"rime\"\nrate_ln_sd = 0.5\nrate_ln_corr_s = 60\n";
+        assert!(parse(paused).unwrap_err().contains("rate_mm_per_h > 0"));
+    }
 
     #[test]
     fn the_documented_example_parses() {
