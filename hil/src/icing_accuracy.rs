@@ -73,8 +73,12 @@ pub struct IcingRow {
     pub runs: usize,
     /// The rate after [`RATE_AFTER_S`] of growth (`None`: no such frame).
     pub rate: Option<RateStat>,
-    /// Minutes from each start of growth to the flag on (∞: not while growing).
+    /// Minutes from each first start of growth (from the dry face a run
+    /// begins with) to the flag on (∞: not while growing).
     pub onset_min: Vec<f64>,
+    /// The same for each later start (after a pause, or regrowth after a
+    /// shed).
+    pub restart_onset_min: Vec<f64>,
     /// At [`RATE_AFTER_S`] into each growth that lasts that long: (est,
     /// true, σ), mm/h — the "rate at 60 min" (one look per growth).
     pub at_60_min: Vec<(f64, f64, f64)>,
@@ -105,9 +109,14 @@ impl IcingRow {
         })
     }
 
-    /// The worst onset, min (`None`: no start).
+    /// The worst onset over every start, first or later, min (`None`: no
+    /// start).
     pub fn worst_onset_min(&self) -> Option<f64> {
-        self.onset_min.iter().copied().reduce(f64::max)
+        self.onset_min
+            .iter()
+            .chain(&self.restart_onset_min)
+            .copied()
+            .reduce(f64::max)
     }
 }
 
@@ -147,6 +156,7 @@ fn row(name: &str, runs: &[&Outcome]) -> IcingRow {
         runs: runs.len(),
         rate: None,
         onset_min: Vec::new(),
+        restart_onset_min: Vec::new(),
         at_60_min: Vec::new(),
         clearings: Vec::new(),
         shed_dry_min: Vec::new(),
@@ -196,6 +206,7 @@ fn watched_min(s: &[EstSample], from: usize, t0: f64) -> f64 {
 fn one_run(s: &[EstSample], r: &mut IcingRow, sums: &mut RateSums) {
     let flag = |x: &EstSample| x.icing.is_some_and(|i| i.accreting);
     let mut growing_since: Option<f64> = None;
+    let mut started = false;
     for (i, x) in s.iter().enumerate() {
         let grows = x.true_rate_mm_per_h > 0.0;
         match (growing_since, grows) {
@@ -207,7 +218,12 @@ fn one_run(s: &[EstSample], r: &mut IcingRow, sums: &mut RateSums) {
                     .take_while(|y| y.true_rate_mm_per_h > 0.0)
                     .find(|y| flag(y))
                     .map_or(f64::INFINITY, |y| (y.t_s - x.t_s) / 60.0);
-                r.onset_min.push(on);
+                if started {
+                    r.restart_onset_min.push(on);
+                } else {
+                    r.onset_min.push(on);
+                }
+                started = true;
             }
             (Some(_), false) => {
                 growing_since = None;
@@ -321,27 +337,60 @@ pub fn table(rows: &[IcingRow]) -> String {
             }
             None => "—".into(),
         };
-        let onset = if r.onset_min.is_empty() {
-            "—".to_string()
-        } else {
+        let med_worst = |v: &[f64]| {
             format!(
                 "{} / {}",
-                minutes(median(r.onset_min.clone())),
-                minutes(r.worst_onset_min())
+                minutes(median(v.to_vec())),
+                minutes(v.iter().copied().reduce(f64::max))
             )
         };
-        let at: Vec<f64> = r.clearings.iter().map(|c| c.thickness_mm).collect();
-        let stops = match (
-            at.iter().copied().reduce(f64::min),
-            at.iter().copied().reduce(f64::max),
-        ) {
-            (Some(a), Some(b)) if b - a < 0.5 => format!("{a:.1}"),
-            (Some(a), Some(b)) => format!("{a:.1}–{b:.1}"),
-            _ => "—".into(),
+        let mut onset = if r.onset_min.is_empty() {
+            "—".to_string()
+        } else {
+            med_worst(&r.onset_min)
         };
-        let watched: Vec<f64> = r.clearings.iter().map(|c| c.observed_min).collect();
-        let off: Vec<Option<f64>> = r.clearings.iter().map(|c| c.flag_off_min).collect();
-        let not_acc: Vec<Option<f64>> = r.clearings.iter().map(|c| c.not_accreting_min).collect();
+        if !r.restart_onset_min.is_empty() {
+            let _ = write!(onset, "; again: {}", med_worst(&r.restart_onset_min));
+        }
+        // The stops grouped by thickness (to 0.5 mm): a pause at 5 mm and
+        // the end at 8 mm are not one figure.
+        let mut groups: BTreeMap<i64, Vec<&Clearing>> = BTreeMap::new();
+        for c in &r.clearings {
+            groups
+                .entry((c.thickness_mm * 2.0).round() as i64)
+                .or_default()
+                .push(c);
+        }
+        let cell = |f: &dyn Fn(&Clearing) -> String| -> String {
+            if groups.is_empty() {
+                return "—".into();
+            }
+            groups
+                .values()
+                .map(|g| f(g[0]).to_string())
+                .collect::<Vec<_>>()
+                .join("; ")
+        };
+        let stops = cell(&|c| format!("{:.1}", c.thickness_mm));
+        let per_group = |pick: &dyn Fn(&Clearing) -> Option<f64>| -> String {
+            groups
+                .values()
+                .map(|g| {
+                    let v: Vec<Option<f64>> = g.iter().map(|c| pick(c)).collect();
+                    let w: Vec<f64> = g.iter().map(|c| c.observed_min).collect();
+                    delays(&v, &w)
+                })
+                .collect::<Vec<_>>()
+                .join("; ")
+        };
+        let (off, not_acc) = if groups.is_empty() {
+            ("—".to_string(), "—".to_string())
+        } else {
+            (
+                per_group(&|c| c.flag_off_min),
+                per_group(&|c| c.not_accreting_min),
+            )
+        };
         let shed = if r.shed_dry_min.is_empty() {
             "—".to_string()
         } else if r.shed_dry_min.iter().any(Option::is_none) {
@@ -352,10 +401,7 @@ pub fn table(rows: &[IcingRow]) -> String {
         let _ = writeln!(
             s,
             "| {} | {} | {at60} | {rate} | {rms} | {within} | {onset} | {stops} | {} | {} | {shed} |",
-            r.name,
-            r.runs,
-            delays(&off, &watched),
-            delays(&not_acc, &watched),
+            r.name, r.runs, off, not_acc,
         );
     }
     s
@@ -418,9 +464,17 @@ mod tests {
             f.medium = if m >= 124 { Medium::Dry } else { Medium::Rime };
             s.push(f);
         }
+        // Regrowth from minute 131 (flag on at 135) to 140, then 10 min at
+        // rest with the flag on.
+        for m in 131..=150 {
+            let rate = if m <= 140 { 2.0 } else { 0.0 };
+            s.push(frame(f64::from(m), Cover::Rime, rate, 2.0, 0.9, m >= 135));
+        }
         o.estimates = s;
         let r = &rows(&[o])[0];
         assert_eq!(r.onset_min, vec![7.0]);
+        assert_eq!(r.restart_onset_min, vec![4.0]);
+        assert_eq!(r.worst_onset_min(), Some(7.0));
         // Minutes 61–89 count (29 frames): 9 at 1.5, 20 at 3.5 (|1.5 − 2| ≤
         // 2σ = 1, |3.5 − 2| is not).
         let x = r.rate.unwrap();
@@ -432,7 +486,9 @@ mod tests {
         assert_eq!(r.at_60_min, vec![(1.5, 2.0, 0.5)]);
         let (rms60, within60) = r.at_60_min_stats().unwrap();
         assert!((rms60 - (0.75f64).ln().abs()).abs() < 1e-12 && within60 == 1.0);
-        assert_eq!(r.clearings.len(), 1);
+        assert_eq!(r.clearings.len(), 2);
+        assert_eq!(r.clearings[1].flag_off_min, None);
+        assert_eq!(r.clearings[1].observed_min, 9.0);
         let c = r.clearings[0];
         assert_eq!(
             (c.flag_off_min, c.not_accreting_min),
@@ -445,7 +501,7 @@ mod tests {
             t.lines()
                 .nth(2)
                 .unwrap()
-                .ends_with("| 7.0 / 7.0 | 1.0 | 12.0 / 12.0 | 20.0 / 20.0 | 3.0 |"),
+                .ends_with("| 7.0 / 7.0; again: 4.0 / 4.0 | 1.0 | 12.0 / none in 9 (1 of 2) | 20.0 / none in 9 (1 of 2) | 3.0 |"),
             "{t}"
         );
     }
