@@ -358,6 +358,8 @@ mod tests {
             medium,
             true_gain: 1.0,
             gain: None,
+            true_rate_mm_per_h: 0.0,
+            icing: None,
         }
     }
 

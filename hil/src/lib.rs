@@ -8,9 +8,11 @@
 //! - [`check`]: the file's expectations against the outcome.
 //! - [`report`]: the results table and the goals.
 //! - [`accuracy`]: the ice estimator's accuracy table (bias, RMS, σ honesty, √CRLB, medium).
+//! - [`icing_accuracy`]: the icing rate and the icing period against the truth (the growth history).
 
 pub mod accuracy;
 pub mod check;
+pub mod icing_accuracy;
 pub mod outcome;
 pub mod report;
 pub mod run;

@@ -52,6 +52,24 @@ pub struct EstSample {
     pub true_gain: f64,
     /// The node's gain estimate and its σ (`MeasurementV3::gain`), if sent.
     pub gain: Option<(f64, f64)>,
+    /// The true growth rate, mm/h: the segment's, while ice grows on the
+    /// face (0 on a dry face, a paused one, water).
+    pub true_rate_mm_per_h: f64,
+    /// The node's icing rate (`MeasurementV5::icing`), if sent.
+    pub icing: Option<IcingSample>,
+}
+
+/// The node's icing rate and period in one frame (`IcingEstimate`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct IcingSample {
+    /// Posterior mean growth rate, mm/h.
+    pub rate_mm_per_h: f64,
+    /// Its σ, mm/h.
+    pub sigma_mm_per_h: f64,
+    /// P(accreting), 0–1.
+    pub p_accreting: f64,
+    /// The icing period's flag.
+    pub accreting: bool,
 }
 
 impl EstSample {

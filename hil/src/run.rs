@@ -14,7 +14,7 @@ use fois_protocol::{
 use fois_sim::streams::SplitMix64;
 use fois_vnode::{Cover, Environment, NodeOptions, VirtualNode};
 
-use crate::outcome::{EstSample, Outcome, ReplySeen, Seen, WATER_FREEZING_BAND_C};
+use crate::outcome::{EstSample, IcingSample, Outcome, ReplySeen, Seen, WATER_FREEZING_BAND_C};
 use crate::scenario::{Scenario, Send, ice_start_s};
 
 struct Observer {
@@ -75,6 +75,12 @@ impl Observer {
             SeqEvent::First | SeqEvent::InOrder => {}
         }
         let gain = f.msg.gain().map(|g| (g.gain(), g.sigma()));
+        let icing = f.msg.icing().map(|i| IcingSample {
+            rate_mm_per_h: f64::from(i.rate_um_per_h) / 1000.0,
+            sigma_mm_per_h: f64::from(i.sigma_um_per_h) / 1000.0,
+            p_accreting: f64::from(i.accreting_permille) / 1000.0,
+            accreting: i.accreting,
+        });
         if let Some((m, estimate)) = f.msg.measurement() {
             let truth = self.env.truth(m.uptime_ms.saturating_mul(1_000_000));
             if truth.cover == Cover::Water && truth.air_temp_c > WATER_FREEZING_BAND_C {
@@ -98,6 +104,8 @@ impl Observer {
                     medium: e.medium,
                     true_gain: truth.gain.signal_gain(),
                     gain,
+                    true_rate_mm_per_h: true_growth_rate(&self.env, m.uptime_ms, truth.cover),
+                    icing,
                 });
             }
         }
@@ -161,6 +169,18 @@ impl Observer {
             },
         }
     }
+}
+
+/// The rate at which ice grows at `uptime_ms`, mm/h: the segment's, if
+/// ice covers the face and grows (0 on a dry face, water, a pause, melting).
+fn true_growth_rate(env: &Environment, uptime_ms: u64, cover: Cover) -> f64 {
+    if cover.ice_kind().is_none() || cover == Cover::Water {
+        return 0.0;
+    }
+    let tl = env.timeline();
+    tl.segments()
+        .get(tl.index_at(uptime_ms as f64 / 1000.0))
+        .map_or(0.0, |s| s.rate_mm_per_h.max(0.0))
 }
 
 fn ns(t_s: f64) -> u64 {

@@ -287,7 +287,7 @@ fn the_report_reseeds_accuracy_runs_from_a_given_first_seed() {
 #[test]
 fn every_shipped_file_runs_the_same_on_the_virtual_node() {
     let files = scenario::files_in(&scenario::default_dir()).unwrap();
-    assert_eq!(files.len(), 44, "hil/scenarios holds 44 files");
+    assert_eq!(files.len(), 52, "hil/scenarios holds 52 files");
     let mut compared = 0;
     for path in &files {
         let v = fois_vnode::scenario::load(path).unwrap_or_else(|e| panic!("{e:#}"));

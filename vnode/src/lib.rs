@@ -11,6 +11,7 @@
 //! - [`node`]: the virtual node, its options and its storage.
 //! - [`scenario`]: the TOML scenario format.
 //! - [`overlay`]: a scenario's temporary changes laid over its segments.
+//! - [`rate_walk`]: a growth rate that varies (ln r a seeded random process).
 //! - `pty` (feature `pty`): a virtual node served on a pseudo-terminal.
 //! - [`modbus_link`]: the node's Modbus RTU link (the firmware's framer and server) between a link's bytes and the node.
 
@@ -25,6 +26,7 @@ pub mod optics;
 pub mod overlay;
 #[cfg(feature = "pty")]
 pub mod pty;
+pub mod rate_walk;
 pub mod scenario;
 
 pub use adc::SimAdc;

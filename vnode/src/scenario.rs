@@ -44,6 +44,12 @@
 //! ambient_ua = [40.0, 40.0]
 //! ```
 //!
+//! A growth rate that varies: `rate_ln_sd = 0.5`, `rate_ln_corr_s = 3600`
+//! (and optionally `rate_ln_step_s = 60`, `rate_ln_seed = 7`) in a segment
+//! with a rate make ln r a seeded random process around it (the rate its
+//! mean), held per step ([`crate::rate_walk`]); the segment becomes one
+//! sub-segment per step.
+//!
 //! The hardware-in-loop suite reads the same files (`hil/scenarios/*.toml`)
 //! and adds keys only its checker uses: `name`, `description`, `class`,
 //! `end_s`, `accuracy`, `[[command]]`, `[sweep]`, `[link]`, `[expect]`. They
@@ -208,6 +214,16 @@ pub struct SegmentSpec {
     /// A reference target on the face (gain calibration practice), µA at
     /// gain 1 per channel.
     pub target_ua: Option<[f64; 2]>,
+    /// A varying rate: the standard deviation of ln r, an
+    /// Ornstein–Uhlenbeck process around the segment's rate (its mean)
+    /// ([`crate::rate_walk`]; default none: a constant rate).
+    pub rate_ln_sd: Option<f64>,
+    /// The walk's correlation time, s (required with `rate_ln_sd`).
+    pub rate_ln_corr_s: Option<f64>,
+    /// The walk's constant-rate steps, s (default 60).
+    pub rate_ln_step_s: Option<f64>,
+    /// The walk's seed (default 1).
+    pub rate_ln_seed: Option<u64>,
 }
 
 /// A segment's length: seconds, or `"inf"`.
@@ -302,9 +318,55 @@ pub fn timeline(specs: Vec<SegmentSpec>) -> Result<Timeline, String> {
             seg.ntc = NtcWiring::parse(w)
                 .ok_or_else(|| at(&format!("ntc = \"{w}\": expected connected, open or short")))?;
         }
-        segs.push(seg);
+        match walk(
+            (
+                s.rate_ln_sd,
+                s.rate_ln_corr_s,
+                s.rate_ln_step_s,
+                s.rate_ln_seed,
+            ),
+            &seg,
+        )
+        .map_err(|e| at(&e))?
+        {
+            Some(w) => segs.extend(crate::rate_walk::expand(&seg, w)),
+            None => segs.push(seg),
+        }
     }
     Ok(Timeline::new(segs))
+}
+
+/// A segment's rate walk, checked (`None`: a constant rate).
+/// The keys: `rate_ln_sd`, `rate_ln_corr_s`, `rate_ln_step_s`, `rate_ln_seed`.
+type WalkKeys = (Option<f64>, Option<f64>, Option<f64>, Option<u64>);
+
+fn walk(keys: WalkKeys, seg: &Segment) -> Result<Option<crate::rate_walk::RateWalk>, String> {
+    let (sd_ln, corr_s, step_s, seed) = keys;
+    let Some(sd_ln) = sd_ln else {
+        return match (corr_s, step_s, seed) {
+            (None, None, None) => Ok(None),
+            _ => Err("rate_ln_corr_s, rate_ln_step_s and rate_ln_seed need rate_ln_sd".into()),
+        };
+    };
+    if !(sd_ln.is_finite() && (0.0..=3.0).contains(&sd_ln)) {
+        return Err(format!("rate_ln_sd = {sd_ln} is outside 0..=3"));
+    }
+    if !(seg.duration_s.is_finite() && seg.rate_mm_per_h > 0.0) {
+        return Err("rate_ln_sd needs a finite duration_s and rate_mm_per_h > 0".into());
+    }
+    let corr_s = corr_s.ok_or("rate_ln_sd needs rate_ln_corr_s (the correlation time, s)")?;
+    let step_s = step_s.unwrap_or(crate::rate_walk::DEFAULT_STEP_S);
+    for (name, v) in [("rate_ln_corr_s", corr_s), ("rate_ln_step_s", step_s)] {
+        if !(v.is_finite() && v >= 1.0) {
+            return Err(format!("{name} = {v} must be >= 1 s"));
+        }
+    }
+    Ok(Some(crate::rate_walk::RateWalk {
+        sd_ln,
+        corr_s,
+        step_s,
+        seed: seed.unwrap_or(1),
+    }))
 }
 
 /// Parse a scenario from TOML text.
@@ -347,6 +409,52 @@ pub fn load(path: &std::path::Path) -> anyhow::Result<Scenario> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_varying_rate_becomes_steps_and_its_keys_are_checked() {
+        let seg = |extra: &str| {
+            format!(
+                "[[segment]]\nduration_s = 600\ncover = \"rime\"\nrate_mm_per_h = 2.0\n{extra}\n"
+            )
+        };
+        let s = parse(&seg(
+            "rate_ln_sd = 0.5\nrate_ln_corr_s = 3600\nrate_ln_step_s = 100",
+        ))
+        .unwrap();
+        let segs = s.timeline.segments();
+        assert_eq!(segs.len(), 6);
+        assert!(
+            segs.iter()
+                .all(|s| s.duration_s == 100.0 && s.cover == Cover::Rime)
+        );
+        assert!(
+            segs.windows(2)
+                .all(|w| w[0].rate_mm_per_h != w[1].rate_mm_per_h)
+        );
+        let seeded = parse(&seg(
+            "rate_ln_sd = 0.5\nrate_ln_corr_s = 3600\nrate_ln_seed = 2",
+        ))
+        .unwrap();
+        assert_ne!(
+            seeded.timeline.segments()[0].rate_mm_per_h,
+            parse(&seg("rate_ln_sd = 0.5\nrate_ln_corr_s = 3600"))
+                .unwrap()
+                .timeline
+                .segments()[0]
+                .rate_mm_per_h
+        );
+        for (bad, says) in [
+            ("rate_ln_corr_s = 3600", "need rate_ln_sd"),
+            ("rate_ln_sd = 0.5", "needs rate_ln_corr_s"),
+            ("rate_ln_sd = -1.0\nrate_ln_corr_s = 3600", "outside 0..=3"),
+            ("rate_ln_sd = 0.5\nrate_ln_corr_s = 0.5", "must be >= 1 s"),
+        ] {
+            let e = parse(&seg(bad)).unwrap_err();
+            assert!(e.contains(says) && e.contains("segment 1"), "{bad}: {e}");
+        }
+        let paused = "[[segment]]\nduration_s = 600\ncover = \"rime\"\nrate_ln_sd = 0.5\nrate_ln_corr_s = 60\n";
+        assert!(parse(paused).unwrap_err().contains("rate_mm_per_h > 0"));
+    }
 
     #[test]
     fn the_documented_example_parses() {

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use clap::Parser;
-use fois_hil::{accuracy, report, run, scenario};
+use fois_hil::{accuracy, icing_accuracy, report, run, scenario};
 
 /// Run hardware-in-loop scenarios (the firmware's own Node on the virtual
 /// hardware, in virtual time) on all cores and print a Markdown table of the
@@ -101,6 +101,14 @@ fn report(args: Args) -> anyhow::Result<()> {
             accuracy::CRLB_SEED,
             accuracy::table(&rows, &crlb)
         );
+        let icing = icing_accuracy::rows(&outcomes);
+        if !icing.is_empty() {
+            println!(
+                "Icing rate and period (the growth history; rate over the frames after {:.0} min of growth):\n{}",
+                icing_accuracy::RATE_AFTER_S / 60.0,
+                icing_accuracy::table(&icing)
+            );
+        }
     }
     let frames: u64 = outcomes.iter().map(|o| o.node_frames).sum();
     let virt: f64 = outcomes.iter().map(|o| o.virtual_s).sum();

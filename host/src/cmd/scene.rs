@@ -300,7 +300,7 @@ mod tests {
             .map(|d| d.filter_map(|e| e.ok().map(|e| e.path())).collect())
             .unwrap_or_default();
         files.retain(|p| p.extension().is_some_and(|e| e == "toml"));
-        assert_eq!(files.len(), 44);
+        assert_eq!(files.len(), 52);
         let mut with_config = 0;
         for f in &files {
             let scene = resolve(&["--scenario", &f.display().to_string()])
