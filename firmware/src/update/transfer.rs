@@ -38,7 +38,7 @@ use fois_protocol::{
 
 use super::key::UpdateKey;
 use super::session::{self, GRANULE, Geometry, MAX_STRIDE, SessionHeader};
-use super::{Refused, UpdateSlots};
+use super::slots::{Refused, UpdateSlots};
 
 /// What the board tells its updater.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
