@@ -9,6 +9,7 @@
 //! - [`adc`]: the simulated ADC ([`fois_firmware::PhotoAdc`]).
 //! - [`flash`]: the board's store flash in RAM, stalling the virtual clock.
 //! - [`node`]: the virtual node, its options and its storage.
+//! - [`update_slots`]: the boot state, active and DFU slots in RAM, embassy-boot's swap at a reset.
 //! - [`scenario`]: the TOML scenario format.
 //! - [`overlay`]: a scenario's temporary changes laid over its segments.
 //! - `pty` (feature `pty`): a virtual node served on a pseudo-terminal.
@@ -26,6 +27,7 @@ pub mod overlay;
 #[cfg(feature = "pty")]
 pub mod pty;
 pub mod scenario;
+pub mod update_slots;
 
 pub use adc::SimAdc;
 pub use clock::{VirtualClock, VirtualDelay, VirtualPin};

@@ -10,6 +10,12 @@
 //! board's too: the firmware's [`FlashStore`] (sequential-storage) over a
 //! [`VirtualFlash`] (the firmware's `RamFlash` of the board's geometry, two
 //! 16 KiB sectors, whose erases stall the virtual clock as the board's do).
+//!
+//! Updates: the node holds the firmware's updater over the board's boot
+//! state and DFU slot in RAM (`crate::update_slots`); a reset runs
+//! embassy-boot's bootloader on them first, and the fresh `Node` runs the
+//! version the active slot's image carries (on trial after a swap, so it
+//! confirms itself after its self-test, as the board's image does).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -19,15 +25,17 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use fois_firmware::estimator::EstimatorParams;
 use fois_firmware::platform::schedule::Schedule;
 use fois_firmware::storage::flash_store::FlashStore;
+use fois_firmware::update::UpdateKey;
 use fois_firmware::{BoardInfo, MemStorage, Node, Storage, StorageError};
 use fois_protocol::ResetReason;
 
 use crate::flash::{FLASH_BYTES, VirtualFlash};
+use crate::update_slots::{UpdatePartitions, VirtualUpdater};
 use crate::{Environment, SimAdc, Truth, VirtualClock, VirtualDelay, VirtualPin};
 
 /// The firmware node on virtual hardware.
 pub type FirmwareNode =
-    Node<SimAdc, VirtualPin, VirtualPin, VirtualPin, VirtualDelay, SharedStorage>;
+    Node<SimAdc, VirtualPin, VirtualPin, VirtualPin, VirtualDelay, SharedStorage, VirtualUpdater>;
 
 /// The node's flash store: the board's [`FlashStore`] over a
 /// [`VirtualFlash`], shared with the runner (so it survives a `Reset` and
@@ -206,6 +214,9 @@ pub struct NodeOptions {
     /// `[config]`), written with the gain calibration if the flash holds no
     /// record; `None`: the defaults.
     pub config: Option<fois_protocol::Config>,
+    /// The key update images are checked with (the firmware's built-in
+    /// public key on a board); [`UpdateKey::NONE`]: every image refused.
+    pub update_key: UpdateKey,
 }
 
 /// A unique id no other virtual node has while this process runs (nor
@@ -232,6 +243,7 @@ impl Default for NodeOptions {
             unique_id: None,
             gain_calibration: None,
             config: None,
+            update_key: UpdateKey::NONE,
         }
     }
 }
@@ -264,6 +276,7 @@ pub struct VirtualNode {
     resets: u32,
     frames: u64,
     storage: SharedStorage,
+    partitions: UpdatePartitions,
 }
 
 const NS_PER_MS: u64 = 1_000_000;
@@ -286,6 +299,7 @@ impl Hardware<'_> {
         resets: u32,
         reason: ResetReason,
         storage: SharedStorage,
+        partitions: &UpdatePartitions,
     ) -> FirmwareNode {
         let adc = SimAdc::new(
             self.clock.clone(),
@@ -296,7 +310,7 @@ impl Hardware<'_> {
         let mut info = BoardInfo::simulated(opts.board);
         info.reset_reason = reason;
         info.unique_id = opts.unique_id.unwrap_or(*b"FOIS-VIRTUAL");
-        let mut node = Node::new(
+        let mut node = Node::new_with_updates(
             adc,
             self.led.clone(),
             self.alarm.clone(),
@@ -304,6 +318,7 @@ impl Hardware<'_> {
             VirtualDelay::new(self.clock.clone()),
             storage,
             info,
+            partitions.updater(opts.update_key),
         );
         node.set_estimator_params(opts.estimator);
         node
@@ -347,6 +362,8 @@ impl VirtualNode {
             storage.write_if_empty(&record);
         }
         storage.stall_on(&clock);
+        let partitions = UpdatePartitions::erased();
+        partitions.stall_on(&clock);
         let hw = Hardware {
             clock: &clock,
             led: &led,
@@ -354,7 +371,7 @@ impl VirtualNode {
             indicator: &indicator,
             env: &env,
         };
-        let node = hw.node(&opts, 0, ResetReason::PowerOn, storage.clone());
+        let node = hw.node(&opts, 0, ResetReason::PowerOn, storage.clone(), &partitions);
         VirtualNode {
             node,
             clock,
@@ -367,6 +384,7 @@ impl VirtualNode {
             resets: 0,
             frames: 0,
             storage,
+            partitions,
         }
     }
 
@@ -417,6 +435,11 @@ impl VirtualNode {
     /// The node's flash store (shared with the node).
     pub fn shared_storage(&self) -> &SharedStorage {
         &self.storage
+    }
+
+    /// The update partitions (boot state, active and DFU slots).
+    pub fn update_partitions(&self) -> &UpdatePartitions {
+        &self.partitions
     }
 
     /// The node's persisted record now (config + baseline).
@@ -518,6 +541,10 @@ impl VirtualNode {
             for pin in [&mut self.led, &mut self.alarm, &mut self.indicator] {
                 let Ok(()) = embedded_hal::digital::OutputPin::set_low(pin);
             }
+            // The boot stage: a committed image swapped in, or a trial
+            // that was not confirmed swapped out (the RAM flash cannot
+            // fail; the board would reset and resume).
+            let _ = self.partitions.run_bootloader();
             let hw = Hardware {
                 clock: &self.clock,
                 led: &self.led,
@@ -530,6 +557,7 @@ impl VirtualNode {
                 self.resets,
                 ResetReason::Software,
                 self.storage.clone(),
+                &self.partitions,
             );
             // The board reboots: a fresh schedule, whose first poll sends
             // Hello and runs the first frame.
