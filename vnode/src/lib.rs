@@ -8,7 +8,8 @@
 //! - [`optics`]: the optical gain (LED, temperature coefficient, fouling).
 //! - [`adc`]: the simulated ADC ([`fois_firmware::PhotoAdc`]).
 //! - [`flash`]: the board's store flash in RAM, stalling the virtual clock.
-//! - [`node`]: the virtual node, its options and its storage.
+//! - [`node`]: the virtual node and its options.
+//! - [`shared_storage`]: its config store (the board's, on the virtual flash), a state file, the old layout's migration.
 //! - [`update_slots`]: the boot state, active and DFU slots in RAM, embassy-boot's swap at a reset.
 //! - [`scenario`]: the TOML scenario format.
 //! - [`overlay`]: a scenario's temporary changes laid over its segments.
@@ -27,6 +28,7 @@ pub mod overlay;
 #[cfg(feature = "pty")]
 pub mod pty;
 pub mod scenario;
+pub mod shared_storage;
 pub mod update_slots;
 
 pub use adc::SimAdc;
