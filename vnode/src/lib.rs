@@ -14,6 +14,7 @@
 //! - [`scenario`]: the TOML scenario format.
 //! - [`overlay`]: a scenario's temporary changes laid over its segments.
 //! - `pty` (feature `pty`): a virtual node served on a pseudo-terminal.
+//! - [`line`]: the framed link's byte time at a baud rate (optional, `pty` serves with it).
 //! - [`modbus_link`]: the node's Modbus RTU link (the firmware's framer and server) between a link's bytes and the node.
 
 pub mod adc;
@@ -21,6 +22,7 @@ pub mod clock;
 pub mod environment;
 pub mod flash;
 pub mod frontend;
+pub mod line;
 pub mod modbus_link;
 pub mod node;
 pub mod optics;
