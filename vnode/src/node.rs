@@ -387,6 +387,16 @@ impl VirtualNode {
     }
 
     fn after_commands(&mut self, tx: &mut impl FnMut(&[u8])) {
+        self.reset_if_asked();
+        // The board's link task wakes the main loop after every command
+        // (a new period, a StopStream's Hello, a Reset apply from now).
+        self.poll(tx);
+    }
+
+    /// A reset the node asked for (a `Reset` or a commit acknowledged, a
+    /// trial past its deadline after a frame): the boot stage, then a
+    /// fresh node and schedule.
+    fn reset_if_asked(&mut self) {
         if self.node_mut().take_reset_request() {
             // A fresh node on the same (shared) storage, as after a reset.
             self.resets += 1;
@@ -418,9 +428,6 @@ impl VirtualNode {
             // Hello and runs the first frame.
             self.schedule = Schedule::new();
         }
-        // The board's link task wakes the main loop after every command
-        // (a new period, a StopStream's Hello, a Reset apply from now).
-        self.poll(tx);
     }
 
     /// One pass of the board's main loop at the current virtual time: what
@@ -436,6 +443,8 @@ impl VirtualNode {
         if due.frame {
             // Runs the pending save too, after the frame.
             self.run_one_frame(tx);
+            // A trial past its deadline asks for the reset that rolls back.
+            self.reset_if_asked();
         } else {
             self.node.poll_storage(now_ms);
         }

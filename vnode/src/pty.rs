@@ -198,7 +198,9 @@ pub fn serve_on_line(
             rtu = None;
         }
         if let (None, Some(line)) = (rtu.as_ref(), line.as_mut()) {
-            let wait = framed_on_line(node, pty, line, &mut stats, &mut buf, start, t0, target, speed);
+            let wait = framed_on_line(
+                node, pty, line, &mut stats, &mut buf, start, t0, target, speed,
+            );
             std::thread::sleep(wait);
             continue;
         }
@@ -309,7 +311,8 @@ fn framed_on_line(
         line.host_sent(buf.get(..n).unwrap_or(&[]), now_ns);
     }
     // How far the node's work runs ahead of real time, real ns.
-    let lead = |node: &VirtualNode| (node.clock().now_ns().saturating_sub(target) as f64 / speed) as u64;
+    let lead =
+        |node: &VirtualNode| (node.clock().now_ns().saturating_sub(target) as f64 / speed) as u64;
     let mut frames: Vec<Vec<u8>> = Vec::new();
     if lead(node) == 0 {
         let bytes = line.arrived_at_node(now_ns);

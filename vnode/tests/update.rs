@@ -61,8 +61,12 @@ fn newer() -> FirmwareVersion {
 }
 
 fn node() -> VirtualNode {
+    node_in(Segment::new(3_600.0, Cover::Dry))
+}
+
+fn node_in(segment: Segment) -> VirtualNode {
     let env = Arc::new(Environment::new(
-        Timeline::new(vec![Segment::new(3_600.0, Cover::Dry)]),
+        Timeline::new(vec![segment]),
         fois_sim::SensorKind::B,
         1,
     ));
@@ -199,4 +203,70 @@ fn refused_images_leave_the_running_version() {
     );
     assert_eq!(info(&mut vn).version, FIRMWARE_VERSION);
     assert_eq!(vn.resets(), 0);
+}
+
+#[test]
+fn an_image_that_fails_its_self_test_is_rolled_back_by_the_bootloader() {
+    // Every frame invalid (both channels saturated by sunlight far beyond
+    // the phototransistors' clip): the new image's self-test
+    // cannot pass; at its deadline it resets, the bootloader swaps the old
+    // image back, and the node reports the rollback.
+    let mut vn = node_in(Segment::new(3_600.0, Cover::Dry).ambient([1_000.0, 1_000.0]));
+    let img = image(30 * 1024, 9, newer());
+    send(&mut vn, &img).unwrap();
+    vn.command(Command::UpdateCommit, &mut |_: &[u8]| {})
+        .unwrap();
+    assert_eq!(vn.resets(), 1);
+    let trial = info(&mut vn);
+    assert_eq!(
+        (trial.version, trial.state),
+        (img.version, ImageState::Trial)
+    );
+    let now = vn.clock().now_s();
+    let mut events = Vec::new();
+    let mut dec = fois_protocol::FrameDecoder::<{ fois_protocol::MAX_FRAME }>::new();
+    vn.run_until_s(now + 90.0, &mut |b: &[u8]| {
+        dec.feed::<fois_protocol::DeviceFrame>(b, |r| {
+            if let Ok(fois_protocol::DeviceFrame {
+                msg: fois_protocol::DeviceMsg::Event(e),
+                ..
+            }) = r
+            {
+                events.push(e.kind);
+            }
+        })
+    });
+    assert_eq!(
+        vn.resets(),
+        2,
+        "no rollback reset: {events:?} {:?}",
+        info(&mut vn)
+    );
+    let after = info(&mut vn);
+    assert_eq!(after.version, FIRMWARE_VERSION);
+    assert!(
+        events.contains(&fois_protocol::EventKind::ImageRolledBack {
+            failed: img.version,
+            running: FIRMWARE_VERSION,
+        }),
+        "{events:?}"
+    );
+    // How this boot went (read at boot), and marked: a new update may begin.
+    assert_eq!(
+        after.state,
+        ImageState::RolledBack {
+            failed: img.version
+        }
+    );
+    let mut digest = [0u8; 32];
+    digest.copy_from_slice(&img.sha512[..32]);
+    let begin = vn.command(
+        Command::UpdateBegin(UpdateBegin {
+            image_len: img.bytes.len() as u32,
+            version: img.version,
+            image_digest: digest,
+        }),
+        &mut |_: &[u8]| {},
+    );
+    assert!(matches!(begin, Ok(AckResult::UpdateStatus(_))), "{begin:?}");
 }
