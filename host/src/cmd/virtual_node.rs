@@ -22,7 +22,8 @@ pub struct VirtualNodeArgs {
     pub link: Option<PathBuf>,
     /// Keep the node's flash record (config, dark baseline) in this file,
     /// so it survives a restart of the virtual node as it survives a power
-    /// cycle on a board [default: RAM only].
+    /// cycle on a board [default: RAM only]. A file of the layout before
+    /// the bootloader (256 KiB) is migrated once, with a note.
     #[arg(long, value_name = "FILE")]
     pub state: Option<PathBuf>,
     /// Speak Modbus RTU on the pty (the node's link settings set so at
