@@ -8,11 +8,14 @@
 //! - [`optics`]: the optical gain (LED, temperature coefficient, fouling).
 //! - [`adc`]: the simulated ADC ([`fois_firmware::PhotoAdc`]).
 //! - [`flash`]: the board's store flash in RAM, stalling the virtual clock.
-//! - [`node`]: the virtual node, its options and its storage.
+//! - [`node`]: the virtual node and its options.
+//! - [`shared_storage`]: its config store (the board's, on the virtual flash), a state file, the old layout's migration.
+//! - [`update_slots`]: the boot state, active and DFU slots in RAM, embassy-boot's swap at a reset.
 //! - [`scenario`]: the TOML scenario format.
 //! - [`overlay`]: a scenario's temporary changes laid over its segments.
 //! - [`rate_walk`]: a growth rate that varies (ln r a seeded random process).
 //! - `pty` (feature `pty`): a virtual node served on a pseudo-terminal.
+//! - [`line`]: the framed link's byte time at a baud rate (optional, `pty` serves with it).
 //! - [`modbus_link`]: the node's Modbus RTU link (the firmware's framer and server) between a link's bytes and the node.
 
 pub mod adc;
@@ -20,6 +23,7 @@ pub mod clock;
 pub mod environment;
 pub mod flash;
 pub mod frontend;
+pub mod line;
 pub mod modbus_link;
 pub mod node;
 pub mod optics;
@@ -28,6 +32,8 @@ pub mod overlay;
 pub mod pty;
 pub mod rate_walk;
 pub mod scenario;
+pub mod shared_storage;
+pub mod update_slots;
 
 pub use adc::SimAdc;
 pub use clock::{VirtualClock, VirtualDelay, VirtualPin};

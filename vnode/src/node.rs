@@ -10,164 +10,30 @@
 //! board's too: the firmware's [`FlashStore`] (sequential-storage) over a
 //! [`VirtualFlash`] (the firmware's `RamFlash` of the board's geometry, two
 //! 16 KiB sectors, whose erases stall the virtual clock as the board's do).
+//!
+//! Updates: the node holds the firmware's updater over the board's boot
+//! state and DFU slot in RAM (`crate::update_slots`); a reset runs
+//! embassy-boot's bootloader on them first, and the fresh `Node` runs the
+//! version the active slot's image carries (on trial after a swap, so it
+//! confirms itself after its self-test, as the board's image does).
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::Mutex;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use fois_firmware::estimator::EstimatorParams;
 use fois_firmware::platform::schedule::Schedule;
-use fois_firmware::storage::flash_store::FlashStore;
-use fois_firmware::{BoardInfo, MemStorage, Node, Storage, StorageError};
+use fois_firmware::update::UpdateKey;
+use fois_firmware::{BoardInfo, MemStorage, Node};
 use fois_protocol::ResetReason;
 
-use crate::flash::{FLASH_BYTES, VirtualFlash};
+pub use crate::shared_storage::SharedStorage;
+use crate::update_slots::{UpdatePartitions, VirtualUpdater};
 use crate::{Environment, SimAdc, Truth, VirtualClock, VirtualDelay, VirtualPin};
 
 /// The firmware node on virtual hardware.
 pub type FirmwareNode =
-    Node<SimAdc, VirtualPin, VirtualPin, VirtualPin, VirtualDelay, SharedStorage>;
-
-/// The node's flash store: the board's [`FlashStore`] over a
-/// [`VirtualFlash`], shared with the runner (so it survives a `Reset` and
-/// can be inspected), optionally mirrored to a file (the raw flash image,
-/// so it survives the process, like flash survives a power cycle).
-#[derive(Clone)]
-pub struct SharedStorage {
-    store: Arc<Mutex<FlashStore<VirtualFlash>>>,
-    file: Option<PathBuf>,
-}
-
-impl std::fmt::Debug for SharedStorage {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SharedStorage")
-            .field("file", &self.file)
-            .finish_non_exhaustive()
-    }
-}
-
-fn flash_store(image: Vec<u8>) -> std::io::Result<FlashStore<VirtualFlash>> {
-    FlashStore::new(VirtualFlash::new(image, None), 0..FLASH_BYTES as u32)
-        .map_err(|e| std::io::Error::other(format!("flash store: {e:?}")))
-}
-
-impl SharedStorage {
-    /// Erased flash (a first boot), then `initial`'s record written to it
-    /// if it holds one.
-    pub fn new(initial: MemStorage) -> Self {
-        Self::try_new(initial).unwrap_or_else(|_| SharedStorage::erased())
-    }
-
-    fn erased() -> Self {
-        // The geometry is the firmware's own; FlashStore::new cannot refuse it.
-        #[allow(clippy::expect_used)]
-        let store = flash_store(vec![0xFF; FLASH_BYTES]).expect("two whole pages");
-        SharedStorage {
-            store: Arc::new(Mutex::new(store)),
-            file: None,
-        }
-    }
-
-    fn try_new(mut initial: MemStorage) -> Result<Self, StorageError> {
-        let this = Self::erased();
-        let mut buf = [0u8; fois_firmware::storage::record::MAX_RECORD];
-        let n = initial.read(&mut buf)?;
-        if n > 0 {
-            let record = buf.get(..n).ok_or(StorageError::Read)?;
-            this.store
-                .lock()
-                .map_err(|_| StorageError::Write)?
-                .write(record)?;
-        }
-        Ok(this)
-    }
-
-    /// Backed by `path`: starts with its flash image (erased flash if the
-    /// file does not exist) and rewrites it after every save. A file that
-    /// is not a flash image of [`FLASH_BYTES`] bytes is an error (the node
-    /// would otherwise boot on defaults without a word).
-    pub fn with_file(path: &Path) -> std::io::Result<Self> {
-        let image = match std::fs::read(path) {
-            Ok(bytes) if bytes.len() == FLASH_BYTES => bytes,
-            Ok(bytes) => {
-                return Err(std::io::Error::new(
-                    std::io::ErrorKind::InvalidData,
-                    format!(
-                        "{} bytes, not a flash image of {FLASH_BYTES} bytes",
-                        bytes.len()
-                    ),
-                ));
-            }
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => vec![0xFF; FLASH_BYTES],
-            Err(e) => return Err(e),
-        };
-        Ok(SharedStorage {
-            store: Arc::new(Mutex::new(flash_store(image)?)),
-            file: Some(path.to_path_buf()),
-        })
-    }
-
-    /// The newest record now (empty storage if there is none or the flash
-    /// holds no readable record).
-    pub fn snapshot(&self) -> MemStorage {
-        let mut buf = [0u8; fois_firmware::storage::record::MAX_RECORD];
-        let n = self
-            .store
-            .lock()
-            .ok()
-            .and_then(|mut s| s.read(&mut buf).ok())
-            .unwrap_or(0);
-        MemStorage::with_bytes(buf.get(..n).unwrap_or(&[]))
-    }
-
-    /// Write `record` if the flash holds none (erased, or nothing readable
-    /// as a record); a stored record is left as it is. Returns whether it
-    /// wrote.
-    pub fn write_if_empty(&self, record: &fois_firmware::storage::record::Record) -> bool {
-        let mut probe = self.clone();
-        let mut buf = [0u8; fois_firmware::storage::record::MAX_RECORD];
-        let empty = match probe.read(&mut buf) {
-            Ok(n) => matches!(
-                fois_firmware::storage::record::decode(buf.get(..n).unwrap_or(&[])),
-                Err(fois_firmware::storage::record::LoadError::Empty)
-            ),
-            Err(_) => false,
-        };
-        if !empty {
-            return false;
-        }
-        let mut out = [0u8; fois_firmware::storage::record::MAX_RECORD];
-        let n = fois_firmware::storage::record::encode(record, &mut out);
-        n > 0 && probe.write(out.get(..n).unwrap_or(&[])).is_ok()
-    }
-
-    /// From now on every erase and write stalls `clock` as the board's
-    /// flash stalls its CPU.
-    pub fn stall_on(&self, clock: &VirtualClock) {
-        self.with_flash(|f| f.set_clock(Some(clock.clone())));
-    }
-
-    /// Run `f` on the flash (to read its counters or damage it in a test).
-    pub fn with_flash<T>(&self, f: impl FnOnce(&mut VirtualFlash) -> T) -> Option<T> {
-        self.store.lock().ok().map(|mut s| f(s.flash_mut()))
-    }
-}
-
-impl Storage for SharedStorage {
-    fn read(&mut self, buf: &mut [u8]) -> Result<usize, StorageError> {
-        self.store.lock().map_err(|_| StorageError::Read)?.read(buf)
-    }
-
-    fn write(&mut self, data: &[u8]) -> Result<(), StorageError> {
-        let mut store = self.store.lock().map_err(|_| StorageError::Write)?;
-        store.write(data)?;
-        if let Some(path) = &self.file {
-            std::fs::write(path, store.flash_mut().bytes()).map_err(|_| StorageError::Write)?;
-        }
-        Ok(())
-    }
-}
+    Node<SimAdc, VirtualPin, VirtualPin, VirtualPin, VirtualDelay, SharedStorage, VirtualUpdater>;
 
 /// How to build a virtual node.
 #[derive(Debug, Clone)]
@@ -206,6 +72,9 @@ pub struct NodeOptions {
     /// `[config]`), written with the gain calibration if the flash holds no
     /// record; `None`: the defaults.
     pub config: Option<fois_protocol::Config>,
+    /// The key update images are checked with (the firmware's built-in
+    /// public key on a board); [`UpdateKey::NONE`]: every image refused.
+    pub update_key: UpdateKey,
 }
 
 /// A unique id no other virtual node has while this process runs (nor
@@ -232,6 +101,7 @@ impl Default for NodeOptions {
             unique_id: None,
             gain_calibration: None,
             config: None,
+            update_key: UpdateKey::NONE,
         }
     }
 }
@@ -264,6 +134,7 @@ pub struct VirtualNode {
     resets: u32,
     frames: u64,
     storage: SharedStorage,
+    partitions: UpdatePartitions,
 }
 
 const NS_PER_MS: u64 = 1_000_000;
@@ -286,6 +157,7 @@ impl Hardware<'_> {
         resets: u32,
         reason: ResetReason,
         storage: SharedStorage,
+        partitions: &UpdatePartitions,
     ) -> FirmwareNode {
         let adc = SimAdc::new(
             self.clock.clone(),
@@ -296,7 +168,7 @@ impl Hardware<'_> {
         let mut info = BoardInfo::simulated(opts.board);
         info.reset_reason = reason;
         info.unique_id = opts.unique_id.unwrap_or(*b"FOIS-VIRTUAL");
-        let mut node = Node::new(
+        let mut node = Node::new_with_updates(
             adc,
             self.led.clone(),
             self.alarm.clone(),
@@ -304,6 +176,7 @@ impl Hardware<'_> {
             VirtualDelay::new(self.clock.clone()),
             storage,
             info,
+            partitions.updater(opts.update_key),
         );
         node.set_estimator_params(opts.estimator);
         node
@@ -323,10 +196,7 @@ impl VirtualNode {
             Some(p) => SharedStorage::with_file(p).unwrap_or_else(|_| {
                 // Unreadable state (the CLI refuses it before this): erased
                 // flash; saves try to rewrite the file.
-                SharedStorage {
-                    file: Some(p.clone()),
-                    ..SharedStorage::erased()
-                }
+                SharedStorage::erased_with_file(p)
             }),
             None => SharedStorage::new(opts.storage.clone()),
         };
@@ -347,6 +217,8 @@ impl VirtualNode {
             storage.write_if_empty(&record);
         }
         storage.stall_on(&clock);
+        let partitions = UpdatePartitions::erased();
+        partitions.stall_on(&clock);
         let hw = Hardware {
             clock: &clock,
             led: &led,
@@ -354,7 +226,7 @@ impl VirtualNode {
             indicator: &indicator,
             env: &env,
         };
-        let node = hw.node(&opts, 0, ResetReason::PowerOn, storage.clone());
+        let node = hw.node(&opts, 0, ResetReason::PowerOn, storage.clone(), &partitions);
         VirtualNode {
             node,
             clock,
@@ -367,6 +239,7 @@ impl VirtualNode {
             resets: 0,
             frames: 0,
             storage,
+            partitions,
         }
     }
 
@@ -417,6 +290,11 @@ impl VirtualNode {
     /// The node's flash store (shared with the node).
     pub fn shared_storage(&self) -> &SharedStorage {
         &self.storage
+    }
+
+    /// The update partitions (boot state, active and DFU slots).
+    pub fn update_partitions(&self) -> &UpdatePartitions {
+        &self.partitions
     }
 
     /// The node's persisted record now (config + baseline).
@@ -509,6 +387,16 @@ impl VirtualNode {
     }
 
     fn after_commands(&mut self, tx: &mut impl FnMut(&[u8])) {
+        self.reset_if_asked();
+        // The board's link task wakes the main loop after every command
+        // (a new period, a StopStream's Hello, a Reset apply from now).
+        self.poll(tx);
+    }
+
+    /// A reset the node asked for (a `Reset` or a commit acknowledged, a
+    /// trial past its deadline after a frame): the boot stage, then a
+    /// fresh node and schedule.
+    fn reset_if_asked(&mut self) {
         if self.node_mut().take_reset_request() {
             // A fresh node on the same (shared) storage, as after a reset.
             self.resets += 1;
@@ -518,6 +406,10 @@ impl VirtualNode {
             for pin in [&mut self.led, &mut self.alarm, &mut self.indicator] {
                 let Ok(()) = embedded_hal::digital::OutputPin::set_low(pin);
             }
+            // The boot stage: a committed image swapped in, or a trial
+            // that was not confirmed swapped out (the RAM flash cannot
+            // fail; the board would reset and resume).
+            let _ = self.partitions.run_bootloader();
             let hw = Hardware {
                 clock: &self.clock,
                 led: &self.led,
@@ -530,14 +422,12 @@ impl VirtualNode {
                 self.resets,
                 ResetReason::Software,
                 self.storage.clone(),
+                &self.partitions,
             );
             // The board reboots: a fresh schedule, whose first poll sends
             // Hello and runs the first frame.
             self.schedule = Schedule::new();
         }
-        // The board's link task wakes the main loop after every command
-        // (a new period, a StopStream's Hello, a Reset apply from now).
-        self.poll(tx);
     }
 
     /// One pass of the board's main loop at the current virtual time: what
@@ -553,6 +443,8 @@ impl VirtualNode {
         if due.frame {
             // Runs the pending save too, after the frame.
             self.run_one_frame(tx);
+            // A trial past its deadline asks for the reset that rolls back.
+            self.reset_if_asked();
         } else {
             self.node.poll_storage(now_ms);
         }
@@ -610,6 +502,7 @@ mod tests {
     #![allow(clippy::unwrap_used)]
     use super::*;
     use crate::{Cover, Segment, Timeline};
+    use fois_firmware::Storage;
     use fois_protocol::{Command, HostFrame, encode_to_vec};
 
     #[test]

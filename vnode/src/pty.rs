@@ -9,6 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::VirtualNode;
+use crate::line::Line;
 use crate::modbus_link::ModbusLink;
 
 /// How to serve a virtual node on a pseudo-terminal.
@@ -142,7 +143,22 @@ pub fn serve_with(
     modbus: &ModbusOptions,
     stop: &AtomicBool,
 ) -> anyhow::Result<ServeStats> {
+    serve_on_line(node, pty, opts, modbus, None, stop)
+}
+
+/// [`serve_with`], the framed link carried at `line_baud` by the byte-time
+/// model of [`crate::line`] (one half-duplex line; an answer leaves after
+/// the flash work it answers): `None`, as fast as the pty moves bytes.
+pub fn serve_on_line(
+    node: &mut VirtualNode,
+    pty: &mut Pty,
+    opts: &ServeOptions,
+    modbus: &ModbusOptions,
+    line_baud: Option<u32>,
+    stop: &AtomicBool,
+) -> anyhow::Result<ServeStats> {
     use anyhow::Context;
+    let mut line = line_baud.map(Line::new);
     let mut log = match &modbus.frame_log {
         Some(p) => Some(
             std::fs::OpenOptions::new()
@@ -180,6 +196,13 @@ pub fn serve_with(
             }
         } else {
             rtu = None;
+        }
+        if let (None, Some(line)) = (rtu.as_ref(), line.as_mut()) {
+            let wait = framed_on_line(
+                node, pty, line, &mut stats, &mut buf, start, t0, target, speed,
+            );
+            std::thread::sleep(wait);
+            continue;
         }
         let master = &mut pty.master;
         // Host → node.
@@ -259,4 +282,63 @@ impl Drop for LinkGuard {
             let _ = std::fs::remove_file(&self.link);
         }
     }
+}
+
+/// One pass of the framed link over the byte-time model: host bytes onto
+/// the line, those arrived handed to the node (unless it is still busy
+/// with flash work: its virtual clock ahead of real time), the node's
+/// frames onto the line, those arrived written to the pty. Returns how
+/// long to sleep.
+#[allow(clippy::too_many_arguments)]
+fn framed_on_line(
+    node: &mut VirtualNode,
+    pty: &mut Pty,
+    line: &mut Line,
+    stats: &mut ServeStats,
+    buf: &mut [u8],
+    start: Instant,
+    t0: u64,
+    target: u64,
+    speed: f64,
+) -> Duration {
+    let master = &mut pty.master;
+    let now_ns = start.elapsed().as_nanos() as u64;
+    while let Ok(n) = master.read(buf) {
+        if n == 0 {
+            break;
+        }
+        stats.bytes_received += n as u64;
+        line.host_sent(buf.get(..n).unwrap_or(&[]), now_ns);
+    }
+    // How far the node's work runs ahead of real time, real ns.
+    let lead =
+        |node: &VirtualNode| (node.clock().now_ns().saturating_sub(target) as f64 / speed) as u64;
+    let mut frames: Vec<Vec<u8>> = Vec::new();
+    if lead(node) == 0 {
+        let bytes = line.arrived_at_node(now_ns);
+        if !bytes.is_empty() {
+            node.handle_rx(&bytes, &mut |b: &[u8]| frames.push(b.to_vec()));
+        }
+    }
+    node.advance_to(target, &mut |b: &[u8]| frames.push(b.to_vec()));
+    let ready = now_ns + lead(node);
+    for f in &frames {
+        line.node_sent(f, ready);
+    }
+    for f in line.arrived_at_host(now_ns) {
+        write_frame(master, &f, stats);
+    }
+    // Until the next byte or frame arrives, the node is free again, or the
+    // next frame is due (≤ 5 ms, ≥ 50 µs).
+    let now_ns = start.elapsed().as_nanos() as u64;
+    let frame_due = (node.next_due_ns().saturating_sub(t0) as f64 / speed) as u64;
+    let mut until = frame_due.min(now_ns + 5_000_000);
+    if let Some(t) = line.next_event_ns() {
+        until = until.min(t);
+    }
+    let busy = lead(node);
+    if busy > 0 {
+        until = until.min(now_ns + busy);
+    }
+    Duration::from_nanos(until.saturating_sub(now_ns).max(50_000))
 }

@@ -253,11 +253,15 @@ pub fn describe(scene: &Scene) -> String {
 
 /// Build the node of a scene (ray-traces the curves: about a second).
 pub fn build_node(scene: &Scene) -> VirtualNode {
-    build_node_with_state(scene, None)
+    build_node_with_state(scene, None, fois_firmware::update::UpdateKey::NONE)
 }
 
 /// Build the node of a scene, its flash record kept in `state` (a file).
-pub fn build_node_with_state(scene: &Scene, state: Option<PathBuf>) -> VirtualNode {
+pub fn build_node_with_state(
+    scene: &Scene,
+    state: Option<PathBuf>,
+    update_key: fois_firmware::update::UpdateKey,
+) -> VirtualNode {
     let env = Arc::new(Environment::new(
         scene.timeline.clone(),
         scene.sensor,
@@ -270,6 +274,7 @@ pub fn build_node_with_state(scene: &Scene, state: Option<PathBuf>) -> VirtualNo
             state_file: state,
             gain_calibration: scene.gain_calibration,
             config: scene.config.clone(),
+            update_key,
             ..NodeOptions::default()
         },
     )

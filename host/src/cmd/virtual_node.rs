@@ -22,7 +22,8 @@ pub struct VirtualNodeArgs {
     pub link: Option<PathBuf>,
     /// Keep the node's flash record (config, dark baseline) in this file,
     /// so it survives a restart of the virtual node as it survives a power
-    /// cycle on a board [default: RAM only].
+    /// cycle on a board [default: RAM only]. A file of the layout before
+    /// the bootloader (256 KiB) is migrated once, with a note.
     #[arg(long, value_name = "FILE")]
     pub state: Option<PathBuf>,
     /// Speak Modbus RTU on the pty (the node's link settings set so at
@@ -52,6 +53,24 @@ pub struct VirtualNodeArgs {
     /// this file while it speaks Modbus: the log to check registers against.
     #[arg(long, value_name = "FILE", requires = "modbus_rtu")]
     pub frame_log: Option<PathBuf>,
+    /// The public key (the 64-hex-digit `.pub` file `foisctl keygen`
+    /// writes) the node checks update images with, as a board checks them
+    /// with the key built into its firmware. The node runs the firmware's
+    /// updater on its own boot-state, active and DFU slots (in RAM: a
+    /// restart is a freshly flashed board) and, after a committed update,
+    /// embassy-boot's swap; it then reports the image's version (it cannot
+    /// run the image's code). Images for it are signed with
+    /// `foisctl sign --board virtual-f446` (its Hello's board name).
+    /// Without this option it refuses every image.
+    #[arg(long, value_name = "FILE.pub")]
+    pub update_key: Option<PathBuf>,
+    /// Carry the framed link at this rate, Bd: each byte takes 10 bit
+    /// times on one half-duplex line, and an answer leaves only after the
+    /// node's flash work for it (`fois_vnode::line`) [default: no byte
+    /// time, as fast as the pty moves bytes].
+    #[arg(long, value_name = "BD", conflicts_with = "modbus_rtu",
+          value_parser = clap::value_parser!(u32).range(300..=4_000_000))]
+    pub line_baud: Option<u32>,
 }
 
 /// `foisctl virtual-node`.
@@ -65,13 +84,26 @@ pub fn run(args: VirtualNodeArgs, stop: &AtomicBool) -> anyhow::Result<()> {
         parity,
         baud,
         frame_log,
+        update_key,
+        line_baud,
     } = args;
     let scene = scene.resolve(VIRTUAL_NODE_DEFAULTS)?;
     if let Some(p) = &state {
-        fois_vnode::SharedStorage::with_file(p)
+        let (_, migration) = fois_vnode::SharedStorage::open_file(p)
             .with_context(|| format!("cannot read the node state {}", p.display()))?;
+        if let Some(m) = migration {
+            eprintln!("{}", migration_note(p, m));
+        }
     }
-    let mut node = build_node_with_state(&scene, state);
+    let key = match &update_key {
+        Some(p) => {
+            let key = crate::signing::read_public_key(p)
+                .with_context(|| format!("cannot read the update key {}", p.display()))?;
+            fois_firmware::update::UpdateKey::from_bytes(key.to_bytes())
+        }
+        None => fois_firmware::update::UpdateKey::NONE,
+    };
+    let mut node = build_node_with_state(&scene, state, key);
     if modbus_rtu {
         let settings = fois_protocol::LinkSettings {
             protocol: fois_protocol::LinkProtocol::ModbusRtu,
@@ -121,7 +153,7 @@ pub fn run(args: VirtualNodeArgs, stop: &AtomicBool) -> anyhow::Result<()> {
         duration: scene.duration,
     };
     let modbus = serve::ModbusOptions { baud, frame_log };
-    let stats = serve::serve_with(&mut node, &mut pty, &opts, &modbus, stop)?;
+    let stats = serve::serve_on_line(&mut node, &mut pty, &opts, &modbus, line_baud, stop)?;
     eprintln!(
         "virtual node stopped at virtual t = {:.1} s: {} frames run, {} sent, {} dropped (no reader)",
         node.clock().now_s(),
@@ -130,4 +162,22 @@ pub fn run(args: VirtualNodeArgs, stop: &AtomicBool) -> anyhow::Result<()> {
         stats.frames_dropped
     );
     Ok(())
+}
+
+/// What the user is told, once, when a state file of the layout before the
+/// bootloader was converted.
+fn migration_note(path: &std::path::Path, m: fois_firmware::storage::migrate::Migration) -> String {
+    use fois_firmware::storage::migrate::Migration;
+    let what = match m {
+        Migration::Moved { layout, .. } => {
+            format!("its record (layout {layout}) moved into the new 2 × 16 KiB store")
+        }
+        Migration::NothingToMove | Migration::NotNeeded => {
+            "it held no record; it now holds the new 2 × 16 KiB store, empty".to_string()
+        }
+    };
+    format!(
+        "note: the node state {} was of the layout before the bootloader (2 × 128 KiB): {what}, as a board's first boot after the move does; the file is rewritten in the new layout",
+        path.display()
+    )
 }
