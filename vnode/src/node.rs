@@ -28,6 +28,7 @@ use fois_firmware::{BoardInfo, MemStorage, Node};
 use fois_protocol::ResetReason;
 
 pub use crate::shared_storage::SharedStorage;
+pub use crate::shared_storage::factory_record;
 use crate::update_slots::{UpdatePartitions, VirtualUpdater};
 use crate::{Environment, SimAdc, Truth, VirtualClock, VirtualDelay, VirtualPin};
 
@@ -103,21 +104,6 @@ impl Default for NodeOptions {
             config: None,
             update_key: UpdateKey::NONE,
         }
-    }
-}
-
-/// The record a factory-calibrated node has in its flash before its first
-/// boot: the default config, no dark baseline, the gain calibration
-/// `(gain, relative sd)` and, as the learned gain, the same (the node's
-/// prior is then the calibration itself, not widened).
-pub fn factory_record(gain: f64, rel_sd: f64) -> fois_firmware::storage::record::Record {
-    let estimate = fois_firmware::calibration::gain::to_estimate(gain as f32, rel_sd as f32);
-    fois_firmware::storage::record::Record {
-        config: fois_protocol::Config::default(),
-        baseline: None,
-        gain: Some(estimate),
-        gain_calibration: Some(estimate),
-        link: fois_protocol::LinkSettings::default(),
     }
 }
 

@@ -218,6 +218,21 @@ impl Storage for SharedStorage {
     }
 }
 
+/// The record a factory-calibrated node has in its flash before its first
+/// boot: the default config, no dark baseline, the gain calibration
+/// `(gain, relative sd)` and, as the learned gain, the same (the node's
+/// prior is then the calibration itself, not widened).
+pub fn factory_record(gain: f64, rel_sd: f64) -> fois_firmware::storage::record::Record {
+    let estimate = fois_firmware::calibration::gain::to_estimate(gain as f32, rel_sd as f32);
+    fois_firmware::storage::record::Record {
+        config: fois_protocol::Config::default(),
+        baseline: None,
+        gain: Some(estimate),
+        gain_calibration: Some(estimate),
+        link: fois_protocol::LinkSettings::default(),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #![allow(clippy::unwrap_used)]
@@ -230,7 +245,7 @@ mod tests {
         std::fs::create_dir_all(&dir).unwrap();
         let path = dir.join("state.bin");
         // An old file: the store on two 128 KiB sectors, holding a record.
-        let rec = crate::node::factory_record(0.9, 0.02);
+        let rec = factory_record(0.9, 0.02);
         let mut bytes = [0u8; record::MAX_RECORD];
         let n = record::encode(&rec, &mut bytes);
         let old =
