@@ -1,4 +1,4 @@
-//! The two linker scripts (the application's `firmware/memory.x`, the
+//! The two linker scripts (the application's `firmware/board/memory.x`, the
 //! bootloader's `boot/memory.x`) say what `platform::flash_layout` says:
 //! one source for the partitions, checked here.
 // A test crate: unwrap and expect are assertions here (helpers included).
@@ -56,7 +56,7 @@ fn read(path: &str) -> String {
 
 #[test]
 fn the_applications_memory_x_is_the_active_slot() {
-    let app = read("memory.x");
+    let app = read("board/memory.x");
     assert_eq!(region(&app, "FLASH"), (ACTIVE.start(), ACTIVE.bytes()));
     assert_eq!(region(&app, "RAM"), (0x2000_0000, 32 * 1024));
     // embassy-boot's names, as offsets from the start of flash.

@@ -4,7 +4,7 @@
 //!
 //! | rule | why |
 //! | --- | --- |
-//! | nothing depends on `fois-host` or `fois-gateway` (any edge: normal, build, dev) | they are the tops of the graph: an operator's tool and a service |
+//! | nothing depends on `fois-host`, `fois-gateway` or `fois-node` (any edge: normal, build, dev) | they are the tops of the graph: an operator's tool, a service and the board's image |
 //! | `fois-sim` depends on no FOIS crate | the simulator knows nothing of firmware or protocol |
 //! | `fois-protocol` depends on no FOIS crate; `fois-firmware` only on `fois-protocol` | the node's contract and logic stand alone |
 //! | `fois-protocol` and `fois-firmware` are `no_std` (their `lib.rs` says so) and pull no host crate for the thumb target | they run on the Cortex-M4F |
@@ -13,6 +13,7 @@
 //! | `fois-gateway` holds no vnode, sim, firmware, plotters, indicatif | a service on a site computer, not the simulator |
 //! | `fois-hil` holds no clap, serialport, plotters, indicatif | the suite runs the node, not the CLI |
 //! | `xtask` depends on no FOIS crate | it runs cargo |
+//! | `fois-node` depends on no FOIS crate but `fois-firmware` and `fois-protocol`, and on no host crate | the board's image is the library's logic and the HAL around it |
 //! | `fois-boot` depends on no FOIS crate, no sequential-storage, postcard or defmt (default features) | the bootloader cannot be updated over the link: small, no log, the flash layout shared by its source file |
 
 use std::collections::BTreeSet;
@@ -41,7 +42,7 @@ pub struct Rule {
 }
 
 /// Every downward rule of ARCHITECTURE.md.
-pub const RULES: [Rule; 9] = [
+pub const RULES: [Rule; 10] = [
     Rule {
         package: "fois-sim",
         edges: "normal,build",
@@ -123,6 +124,22 @@ pub const RULES: [Rule; 9] = [
         why: "xtask runs cargo, it links no FOIS crate",
     },
     Rule {
+        package: "fois-node",
+        edges: "normal,build",
+        target: Some("thumbv7em-none-eabihf"),
+        forbidden: &[
+            "fois-*",
+            "tokio",
+            "rumqttc",
+            "rustls",
+            "clap",
+            "rayon",
+            "serialport",
+        ],
+        allowed: &["fois-firmware", "fois-protocol"],
+        why: "the board's image is the library's logic and the HAL around it",
+    },
+    Rule {
         package: "fois-boot",
         edges: "normal,build",
         target: Some("thumbv7em-none-eabihf"),
@@ -134,7 +151,7 @@ pub const RULES: [Rule; 9] = [
 ];
 
 /// Packages nothing may depend on, over any edge.
-pub const TOPS: [&str; 2] = ["fois-host", "fois-gateway"];
+pub const TOPS: [&str; 3] = ["fois-host", "fois-gateway", "fois-node"];
 
 /// Crates whose `lib.rs` must declare `no_std`.
 pub const NO_STD: [(&str, &str); 2] = [

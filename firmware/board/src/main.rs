@@ -27,19 +27,14 @@
 #![cfg_attr(target_os = "none", no_main)]
 
 #[cfg(target_os = "none")]
-#[path = "fois-node/board.rs"]
 mod board;
 #[cfg(target_os = "none")]
-#[path = "fois-node/link.rs"]
 mod link;
 #[cfg(target_os = "none")]
-#[path = "fois-node/rtu.rs"]
 mod rtu;
 #[cfg(target_os = "none")]
-#[path = "fois-node/safety.rs"]
 mod safety;
 #[cfg(target_os = "none")]
-#[path = "fois-node/slots.rs"]
 mod slots;
 
 #[cfg(target_os = "none")]
@@ -110,7 +105,7 @@ mod app {
     type BoardUpdates = fois_firmware::update::NoUpdates;
 
     /// The public key images are verified with: the 32 bytes of the file
-    /// named at build time (`firmware/build.rs`: `FOIS_UPDATE_PUBLIC_KEY`
+    /// named at build time (`firmware/board/build.rs`: `FOIS_UPDATE_PUBLIC_KEY`
     /// or `firmware/keys/fois-update.pub`), or none — then every image is
     /// refused (`UpdateKey::NONE`), never accepted.
     #[cfg(feature = "updater")]

@@ -1,18 +1,15 @@
 //! The update key (every build: `$OUT_DIR/update_key.rs`, the board's
-//! `UPDATE_KEY`) and the board image's linker settings: its `memory.x` (the active slot at
-//! 0x0802_0000, `src/platform/flash_layout.rs`) first on the linker search
-//! path, and defmt's linker script. Only for the board binary on the thumb
-//! target: host builds, the QEMU test image and the bootloader (which use
-//! the library with the `board` feature off) get nothing from here.
+//! `UPDATE_KEY`) and the board image's linker settings: its `memory.x` (the
+//! active slot at 0x0802_0000, fois-firmware's `platform/flash_layout.rs`)
+//! first on the linker search path, and defmt's linker script. The linker
+//! settings only on the thumb target: on the host the binary is a stub.
 use std::{env, fs, path::PathBuf};
 
 fn main() {
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=build.rs");
     update_key();
-    let board = env::var_os("CARGO_FEATURE_BOARD").is_some();
-    let thumb = env::var("TARGET").is_ok_and(|t| t.starts_with("thumb"));
-    if !(board && thumb) {
+    if !env::var("TARGET").is_ok_and(|t| t.starts_with("thumb")) {
         return;
     }
     let Some(out) = env::var_os("OUT_DIR").map(PathBuf::from) else {
@@ -26,14 +23,14 @@ fn main() {
 }
 
 /// The public key the board verifies images with, from the file named by
-/// `FOIS_UPDATE_PUBLIC_KEY`, else `keys/fois-update.pub` (64 hex digits,
+/// `FOIS_UPDATE_PUBLIC_KEY`, else `firmware/keys/fois-update.pub` (64 hex digits,
 /// what `foisctl keygen` writes), written as a Rust expression of type
 /// `Option<[u8; 32]>` into `$OUT_DIR/update_key.rs`. Without a file the
 /// expression is `None`: the image refuses every update (a warning says
 /// so). A file that is not a key fails the build.
 fn update_key() {
     println!("cargo:rerun-if-env-changed=FOIS_UPDATE_PUBLIC_KEY");
-    let default = PathBuf::from("keys/fois-update.pub");
+    let default = PathBuf::from("../keys/fois-update.pub");
     println!("cargo:rerun-if-changed={}", default.display());
     let named = env::var_os("FOIS_UPDATE_PUBLIC_KEY").map(PathBuf::from);
     let path = named.clone().unwrap_or(default);
@@ -64,7 +61,7 @@ fn update_key() {
             let thumb = env::var("TARGET").is_ok_and(|t| t.starts_with("thumb"));
             if board && thumb {
                 println!(
-                    "cargo:warning=no update key (keys/fois-update.pub or FOIS_UPDATE_PUBLIC_KEY): \
+                    "cargo:warning=no update key (firmware/keys/fois-update.pub or FOIS_UPDATE_PUBLIC_KEY): \
                      this image refuses every firmware update"
                 );
             }
