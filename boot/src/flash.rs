@@ -29,6 +29,7 @@ use embedded_storage::nor_flash::{
     ErrorType, NorFlash, NorFlashError, NorFlashErrorKind, ReadNorFlash,
 };
 
+use crate::flash_controller;
 use crate::flash_layout::{FLASH_BASE, Partition, WRITE_BYTES};
 
 /// IWDG prescaler: LSI / 64 (PR = 4).
@@ -100,61 +101,20 @@ impl<const SECTOR: usize> PartitionFlash<SECTOR> {
     }
 }
 
-fn unlock() {
-    let flash = pac::FLASH;
-    while flash.sr().read().bsy() {}
-    if flash.cr().read().lock() {
-        flash.keyr().write_value(0x4567_0123);
-        flash.keyr().write_value(0xCDEF_89AB);
-    }
-    // Old error flags (write 1 to clear).
-    flash.sr().write(|w| {
-        w.set_eop(true);
-        w.set_operr(true);
-        w.set_wrperr(true);
-        w.set_pgaerr(true);
-        w.set_pgperr(true);
-        w.set_pgserr(true);
-    });
-}
-
-/// Wait for the controller, lock it, and say whether it reported an error.
-fn finish() -> Result<(), FlashError> {
-    let flash = pac::FLASH;
-    while flash.sr().read().bsy() {}
-    let sr = flash.sr().read();
-    flash.cr().write(|w| w.set_lock(true));
-    if sr.pgserr() || sr.pgperr() || sr.pgaerr() || sr.wrperr() || sr.operr() {
-        Err(FlashError::Failed)
-    } else {
-        Ok(())
-    }
-}
-
 fn erase_sector(snb: u8) -> Result<(), FlashError> {
     watchdog_feed();
-    unlock();
-    let flash = pac::FLASH;
-    flash.cr().write(|w| {
-        w.set_ser(true);
-        w.set_snb(snb);
-        w.set_psize(Psize::PSIZE16);
-    });
-    flash.cr().modify(|w| w.set_strt(true));
+    flash_controller::unlock();
+    flash_controller::start_sector_erase(snb, Psize::PSIZE16);
     // The CPU stalls on its next instruction fetch until the erase ends.
-    let done = finish();
+    let done = flash_controller::finish().map_err(|_| FlashError::Failed);
     watchdog_feed();
     done
 }
 
 fn program(address: u32, bytes: &[u8]) -> Result<(), FlashError> {
     watchdog_feed();
-    unlock();
-    let flash = pac::FLASH;
-    flash.cr().write(|w| {
-        w.set_pg(true);
-        w.set_psize(Psize::PSIZE16);
-    });
+    flash_controller::unlock();
+    flash_controller::start_programming(Psize::PSIZE16);
     let mut at = address;
     let mut result = Ok(());
     for pair in bytes.chunks_exact(2) {
@@ -162,9 +122,7 @@ fn program(address: u32, bytes: &[u8]) -> Result<(), FlashError> {
         // SAFETY: `at` is inside a partition of the flash (checked by the
         // caller), half-word aligned, and the controller is in PG mode at x16.
         unsafe { core::ptr::write_volatile(at as *mut u16, half) };
-        while flash.sr().read().bsy() {}
-        let sr = flash.sr().read();
-        if sr.pgserr() || sr.pgperr() || sr.pgaerr() || sr.wrperr() || sr.operr() {
+        if flash_controller::wait_idle().is_err() {
             result = Err(FlashError::Failed);
             break;
         }
@@ -175,8 +133,7 @@ fn program(address: u32, bytes: &[u8]) -> Result<(), FlashError> {
         }
         at += 2;
     }
-    flash.cr().write(|w| w.set_pg(false));
-    let locked = finish();
+    let locked = flash_controller::finish().map_err(|_| FlashError::Failed);
     result.and(locked)
 }
 

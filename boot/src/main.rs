@@ -5,7 +5,7 @@
 //! swapped in was not marked good by the next reset, it swaps the old one
 //! back (rollback). Every step is power-fail safe: the progress is kept in
 //! the state sector and a reset resumes it. Then it jumps to the active
-//! slot (`firmware/memory.x`).
+//! slot (`firmware/board/memory.x`).
 //!
 //! HardFault and panic reset the chip (a retry: a swap resumes where it
 //! stopped); a flash error in the swap does too. The independent watchdog
@@ -17,6 +17,10 @@
 #[allow(dead_code)] // the shared layout names more than the bootloader uses
 #[path = "../../firmware/src/platform/flash_layout.rs"]
 mod flash_layout;
+
+#[cfg(target_os = "none")]
+#[path = "../../firmware/board/src/flash_controller.rs"]
+mod flash_controller;
 
 #[cfg(target_os = "none")]
 mod flash;

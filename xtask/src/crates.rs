@@ -14,7 +14,7 @@
 //! | `fois-hil` holds no clap, serialport, plotters, indicatif | the suite runs the node, not the CLI |
 //! | `xtask` depends on no FOIS crate | it runs cargo |
 //! | `fois-node` depends on no FOIS crate but `fois-firmware` and `fois-protocol`, and on no host crate | the board's image is the library's logic and the HAL around it |
-//! | `fois-boot` depends on no FOIS crate, no sequential-storage, postcard or defmt (default features) | the bootloader cannot be updated over the link: small, no log, the flash layout shared by its source file |
+//! | `fois-boot` depends on no FOIS crate, no sequential-storage, postcard or defmt (default features) | the bootloader cannot be updated over the link: small, no log, the flash layout and the flash controller's steps shared by their source files |
 
 use std::collections::BTreeSet;
 use std::path::Path;
@@ -146,7 +146,7 @@ pub const RULES: [Rule; 10] = [
         forbidden: &["fois-*", "sequential-storage", "postcard", "defmt"],
         allowed: &[],
         why: "the bootloader is never updated in the field: it stays small and links no FOIS crate \
-              (it shares the flash layout's source file) and no log by default",
+              (it shares the flash layout's and the flash controller's source files) and no log by default",
     },
 ];
 

@@ -22,6 +22,7 @@ use fois_firmware::platform::flash_layout::{CONFIG_STORE, Partition};
 use fois_firmware::platform::reply_time::{RESET_DRAIN_BYTES, drain_ms};
 use fois_protocol::ResetReason;
 
+use crate::flash_controller::{self, ControllerError};
 use crate::safety::Watchdog;
 
 /// Board name sent in `Hello`.
@@ -299,38 +300,17 @@ pub fn erase_sector(snb: u8, wdg: Watchdog) -> Result<(), FlashError> {
     } else {
         Psize::PSIZE16
     };
-    let flash = pac::FLASH;
     wdg.pet();
     wait_for_link_idle();
     wdg.pet();
-    while flash.sr().read().bsy() {}
-    if flash.cr().read().lock() {
-        flash.keyr().write_value(0x4567_0123);
-        flash.keyr().write_value(0xCDEF_89AB);
-    }
-    // Clear old error flags (write 1 to clear).
-    flash.sr().write(|w| {
-        w.set_eop(true);
-        w.set_operr(true);
-        w.set_wrperr(true);
-        w.set_pgaerr(true);
-        w.set_pgperr(true);
-        w.set_pgserr(true);
-    });
-    flash.cr().write(|w| {
-        w.set_ser(true);
-        w.set_snb(snb);
-        w.set_psize(psize);
-    });
-    flash.cr().modify(|w| w.set_strt(true));
+    flash_controller::unlock();
+    flash_controller::start_sector_erase(snb, psize);
     // The CPU stalls here on its next instruction fetch until the erase
     // ends (one bank): 1–2 s at x32 for 128 KiB, 0.25–0.5 s for 16 KiB.
-    while flash.sr().read().bsy() {}
-    let sr = flash.sr().read();
-    flash.cr().write(|w| w.set_ser(false));
-    flash.cr().modify(|w| w.set_lock(true));
+    let reported = flash_controller::finish();
     // Stale lines of the erased sector must not be served from the data
     // cache (if anything enabled it).
+    let flash = pac::FLASH;
     if flash.acr().read().dcen() {
         flash.acr().modify(|w| w.set_dcen(false));
         flash.acr().modify(|w| w.set_dcrst(true));
@@ -338,17 +318,13 @@ pub fn erase_sector(snb: u8, wdg: Watchdog) -> Result<(), FlashError> {
         flash.acr().modify(|w| w.set_dcen(true));
     }
     wdg.pet();
-    if sr.pgserr() {
-        Err(FlashError::Seq)
-    } else if sr.pgperr() {
-        Err(FlashError::Parallelism)
-    } else if sr.pgaerr() {
-        Err(FlashError::Unaligned)
-    } else if sr.wrperr() {
-        Err(FlashError::Protected)
-    } else {
-        Ok(())
-    }
+    reported.map_err(|e| match e {
+        ControllerError::Sequence => FlashError::Seq,
+        ControllerError::Parallelism => FlashError::Parallelism,
+        ControllerError::Alignment => FlashError::Unaligned,
+        ControllerError::Protected => FlashError::Protected,
+        ControllerError::Operation => FlashError::Prog,
+    })
 }
 
 /// Erase the sectors of `part` that hold `from..to` (offsets from the

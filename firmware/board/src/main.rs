@@ -29,6 +29,9 @@
 #[cfg(target_os = "none")]
 mod board;
 #[cfg(target_os = "none")]
+#[allow(dead_code)] // shared with the bootloader, which also programs through it
+mod flash_controller;
+#[cfg(target_os = "none")]
 mod link;
 #[cfg(target_os = "none")]
 mod rtu;
