@@ -41,6 +41,19 @@ pub struct Rule {
     pub why: &'static str,
 }
 
+/// What a crate that runs on the Cortex-M4F must not pull in: any FOIS
+/// crate but those its rule allows, and the host's runtime, network and
+/// command-line crates.
+const ON_THE_CHIP: &[&str] = &[
+    "fois-*",
+    "tokio",
+    "rumqttc",
+    "rustls",
+    "clap",
+    "rayon",
+    "serialport",
+];
+
 /// Every downward rule of ARCHITECTURE.md.
 pub const RULES: [Rule; 10] = [
     Rule {
@@ -55,15 +68,7 @@ pub const RULES: [Rule; 10] = [
         package: "fois-protocol",
         edges: "normal,build",
         target: Some("thumbv7em-none-eabihf"),
-        forbidden: &[
-            "fois-*",
-            "tokio",
-            "rumqttc",
-            "rustls",
-            "clap",
-            "rayon",
-            "serialport",
-        ],
+        forbidden: ON_THE_CHIP,
         allowed: &[],
         why: "the protocol is no_std and stands alone",
     },
@@ -71,15 +76,7 @@ pub const RULES: [Rule; 10] = [
         package: "fois-firmware",
         edges: "normal,build",
         target: Some("thumbv7em-none-eabihf"),
-        forbidden: &[
-            "fois-*",
-            "tokio",
-            "rumqttc",
-            "rustls",
-            "clap",
-            "rayon",
-            "serialport",
-        ],
+        forbidden: ON_THE_CHIP,
         allowed: &["fois-protocol"],
         why: "the firmware is no_std and depends only on the protocol",
     },
@@ -127,15 +124,7 @@ pub const RULES: [Rule; 10] = [
         package: "fois-node",
         edges: "normal,build",
         target: Some("thumbv7em-none-eabihf"),
-        forbidden: &[
-            "fois-*",
-            "tokio",
-            "rumqttc",
-            "rustls",
-            "clap",
-            "rayon",
-            "serialport",
-        ],
+        forbidden: ON_THE_CHIP,
         allowed: &["fois-firmware", "fois-protocol"],
         why: "the board's image is the library's logic and the HAL around it",
     },
