@@ -40,6 +40,9 @@ pub const RATE_MAX_MM_PER_H: f32 = 13.0;
 /// the level look waits.
 pub const READY_TO_LOOK: u8 = 25;
 
+/// Parts of the change look (stages 6–21), a share of the levels each.
+const CHANGE_PARTS: usize = 16;
+
 /// A level's probability below this (relative to the sum) is set to zero.
 const FLOOR: f32 = 1e-20;
 
@@ -229,8 +232,8 @@ impl History {
     /// no second carries more than one (the budget's worst second). The
     /// prediction: 1 growth; 2, 3 pause, resume, shed and restarts (half
     /// the rate bins each); 4, 5 the rate walk (growing, paused); 6 the
-    /// change look's start, 7–22 the change look (half a rate bin's levels
-    /// each); 23, 24 the levels' sums (then the levels restored to their
+    /// change look's start, 7–22 the change look (a sixteenth of the levels
+    /// each, every rate bin); 23, 24 the levels' sums (then the levels restored to their
     /// masses before the change look); 25 the prediction's marginal
     /// ([`READY_TO_LOOK`]: the caller looks with [`Self::look`]). The look
     /// applied: 27 every state times its level's factor, 28 normalised, 0
@@ -258,18 +261,20 @@ impl History {
                 self.stage = 6;
             }
             6..=21 => {
-                // Half a rate bin's levels a part.
+                // A sixteenth of the levels a part.
                 let part = usize::from(self.stage - 6);
-                let (b, half) = (part / 2, part % 2);
-                let first = half * (LEVELS / 2);
-                let last = if half == 0 { LEVELS / 2 } else { LEVELS };
-                if let (Some(g), Some(&r)) = (
-                    self.grow.get_mut(b).and_then(|g| g.get_mut(first..last)),
-                    self.rates.get(b),
-                ) {
-                    self.change.weigh(g, first, r, self.gain, self.p_rime, p);
-                }
-                if part + 1 == 2 * RATE_BINS {
+                let per = LEVELS.div_ceil(CHANGE_PARTS);
+                let first = (part * per).min(LEVELS);
+                let last = ((part + 1) * per).min(LEVELS);
+                self.change.weigh(
+                    &mut self.grow,
+                    &self.rates,
+                    first..last,
+                    self.gain,
+                    self.p_rime,
+                    p,
+                );
+                if part + 1 == CHANGE_PARTS {
                     self.change.end();
                 }
                 self.stage += 1;
@@ -307,18 +312,19 @@ impl History {
         self.stage
     }
 
-    /// The currents of an update (`None`: the bank did not measure) and
-    /// its time, for the change look's windows; `gain` and `p_rime` the
-    /// bank's, for its next look.
+    /// The currents of an update (`None`: the bank did not measure), their
+    /// noise (standard deviation, nA) and the update's time, for the change
+    /// look's windows; `gain` and `p_rime` the bank's, for its next look.
     pub fn gather_currents(
         &mut self,
         dt_s: f32,
         x_na: Option<[f32; 2]>,
+        noise_na: [f32; 2],
         gain: f32,
         p_rime: f32,
         p: &HistoryParams,
     ) {
-        self.change.gather(dt_s, x_na, p);
+        self.change.gather(dt_s, x_na, noise_na, p);
         self.gain = gain;
         self.p_rime = p_rime;
     }
