@@ -24,15 +24,6 @@ const MAX_LN_LR: f32 = 6.0;
 /// Most rate bins the look weighs at one level.
 const MAX_BINS: usize = 16;
 
-/// The change look's weight on the rates within a level (its ln
-/// likelihood ratios times this): the deviation of an accretion's slope
-/// from the table's persists from window to window, so the looks' rate
-/// evidence is not independent (at 1: a replay of rows 180 s apart 0.36
-/// RMS ln one hour into 2 mm/h of rime, but 1 Hz rime at 4 mm/h overshot
-/// by 20 %; at 0.5: 0.46 and 1 Hz better; 0.7 between; seeds 7001–7003
-/// and the replay's first 10 curves, 2026-11-28).
-const RATE_TEMPER: f32 = 0.7;
-
 /// Largest ln ratio between two rates at a level from one look (after the
 /// temper): a change that fits no rate does not rule one out.
 const RATE_SPAN: f32 = 8.0;
@@ -184,7 +175,8 @@ impl Change {
     /// ratio (its rates' ratios against a pause, each capped at e^±6,
     /// weighed by their probabilities there) — and the rates among
     /// themselves, by their ratios against the best rate there, tempered
-    /// ([`RATE_TEMPER`]). Before, each state took its own capped ratio: a
+    /// (`HistoryParams::change_rate_temper`; at 0 each rate takes its own
+    /// capped ratio, the look as it was first). Before, each state took its own capped ratio: a
     /// large change gave every rate fast enough the same e⁶ while a small
     /// one ruled the fast rates out, and the rates drifted low (a replay
     /// of rows 180 s apart: RMS ln 0.57 one hour into 2 mm/h of rime).
@@ -212,6 +204,7 @@ impl Change {
         let d = self.delta_na;
         let p_rime = p_rime.clamp(0.0, 1.0);
         let window_h = p.change_window_s / 3600.0;
+        let temper = p.change_rate_temper;
         let media = [(1usize, 1.0 - p_rime), (2usize, p_rime)];
         for j in levels {
             let at = j as f32;
@@ -227,8 +220,14 @@ impl Change {
             }
             let (mut sum_g, mut sum_gl) = (0.0f32, 0.0f32);
             let mut lns = [f32::NEG_INFINITY; MAX_BINS];
+            let mut lrs = [0.0f32; MAX_BINS];
             let mut ln_best = f32::NEG_INFINITY;
-            for ((row, &rate), ln_out) in grow.iter().zip(rates_mm_per_h).zip(lns.iter_mut()) {
+            for (((row, &rate), ln_out), lr_out) in grow
+                .iter()
+                .zip(rates_mm_per_h)
+                .zip(lns.iter_mut())
+                .zip(lrs.iter_mut())
+            {
                 let g = match row.get(j) {
                     Some(&g) if g > 0.0 => g,
                     _ => continue,
@@ -276,9 +275,18 @@ impl Change {
                 sum_g += g;
                 sum_gl += g * lr;
                 *ln_out = ln_mean;
+                *lr_out = lr;
                 ln_best = ln_best.max(ln_mean);
             }
             if sum_g <= 0.0 {
+                continue;
+            }
+            if temper <= 0.0 {
+                for (row, lr) in grow.iter_mut().zip(lrs) {
+                    if let Some(g) = row.get_mut(j) {
+                        *g *= lr;
+                    }
+                }
                 continue;
             }
             // The rates' shares: tempered, bounded, against the best.
@@ -286,7 +294,7 @@ impl Change {
             for (row, ln) in grow.iter().zip(lns.iter_mut()) {
                 let g = row.get(j).copied().unwrap_or(0.0);
                 *ln = if g > 0.0 {
-                    fast_math::exp((RATE_TEMPER * (*ln - ln_best)).max(-RATE_SPAN))
+                    fast_math::exp((temper * (*ln - ln_best)).max(-RATE_SPAN))
                 } else {
                     0.0
                 };
