@@ -22,7 +22,9 @@
 //! Settings: `EST_MEMORY` (gain memory, s), `EST_PERIOD` (update period,
 //! s), `EST_SWITCH`, `EST_WITHIN`, and the history's `EST_LOOKS`
 //! (looks per mm), `EST_EARLY`, `EST_LOOKS_PER_H`, `EST_WALK`,
-//! `EST_HPERIOD`, `EST_GAMMA` (output weight), `EST_ESCAPE`.
+//! `EST_HPERIOD`, `EST_GAMMA` (output weight), `EST_ESCAPE`, the change
+//! look's `EST_CWIN`, `EST_CNOISE`, `EST_CSLOPE`, `EST_CTEMPER` (0: the look as it
+//! was first), `EST_RESUME`, `EST_TELL`.
 // An evaluation tool sharing the accuracy test's harness: a missing estimate
 // there is a failed evaluation, as in the tests.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -249,6 +251,9 @@ fn params_from_env() -> EstimatorParams {
     }
     if let Some(v) = get("EST_CSLOPE") {
         p.history.change_slope_sd = v;
+    }
+    if let Some(v) = get("EST_CTEMPER") {
+        p.history.change_rate_temper = v;
     }
     if let Some(v) = get("EST_RESUME") {
         p.history.resume_ice_per_h = v;

@@ -394,8 +394,9 @@ impl Estimator {
         if hp.enabled && self.history.initialised {
             let x_change = if negative { None } else { x };
             let gain = self.bank.gain().gain;
+            let noise_na = self.params.noise_ua.map(|s| s * 1000.0);
             self.history
-                .gather_currents(dt_s, x_change, gain, self.bank_p_rime, &hp);
+                .gather_currents(dt_s, x_change, noise_na, gain, self.bank_p_rime, &hp);
             let due = self.history.gather(dt_s, hp.period_s);
             let stage = self.history.stage();
             if stage == READY_TO_LOOK {

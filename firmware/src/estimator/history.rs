@@ -36,9 +36,25 @@ pub const RATE_MIN_MM_PER_H: f32 = 0.3;
 /// See [`RATE_MIN_MM_PER_H`].
 pub const RATE_MAX_MM_PER_H: f32 = 13.0;
 
+/// Parts of the change look, a share of the levels each (every rate bin):
+/// 19 parts of 4 levels keep its part within the worst second's budget.
+const CHANGE_PARTS: usize = 19;
+
+/// The stage of the change look's first part.
+const CHANGE_FIRST: u8 = 6;
+
+/// The stage after the change look's last part (the levels' sums).
+const SUMS: u8 = CHANGE_FIRST + CHANGE_PARTS as u8;
+
 /// The stage at which the prediction and the change look are done and
 /// the level look waits.
-pub const READY_TO_LOOK: u8 = 25;
+pub const READY_TO_LOOK: u8 = SUMS + 3;
+
+/// The stages of the look applied: the factor, the normalisation, the
+/// marginal.
+const LOOKED: u8 = READY_TO_LOOK + 1;
+const APPLIED: u8 = READY_TO_LOOK + 2;
+const NORMALISED: u8 = READY_TO_LOOK + 3;
 
 /// A level's probability below this (relative to the sum) is set to zero.
 const FLOOR: f32 = 1e-20;
@@ -229,12 +245,12 @@ impl History {
     /// no second carries more than one (the budget's worst second). The
     /// prediction: 1 growth; 2, 3 pause, resume, shed and restarts (half
     /// the rate bins each); 4, 5 the rate walk (growing, paused); 6 the
-    /// change look's start, 7–22 the change look (half a rate bin's levels
-    /// each); 23, 24 the levels' sums (then the levels restored to their
-    /// masses before the change look); 25 the prediction's marginal
-    /// ([`READY_TO_LOOK`]: the caller looks with [`Self::look`]). The look
-    /// applied: 27 every state times its level's factor, 28 normalised, 0
-    /// the marginal. Returns the stage reached.
+    /// change look's start, 7–25 the change look (a nineteenth of the
+    /// levels each, every rate bin); 26, 27 the levels' sums (then the
+    /// levels restored to their masses before the change look); 28 the
+    /// prediction's marginal ([`READY_TO_LOOK`]: the caller looks with
+    /// [`Self::look`]). The look applied: 30 every state times its level's
+    /// factor, 31 normalised, 0 the marginal. Returns the stage reached.
     pub fn advance(&mut self, p: &HistoryParams) -> u8 {
         match self.stage {
             0 => self.predict_growth(p),
@@ -255,38 +271,39 @@ impl History {
                         }
                     }
                 }
-                self.stage = 6;
+                self.stage = CHANGE_FIRST;
             }
-            6..=21 => {
-                // Half a rate bin's levels a part.
-                let part = usize::from(self.stage - 6);
-                let (b, half) = (part / 2, part % 2);
-                let first = half * (LEVELS / 2);
-                let last = if half == 0 { LEVELS / 2 } else { LEVELS };
-                if let (Some(g), Some(&r)) = (
-                    self.grow.get_mut(b).and_then(|g| g.get_mut(first..last)),
-                    self.rates.get(b),
-                ) {
-                    self.change.weigh(g, first, r, self.gain, self.p_rime, p);
-                }
-                if part + 1 == 2 * RATE_BINS {
+            CHANGE_FIRST..SUMS => {
+                let part = usize::from(self.stage - CHANGE_FIRST);
+                let per = LEVELS.div_ceil(CHANGE_PARTS);
+                let first = (part * per).min(LEVELS);
+                let last = ((part + 1) * per).min(LEVELS);
+                self.change.weigh(
+                    &mut self.grow,
+                    &self.rates,
+                    first..last,
+                    self.gain,
+                    self.p_rime,
+                    p,
+                );
+                if part + 1 == CHANGE_PARTS {
                     self.change.end();
                 }
                 self.stage += 1;
             }
-            22 => {
+            SUMS => {
                 self.sum_levels(0);
-                self.stage = 23;
+                self.stage = SUMS + 1;
             }
-            23 => {
+            s if s == SUMS + 1 => {
                 self.sum_levels(1);
                 if self.changed {
                     self.changed = false;
                     self.restore_levels();
                 }
-                self.stage = 24;
+                self.stage = SUMS + 2;
             }
-            24 => {
+            s if s == SUMS + 2 => {
                 let m = self.scratch;
                 let s: f32 = m.iter().sum();
                 self.scratch = [0.0; LEVELS];
@@ -294,9 +311,9 @@ impl History {
                 self.set_marginal(m.map(|a| a * inv));
                 self.stage = READY_TO_LOOK;
             }
-            26 => self.apply_factor(),
-            27 => self.normalise_applied(),
-            28 => {
+            LOOKED => self.apply_factor(),
+            APPLIED => self.normalise_applied(),
+            NORMALISED => {
                 let m = self.scratch;
                 self.scratch = [0.0; LEVELS];
                 self.set_marginal(m);
@@ -307,18 +324,19 @@ impl History {
         self.stage
     }
 
-    /// The currents of an update (`None`: the bank did not measure) and
-    /// its time, for the change look's windows; `gain` and `p_rime` the
-    /// bank's, for its next look.
+    /// The currents of an update (`None`: the bank did not measure), their
+    /// noise (standard deviation, nA) and the update's time, for the change
+    /// look's windows; `gain` and `p_rime` the bank's, for its next look.
     pub fn gather_currents(
         &mut self,
         dt_s: f32,
         x_na: Option<[f32; 2]>,
+        noise_na: [f32; 2],
         gain: f32,
         p_rime: f32,
         p: &HistoryParams,
     ) {
-        self.change.gather(dt_s, x_na, p);
+        self.change.gather(dt_s, x_na, noise_na, p);
         self.gain = gain;
         self.p_rime = p_rime;
     }
@@ -468,12 +486,12 @@ impl History {
         }
     }
 
-    /// The look (at [`READY_TO_LOOK`], → 26): the bank's thickness likelihood `lik` (sums to
+    /// The look (at [`READY_TO_LOOK`], → [`LOOKED`]): the bank's thickness likelihood `lik` (sums to
     /// 1), tempered by the looks it is worth; `p_rime` the bank's
     /// probability of rime (the early trust). Also how well the
     /// prediction foresaw it (the history's credibility).
     pub fn look(&mut self, lik: &[f32; LEVELS], p_rime: f32, p: &HistoryParams) {
-        self.stage = 26;
+        self.stage = LOOKED;
         let mut o = 0.0f32;
         for (l, m) in lik.iter().zip(self.marginal.iter()) {
             o += l * m;
@@ -506,10 +524,10 @@ impl History {
         }
     }
 
-    /// The look applied (stage 26 → 27): every state times its level's
+    /// The look applied ([`LOOKED`] → [`APPLIED`]): every state times its level's
     /// factor, the levels' sums in the scratch.
     fn apply_factor(&mut self) {
-        self.stage = 27;
+        self.stage = APPLIED;
         let mut m = [0.0f32; LEVELS];
         for row in self.grow.iter_mut().chain(self.pause.iter_mut()) {
             for ((v, f), a) in row.iter_mut().zip(self.factor.iter()).zip(m.iter_mut()) {
@@ -520,9 +538,9 @@ impl History {
         self.scratch = m;
     }
 
-    /// Normalised (stage 27 → 28); the scratch holds the marginal.
+    /// Normalised ([`APPLIED`] → [`NORMALISED`]); the scratch holds the marginal.
     fn normalise_applied(&mut self) {
-        self.stage = 28;
+        self.stage = NORMALISED;
         let total: f32 = self.scratch.iter().sum();
         if !(total.is_finite() && total > 0.0) {
             self.reset_flat();

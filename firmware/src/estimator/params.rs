@@ -186,6 +186,16 @@ pub struct HistoryParams {
     /// 2 mm/h of rime or glaze stopped at 6 mm, or 10 mm/h of rime at
     /// 11 mm, took 27–35 min instead of 19–23 min).
     pub change_slope_sd: f32,
+    /// The change look's weight on the rates within a level (its ln
+    /// likelihood ratios against the level's best rate times this; default
+    /// 0.7): an accretion's slope deviates from the table's alike from
+    /// window to window, so the looks' rate evidence is not independent.
+    /// 0: each rate its own ratio capped at e^±6 — the look as it was
+    /// first, whose rates drifted low (firmware/README.md, *The change
+    /// look*). At 1 a replay of rows 180 s apart gave 0.36 RMS ln one hour
+    /// into 2 mm/h of rime but 1 Hz rime at 4 mm/h overshot by 20 %; at
+    /// 0.5, 0.46 (10 curves of seed 7100, HIL seeds 7001–7003, 2026-11-28).
+    pub change_rate_temper: f32,
     /// The node can tell growth from a pause when the change looks of
     /// 20 min (the clearing goal) are worth at least this many nats if the ice grew as
     /// the history believes (default 2); below, the icing state is
@@ -213,6 +223,7 @@ impl Default for HistoryParams {
             change_window_s: 240.0,
             change_noise_ua: 0.05,
             change_slope_sd: 0.8,
+            change_rate_temper: 0.7,
             tell_nats: 2.0,
         }
     }
@@ -246,6 +257,7 @@ impl HistoryParams {
             change_window_s: within(self.change_window_s, 1.0, 3600.0, d.change_window_s),
             change_noise_ua: within(self.change_noise_ua, 0.001, 100.0, d.change_noise_ua),
             change_slope_sd: within(self.change_slope_sd, 0.0, 10.0, d.change_slope_sd),
+            change_rate_temper: within(self.change_rate_temper, 0.0, 10.0, d.change_rate_temper),
             tell_nats: within(self.tell_nats, 0.0, 1000.0, d.tell_nats),
         }
     }
