@@ -24,7 +24,8 @@
 //! (looks per mm), `EST_EARLY`, `EST_LOOKS_PER_H`, `EST_WALK`,
 //! `EST_HPERIOD`, `EST_GAMMA` (output weight), `EST_ESCAPE`, the change
 //! look's `EST_CWIN`, `EST_CNOISE`, `EST_CSLOPE`, `EST_CTEMPER` (0: the look as it
-//! was first), `EST_RESUME`, `EST_TELL`.
+//! was first), `EST_RESUME`, `EST_TELL`; the shedding rates `EST_SHED` (the bank's) and
+//! `EST_HSHED` (the history's).
 // An evaluation tool sharing the accuracy test's harness: a missing estimate
 // there is a failed evaluation, as in the tests.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
@@ -260,6 +261,12 @@ fn params_from_env() -> EstimatorParams {
     }
     if let Some(v) = get("EST_TELL") {
         p.history.tell_nats = v;
+    }
+    if let Some(v) = get("EST_SHED") {
+        p.shed_per_h = v;
+    }
+    if let Some(v) = get("EST_HSHED") {
+        p.history.shed_per_h = v;
     }
     p
 }
