@@ -14,7 +14,10 @@ pub struct EstimatorParams {
     pub max_growth_mm_per_h: f32,
     /// Largest melting / evaporation rate, mm/h (default 5).
     pub max_shrink_mm_per_h: f32,
-    /// Rate of shedding (the whole layer falls off), per hour (default 0.5).
+    /// Rate of shedding (the whole layer falls off), per hour (default 0.1:
+    /// a shed shows as a jump of the currents and is taken at once; thick
+    /// clear ice, which reads almost like a dry face, is not shed by the
+    /// prior alone within hours).
     pub shed_per_h: f32,
     /// Rate of a change of medium at the same thickness, per hour (default 0.5).
     pub switch_per_h: f32,
@@ -64,7 +67,7 @@ impl Default for EstimatorParams {
             forget_time_s: 30.0,
             max_growth_mm_per_h: 10.0,
             max_shrink_mm_per_h: 5.0,
-            shed_per_h: 0.5,
+            shed_per_h: 0.1,
             switch_per_h: 0.5,
             noise_ua: [0.15, 0.15],
             gain_sd: 0.02,
@@ -149,7 +152,8 @@ pub struct HistoryParams {
     /// Paused growth on ice resumes at this rate, per hour (default 0.3:
     /// ice stays on the face for hours after an icing event ends).
     pub resume_ice_per_h: f32,
-    /// The ice sheds to a dry face at this rate, per hour (default 0.5).
+    /// The ice sheds to a dry face at this rate, per hour (default 0.1, as
+    /// the bank's `shed_per_h`).
     pub shed_per_h: f32,
     /// Share of the probability that restarts anywhere, per hour (default
     /// 0.1): the model's escape.
@@ -212,7 +216,7 @@ impl Default for HistoryParams {
             pause_per_h: 0.2,
             resume_per_h: 1.0,
             resume_ice_per_h: 0.3,
-            shed_per_h: 0.5,
+            shed_per_h: 0.1,
             restart_per_h: 0.1,
             looks_per_mm: 0.3,
             early_rime_looks_per_mm: 0.7,
