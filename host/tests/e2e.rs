@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 use fois_host::csvlog::{HEADER, LogTable};
 
 mod common;
+use common::foisctl;
 use common::{BIN, NodeProc};
 
 /// `foisctl monitor --port PORT --log LOG --plain EXTRA...` as a child;
@@ -32,15 +33,6 @@ fn spawn_monitor(port: &str, log: &Path, extra: &[&str], piped: bool) -> Child {
         .stderr(io())
         .spawn()
         .unwrap()
-}
-
-fn foisctl(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(BIN).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
 }
 
 /// `foisctl calibrate-gain --port PORT --i1-ua I1 --i2-ua I2`.

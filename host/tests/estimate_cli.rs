@@ -6,21 +6,13 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 use std::path::Path;
-use std::process::Command;
 use std::sync::Arc;
 
 use fois_host::csvlog::{CsvLog, LogTable, Row};
 
-const BIN: &str = env!("CARGO_BIN_EXE_foisctl");
+mod common;
 
-fn foisctl(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(BIN).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use common::foisctl;
 
 fn estimate(input: &Path, out: &Path, extra: &[&str]) -> (i32, String, String) {
     let mut a = vec![

@@ -6,18 +6,9 @@
 // A test crate: unwrap and expect are assertions here (helpers included).
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
-use std::process::Command;
+mod common;
 
-const BIN: &str = env!("CARGO_BIN_EXE_foisctl");
-
-fn foisctl(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(BIN).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
+use common::foisctl;
 
 #[test]
 fn keygen_sign_and_image_info_work_together_and_refuse_by_exit_code() {

@@ -11,6 +11,7 @@
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
+use common::foisctl;
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -25,15 +26,6 @@ use fois_protocol::{
 
 /// The virtual node's board name (its Hello's).
 const BOARD: &str = "virtual-f446";
-
-fn foisctl(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(BIN).args(args).output().unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8_lossy(&out.stdout).into_owned(),
-        String::from_utf8_lossy(&out.stderr).into_owned(),
-    )
-}
 
 /// The crate's version (the virtual node's before any update).
 fn crate_version() -> [u8; 3] {

@@ -9,6 +9,17 @@ use std::process::{Child, Command, Stdio};
 /// `foisctl`.
 pub const BIN: &str = env!("CARGO_BIN_EXE_foisctl");
 
+/// Run `foisctl` with `args` to its end: (exit code, -1 if killed by a
+/// signal; stdout; stderr).
+pub fn foisctl(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(BIN).args(args).output().unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+        String::from_utf8_lossy(&out.stderr).into_owned(),
+    )
+}
+
 /// A `foisctl virtual-node`, killed on drop.
 pub struct NodeProc {
     child: Child,
