@@ -18,7 +18,10 @@
 //! every class with the gain taken as 1 ± 2 %, `EST_DESIGN=folded` with the
 //! gain's uncertainty folded into each state's covariance;
 //! `EST_HISTORY=off` without the growth history, `EST_HISTORY=nopause`
-//! without its pause state; `EST_TRACE=1` prints every 300 s of each run.
+//! without its pause state; `EST_TRACE=1` prints every 300 s of each run;
+//! `EST_MEDIUM_BINS=1` adds the medium right in 1–2, 2–4 and ≥ 4 mm;
+//! `EST_ODDS=1` prints the bank's ln odds of rime against glaze per 0.5 mm
+//! of steady growth.
 //! Settings: `EST_MEMORY` (gain memory, s), `EST_PERIOD` (update period,
 //! s), `EST_SWITCH`, `EST_WITHIN`, and the history's `EST_LOOKS`
 //! (looks per mm), `EST_EARLY`, `EST_LOOKS_PER_H`, `EST_WALK`,
@@ -95,6 +98,8 @@ struct Score {
     shed_dry_s: Vec<f64>,
     /// Frames with ice ≥ 1 mm, and those whose medium is right.
     medium: (u64, u64),
+    /// The same in 1–2 mm, 2–4 mm and from 4 mm (`EST_MEDIUM_BINS`).
+    medium_bins: [(u64, u64); 3],
 }
 
 const AT_MM: [f64; 3] = [2.0, 5.0, 10.0];
@@ -359,6 +364,26 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
             }
         }
     }
+    if std::env::var("EST_ODDS").is_ok() && c.shape == Shape::Steady {
+        // Per 0.5 mm of the first growth: the bank's ln odds of rime
+        // against glaze, averaged (`EST_ODDS`).
+        let mut bins = [(0.0f64, 0u32); 12];
+        for f in frames
+            .iter()
+            .filter(|f| f.t_s >= skip_s && f.rate_mm_per_h > 0.0)
+        {
+            let b = (f.thickness_mm / 0.5) as usize;
+            if let Some(v) = bins.get_mut(b) {
+                v.0 += f64::from(f.rime_odds);
+                v.1 += 1;
+            }
+        }
+        let cells: Vec<String> = bins
+            .iter()
+            .map(|v| format!("{:+.1}", v.0 / f64::from(v.1.max(1))))
+            .collect();
+        println!("odds {seed}: {}", cells.join(" "));
+    }
     for f in frames.iter().filter(|f| f.t_s >= skip_s) {
         if on.is_nan() && f.accreting {
             on = f.t_s - skip_s;
@@ -419,10 +444,18 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
             }
         }
         if d >= 1.0 {
+            let right = u64::from(est.medium().0 == f.medium);
             s.medium.0 += 1;
-            if est.medium().0 == f.medium {
-                s.medium.1 += 1;
-            }
+            s.medium.1 += right;
+            let bin = if d < 2.0 {
+                0
+            } else if d < 4.0 {
+                1
+            } else {
+                2
+            };
+            s.medium_bins[bin].0 += 1;
+            s.medium_bins[bin].1 += right;
         }
         if d >= 4.0 && f64::from(est.thickness_mm) + 2.0 * sigma < d / 2.0 {
             s.thin += 1;
@@ -558,6 +591,10 @@ fn main() {
             all.shed_dry_s.extend(s.shed_dry_s);
             all.medium.0 += s.medium.0;
             all.medium.1 += s.medium.1;
+            for (a, b) in all.medium_bins.iter_mut().zip(s.medium_bins) {
+                a.0 += b.0;
+                a.1 += b.1;
+            }
         }
         println!(
             "| {} | {:.1} % | {:.2} | {:.2} | {:.2} | {} | {:.1} % | {:.3} | {:.2} | {:.0} % | {} / {} | {} / {} | {} / {} | {} | {:.0} % | {} |",
@@ -581,5 +618,14 @@ fn main() {
             100.0 * all.grow_flagged.0 as f64 / all.grow_flagged.1.max(1) as f64,
             worst_min(&all.shed_dry_s),
         );
+        if std::env::var("EST_MEDIUM_BINS").is_ok() {
+            let pct = |b: (u64, u64)| 100.0 * b.1 as f64 / b.0.max(1) as f64;
+            println!(
+                "  medium right: 1–2 mm {:.1} %, 2–4 mm {:.1} %, from 4 mm {:.1} %",
+                pct(all.medium_bins[0]),
+                pct(all.medium_bins[1]),
+                pct(all.medium_bins[2]),
+            );
+        }
     }
 }

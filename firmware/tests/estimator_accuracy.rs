@@ -350,3 +350,46 @@ fn a_rate_beyond_the_history_s_grid_widens_sigma() {
     assert_eq!(thin, 0);
     assert!(share >= 0.90, "within 2σ {share}");
 }
+
+#[test]
+fn thick_clear_glaze_at_a_low_gain_stays_ice() {
+    // Glaze at 10 mm/h to 11 mm on a face of gain 0.85 the node is not
+    // told, then 40 min with the ice staying: beyond ~8 mm thick clear ice
+    // returns ~0.3 µA, near a dry face's reading. The currents never fell
+    // as a shed makes them fall, so the node keeps the ice: from 8 mm on it
+    // names glaze in ≥ 95 % of the frames and is never confidently thin.
+    // (Shed by the prior's 0.1/h alone, without the fall, the history took
+    // the dry face in two of these four runs: glaze named in 9 816 of
+    // 13 920 frames from 8 mm, 5 of 3 480 in seed 9302.)
+    let (mut n, mut glazed, mut thin) = (0u64, 0u64, 0u64);
+    for seed in 9301..=9304u64 {
+        let mut run = Run::new(
+            seed,
+            vec![
+                Segment::dry(60.0, -5.0),
+                Segment::grow(IceKind::Glazed, 0.0, 11.0, 10.0, -5.0),
+                Segment::pause(IceKind::Glazed, 2400.0, -5.0),
+            ],
+        );
+        run.frame_s = 1.0;
+        run.led = 0.85;
+        let (mut ns, mut gs) = (0u64, 0u64);
+        for f in simulate(&run, EstimatorParams::default())
+            .iter()
+            .filter(|f| f.thickness_mm >= 8.0)
+        {
+            let p = f.est.expect("an estimate");
+            ns += 1;
+            gs += u64::from(p.medium().0 == fois_protocol::Medium::Glazed);
+            if f64::from(p.thickness_mm + 2.0 * p.sigma_mm) < f.thickness_mm / 2.0 {
+                thin += 1;
+            }
+        }
+        println!("seed {seed}: glazed named in {gs} of {ns} frames from 8 mm");
+        n += ns;
+        glazed += gs;
+    }
+    println!("glazed named in {glazed} of {n} frames from 8 mm, {thin} confidently thin");
+    assert!(glazed as f64 >= 0.95 * n as f64, "{glazed} of {n}");
+    assert_eq!(thin, 0);
+}

@@ -71,6 +71,12 @@ pub(crate) struct Change {
     grow_part: f32,
     /// Its value at the last completed look (`None`: none yet).
     discern: Option<f32>,
+    /// The last two windows' means fell from ice to a dry face's reading
+    /// (a shed, a wiped face).
+    fell_to_dry: bool,
+    /// Updates in a row that fell from the last window's mean to a dry
+    /// face's reading.
+    fell_run: u16,
 }
 
 impl Change {
@@ -88,6 +94,8 @@ impl Change {
             discern_part: 0.0,
             grow_part: 0.0,
             discern: None,
+            fell_to_dry: false,
+            fell_run: 0,
         }
     }
 
@@ -110,6 +118,17 @@ impl Change {
             self.sum_na[0] += x[0];
             self.sum_na[1] += x[1];
             self.n += 1;
+            // A fall is seen at once, within the window: updates in a row
+            // that read as a dry face, against the last window's mean.
+            let change_na = p.change_noise_ua * 1000.0;
+            let fell = self
+                .prev_na
+                .is_some_and(|(prev, _, _)| fell_to_dry(prev, x, noise_na, change_na));
+            self.fell_run = if fell {
+                self.fell_run.saturating_add(1)
+            } else {
+                0
+            };
         }
         if self.window_s + 1e-4 < p.change_window_s {
             return;
@@ -120,7 +139,9 @@ impl Change {
         } else {
             None
         };
+        self.fell_to_dry = false;
         if let (Some(m), Some((prev, prev_s, prev_n))) = (now, self.prev_na) {
+            self.fell_to_dry = fell_to_dry(prev, m, noise_na, p.change_noise_ua * 1000.0);
             let dt_h = 0.5 * (prev_s + self.window_s) / 3600.0;
             let inv_n = 1.0 / prev_n.max(1) as f32 + 1.0 / self.n.max(1) as f32;
             self.pending = Some((
@@ -166,6 +187,14 @@ impl Change {
     /// history believes it, nats (`None` before the first change look).
     pub fn discern(&self) -> Option<f32> {
         self.discern
+    }
+
+    /// The currents fell from ice to a dry face's reading: a shed is seen
+    /// (the last window's mean against the one before, until the next
+    /// window ends; or [`FALL_UPDATES`] updates in a row against the last
+    /// window's mean).
+    pub fn fell_to_dry(&self) -> bool {
+        self.fell_to_dry || self.fell_run >= FALL_UPDATES
     }
 
     /// The change look on the growing states at the levels `levels` (0 the
@@ -313,6 +342,46 @@ impl Change {
     }
 }
 
+/// Whether the currents fell from `prev_na` to `now_na` (two windows'
+/// means, nA) as a shed makes them fall: `now_na` within
+/// [`DRY_READING_SD`] noise deviations `noise_na` of a dry face's zero in
+/// both channels, `prev_na` beyond it in one, the fall larger than
+/// [`FALL_CHANGE_SD`] deviations of the change's noise `change_na`, and at
+/// most [`FALL_KEEPS`] of the currents' sum left. Thick
+/// clear ice also reads near zero, but it gets there slowly: its windows
+/// never fall by that much (glaze at 10 mm/h beyond 8 mm: ~0.05 µA a
+/// window).
+fn fell_to_dry(prev_na: [f32; 2], now_na: [f32; 2], noise_na: [f32; 2], change_na: f32) -> bool {
+    let near_zero = |x: [f32; 2]| {
+        x[0].abs() <= DRY_READING_SD * noise_na[0] && x[1].abs() <= DRY_READING_SD * noise_na[1]
+    };
+    let d = [prev_na[0] - now_na[0], prev_na[1] - now_na[1]];
+    let fall2 = d[0] * d[0] + d[1] * d[1];
+    let limit = FALL_CHANGE_SD * change_na;
+    let (sum_prev, sum_now) = (prev_na[0] + prev_na[1], now_na[0] + now_na[1]);
+    near_zero(now_na)
+        && !near_zero(prev_na)
+        && fall2 > 2.0 * limit * limit
+        && sum_now <= FALL_KEEPS * sum_prev
+}
+
+/// At most this share of the currents' sum is left after a fall: a shed
+/// takes the whole layer (thick glaze growing 0.7 mm in a window at
+/// 10 mm/h keeps ~80 %).
+const FALL_KEEPS: f32 = 0.3;
+
+/// Updates in a row that must read as a fall before it is seen (a spike,
+/// a frame's glitch, is not a shed).
+const FALL_UPDATES: u16 = 5;
+
+/// A window's mean within this many deviations of the update noise of zero
+/// reads like a dry face.
+const DRY_READING_SD: f32 = 3.0;
+
+/// A fall between two windows' means larger than this many deviations of
+/// the change's noise is a jump, not growth.
+const FALL_CHANGE_SD: f32 = 4.0;
+
 /// The table's mean of medium `k` at level `at` (rows from the dry face,
 /// fractional; below 0 the dry face), nA, linearly between rows.
 #[inline(never)]
@@ -331,4 +400,74 @@ fn mu_at(k: usize, at: f32) -> [f32; 2] {
     };
     let (a, b) = (row(i), row(i + 1));
     [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const NOISE_NA: [f32; 2] = [150.0; 2];
+    const CHANGE_NA: f32 = 50.0;
+
+    #[test]
+    fn a_shed_falls_to_a_dry_face_and_thick_glaze_growing_does_not() {
+        // Rime at 5 mm (22 / 14 µA) to a dry face's 20 / 10 nA: a shed.
+        assert!(fell_to_dry(
+            [22_000.0, 14_000.0],
+            [20.0, 10.0],
+            NOISE_NA,
+            CHANGE_NA
+        ));
+        // Glaze at 10 mm, 0.85 of the table's gain (380 / 480 nA), shed.
+        assert!(fell_to_dry(
+            [380.0, 480.0],
+            [5.0, -8.0],
+            NOISE_NA,
+            CHANGE_NA
+        ));
+        // Glaze growing 6.4 → 7.0 mm in a window at 10 mm/h, an accretion
+        // reading low (0.6 of the mean): 520 / 990 → 440 / 800 nA, within
+        // 3σ of zero after, but 83 % of the sum left.
+        assert!(!fell_to_dry(
+            [520.0, 990.0],
+            [440.0, 800.0],
+            NOISE_NA,
+            CHANGE_NA
+        ));
+        // Already near zero before: no fall (thick glaze that reads low).
+        assert!(!fell_to_dry(
+            [300.0, 200.0],
+            [20.0, 10.0],
+            NOISE_NA,
+            CHANGE_NA
+        ));
+        // A fall that does not reach a dry face's reading: not a shed.
+        assert!(!fell_to_dry(
+            [22_000.0, 14_000.0],
+            [2_000.0, 900.0],
+            NOISE_NA,
+            CHANGE_NA
+        ));
+    }
+
+    #[test]
+    fn a_fall_is_seen_after_five_updates_in_a_row_not_one() {
+        let p = HistoryParams::default();
+        let mut c = Change::new();
+        // A window of rime at 22 / 14 µA, one update a second.
+        for _ in 0..240 {
+            c.gather(1.0, Some([22_000.0, 14_000.0]), NOISE_NA, &p);
+        }
+        assert!(!c.fell_to_dry());
+        // One spike to zero, then rime again: no fall.
+        c.gather(1.0, Some([0.0, 0.0]), NOISE_NA, &p);
+        c.gather(1.0, Some([22_000.0, 14_000.0]), NOISE_NA, &p);
+        assert!(!c.fell_to_dry());
+        // The layer falls off: seen at the fifth update.
+        for k in 1..=5 {
+            assert!(!c.fell_to_dry(), "seen after {k} updates");
+            c.gather(1.0, Some([10.0, 5.0]), NOISE_NA, &p);
+        }
+        assert!(c.fell_to_dry());
+    }
 }

@@ -75,6 +75,8 @@ pub struct Estimator {
     pub(super) history: History,
     /// The bank's P(rime) of the last summary.
     pub(super) bank_p_rime: f32,
+    /// The bank's P(glazed) of the last summary.
+    pub(super) bank_p_glazed: f32,
     /// The growth rate after the last step.
     pub(super) rate: Option<Rate>,
     /// The bank's likelihood gathered over parts, and the part done.
@@ -120,6 +122,7 @@ impl Estimator {
                 h
             },
             bank_p_rime: 0.0,
+            bank_p_glazed: 0.0,
             rate: None,
             lik: [0.0; LEVELS],
             lik_part: 0,

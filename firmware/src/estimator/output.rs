@@ -1,5 +1,5 @@
 //! The estimator's output: the posterior (the bank's grids, each weighted
-//! by the growth history's prediction; the medium from the bank alone), the
+//! by the growth history's prediction; which ice, from the bank alone), the
 //! icing rate and P(accreting) (the history's, widened towards its prior as
 //! far as the bank's evidence falls outside what it foresaw), and the icing
 //! period and state. Reads the estimator (`filter.rs`), which reads nothing
@@ -62,6 +62,17 @@ impl Estimator {
         self.accreting
     }
 
+    /// Glaze against rime (diagnostics): the bank's ln(P(rime) / P(glazed))
+    /// of the last summary (0 while either is 0).
+    pub fn rime_odds(&self) -> f32 {
+        let (r, g) = (self.bank_p_rime, self.bank_p_glazed);
+        if r > 0.0 && g > 0.0 {
+            fast_math::ln(r / g)
+        } else {
+            0.0
+        }
+    }
+
     /// The icing state (`None` before the first valid frame or with the
     /// history off): accreting (the icing period's flag), not accreting
     /// (P(accreting) ≤ [`ACCRETING_OFF`]), else uncertain — what a host
@@ -96,18 +107,8 @@ impl Estimator {
         let mut h = [1.0 / LEVELS as f32; LEVELS];
         if use_history {
             let flat = hp.escape / LEVELS as f32;
-            let mut top = 0.0f32;
             for (a, m) in h.iter_mut().zip(self.history.weight()) {
                 *a = (1.0 - hp.escape) * m + flat;
-                top = top.max(*a);
-            }
-            // Dry against ice stays the bank's call: the dry face weighs
-            // as the history's likeliest level. Thick clear ice reads
-            // almost like a dry face; weighted by a history that had shed
-            // it, glaze at 10 mm/h and gain 0.85 read confidently thin in
-            // 890 frames of 10 accretions.
-            if let Some(d) = h.first_mut() {
-                *d = top;
             }
         }
         let mut parts = [None; GAINS];
@@ -121,15 +122,20 @@ impl Estimator {
                 .summarise_weighted(&shared, &h, w, &mut p_medium)
                 .map(|(m, ratio)| (w * ratio, m));
         }
-        // Thickness from the product with the history; the medium from the
-        // bank alone (the history weighs thickness, not medium: weighted,
-        // rime's broad branch lost to glaze's narrow one between 1 and 3 mm
-        // — medium right 78 % of glazed frames instead of 93 %).
+        // Thickness, and a dry face against ice, from the product with the
+        // history: thick clear ice reads almost like a dry face, and the
+        // history holds it as ice unless the change look saw the currents
+        // fall (a shed). Which medium the ice is, from the bank alone: the
+        // history weighs thickness, not medium (weighted, rime's broad
+        // branch lost to glaze's narrow one between 1 and 3 mm — medium
+        // right 78 % of glazed frames instead of 93 %).
         let post = Moments::mixture(parts.iter().filter_map(|m| *m)).map(|mut p| {
             let s: f32 = p_medium.iter().sum();
-            if s > 0.0 {
-                for (a, b) in p.p_medium.iter_mut().zip(p_medium) {
-                    *a = b / s;
+            let p_dry = p.p_medium[0];
+            let s_ice = s - p_medium[0];
+            if s_ice > 0.0 {
+                for (a, b) in p.p_medium.iter_mut().zip(p_medium).skip(1) {
+                    *a = b / s_ice * (1.0 - p_dry);
                 }
             }
             p
@@ -143,7 +149,10 @@ impl Estimator {
             self.posterior = None;
             return;
         }
-        self.bank_p_rime = p_medium[3];
+        let s: f32 = p_medium.iter().sum();
+        let inv = if s > 0.0 { 1.0 / s } else { 0.0 };
+        self.bank_p_rime = p_medium[3] * inv;
+        self.bank_p_glazed = p_medium[2] * inv;
         self.posterior = post;
         self.rate = if use_history {
             // Credibility of the history: the share of the output's weight

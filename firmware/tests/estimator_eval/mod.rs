@@ -123,6 +123,8 @@ pub struct FrameRecord {
     pub accreting: bool,
     /// The estimator's icing state after the frame.
     pub icing: Option<IcingState>,
+    /// The bank's ln odds of rime against glaze after the frame.
+    pub rime_odds: f32,
 }
 
 pub fn medium_of(kind: Option<IceKind>) -> Medium {
@@ -233,6 +235,7 @@ pub fn simulate(run: &Run, params: EstimatorParams) -> Vec<FrameRecord> {
                 est_rate: est.rate(),
                 accreting: est.accreting(),
                 icing: est.icing_state(),
+                rime_odds: est.rime_odds(),
             });
             t += run.frame_s;
             if seg.cover.is_some() {
