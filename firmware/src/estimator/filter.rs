@@ -86,6 +86,8 @@ pub struct Estimator {
     pub(super) accreting: bool,
     /// The change looks can tell growth from a pause.
     pub(super) can_tell: bool,
+    /// Time since P(accreting) was last at or below the off threshold, s.
+    pub(super) since_low_s: f32,
 }
 
 impl Default for Estimator {
@@ -128,6 +130,7 @@ impl Estimator {
             lik_part: 0,
             accreting: false,
             can_tell: true,
+            since_low_s: 0.0,
         }
     }
 
@@ -154,6 +157,7 @@ impl Estimator {
         self.rate = None;
         self.accreting = false;
         self.can_tell = true;
+        self.since_low_s = 0.0;
     }
 
     /// The face is known to be clean and dry (a dark calibration has just
@@ -383,6 +387,7 @@ impl Estimator {
     #[inline(never)]
     fn run_update(&mut self) {
         let dt_s = self.pending_dt_s;
+        self.since_low_s = (self.since_low_s + dt_s).min(MAX_DT_S);
         let x = self.pending_mean();
         let negative = x.is_none() && self.pending_negative > 0;
         self.clear_pending();

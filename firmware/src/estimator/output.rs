@@ -20,6 +20,10 @@ pub const ACCRETING_ON: f32 = 0.7;
 /// P(accreting) below which an icing period ends.
 pub const ACCRETING_OFF: f32 = 0.3;
 
+/// How long after P(accreting) was last at [`ACCRETING_OFF`] its rise
+/// counts as evidence of growth on its own, s (the clearing goal's 20 min).
+const RISE_S: f32 = 1200.0;
+
 /// Meteorological icing as the node states it: three-valued, since where
 /// the currents barely move with the thickness (thick rime or glaze) the
 /// node cannot tell growth from a pause within the clearing time.
@@ -181,10 +185,21 @@ impl Estimator {
             .history
             .discern_nats(&hp)
             .is_none_or(|d| d >= hp.tell_nats);
+        // A rise of P(accreting) from the off threshold within the clearing
+        // time is the change looks' own evidence of growth (the prior alone
+        // never lifts it above its stationary 0.6 on ice): the period
+        // starts on it even where the node could not tell a later stop
+        // (growth resumed on thick ice), and ends the clearing time after
+        // that rise unless the node can tell by then.
+        let rose = self.since_low_s < RISE_S;
+        let decided = self.can_tell || rose;
         if let Some(r) = self.rate {
-            if r.p_accreting >= ACCRETING_ON && self.can_tell {
+            if r.p_accreting <= ACCRETING_OFF {
+                self.since_low_s = 0.0;
+            }
+            if r.p_accreting >= ACCRETING_ON && decided {
                 self.accreting = true;
-            } else if r.p_accreting <= ACCRETING_OFF || !self.can_tell {
+            } else if r.p_accreting <= ACCRETING_OFF || !decided {
                 self.accreting = false;
             }
         } else {
