@@ -69,6 +69,12 @@ pub(crate) struct Change {
     /// as the history believes (summed over the look's parts).
     discern_part: f32,
     grow_part: f32,
+    /// The growing states' likelihood ratio against a pause, summed with
+    /// their weights over the look's parts.
+    support_part: f32,
+    /// Time since a window's change last supported growth by at least
+    /// [`SUPPORT_NATS`], s.
+    support_age_s: f32,
     /// Its value at the last completed look (`None`: none yet).
     discern: Option<f32>,
     /// The last two windows' means fell from ice to a dry face's reading
@@ -93,6 +99,8 @@ impl Change {
             active: false,
             discern_part: 0.0,
             grow_part: 0.0,
+            support_part: 0.0,
+            support_age_s: 0.0,
             discern: None,
             fell_to_dry: false,
             fell_run: 0,
@@ -114,6 +122,7 @@ impl Change {
         p: &HistoryParams,
     ) {
         self.window_s += dt_s;
+        self.support_age_s = (self.support_age_s + dt_s).min(SUPPORT_AGE_MAX_S);
         if let Some(x) = x_na {
             self.sum_na[0] += x[0];
             self.sum_na[1] += x[1];
@@ -162,6 +171,7 @@ impl Change {
         self.active = false;
         self.discern_part = 0.0;
         self.grow_part = 0.0;
+        self.support_part = 0.0;
         if let Some((d, h, v)) = self.pending.take() {
             self.delta_na = d;
             self.delta_h = h;
@@ -179,6 +189,11 @@ impl Change {
             } else {
                 0.0
             });
+            if self.grow_part > 0.0
+                && self.support_part > fast_math::exp(SUPPORT_NATS) * self.grow_part
+            {
+                self.support_age_s = 0.0;
+            }
         }
         self.active = false;
     }
@@ -187,6 +202,13 @@ impl Change {
     /// history believes it, nats (`None` before the first change look).
     pub fn discern(&self) -> Option<f32> {
         self.discern
+    }
+
+    /// Time since a window's change last supported growth against a pause
+    /// by at least [`SUPPORT_NATS`] (the growing states' likelihood ratio,
+    /// weighed by their probabilities), s.
+    pub fn support_age_s(&self) -> f32 {
+        self.support_age_s
     }
 
     /// The currents fell from ice to a dry face's reading: a shed is seen
@@ -301,6 +323,7 @@ impl Change {
                 }
                 self.discern_part += g * info;
                 self.grow_part += g;
+                self.support_part += g * lr;
                 sum_g += g;
                 sum_gl += g * lr;
                 *ln_out = ln_mean;
@@ -369,6 +392,13 @@ fn fell_to_dry(prev_na: [f32; 2], now_na: [f32; 2], noise_na: [f32; 2], change_n
 /// takes the whole layer (thick glaze growing 0.7 mm in a window at
 /// 10 mm/h keeps ~80 %).
 const FALL_KEEPS: f32 = 0.3;
+
+/// A window's change supports growth when the growing states' likelihood
+/// ratio against a pause is at least e^this, nats.
+const SUPPORT_NATS: f32 = 1.0;
+
+/// The support's age saturates here, s (a day).
+const SUPPORT_AGE_MAX_S: f32 = 86_400.0;
 
 /// Updates in a row that must read as a fall before it is seen (a spike,
 /// a frame's glitch, is not a shed).

@@ -358,6 +358,12 @@ impl History {
             .map(|d| d * TELL_WINDOW_S / p.change_window_s)
     }
 
+    /// Time since a change look last supported growth against a pause, s
+    /// (`Change::support_age_s`).
+    pub fn support_age_s(&self) -> f32 {
+        self.change.support_age_s()
+    }
+
     /// After the change look: every level back to its mass before it
     /// (held in `factor`; the scratch holds the masses after it, and then
     /// the ones before).

@@ -20,6 +20,12 @@ pub const ACCRETING_ON: f32 = 0.7;
 /// P(accreting) below which an icing period ends.
 pub const ACCRETING_OFF: f32 = 0.3;
 
+/// The icing period ends when no change look has supported growth for
+/// this long, s: with the last supporting window ending at most one
+/// window (240 s) and an update (~35 s) after growth stops, the period
+/// ends within 20 min of the stop.
+const SUPPORT_S: f32 = 900.0;
+
 /// How long after P(accreting) was last at [`ACCRETING_OFF`] its rise
 /// counts as evidence of growth on its own, s (the clearing goal's 20 min).
 const RISE_S: f32 = 1200.0;
@@ -192,7 +198,11 @@ impl Estimator {
         // (growth resumed on thick ice), and ends the clearing time after
         // that rise unless the node can tell by then.
         let rose = self.since_low_s < RISE_S;
-        let decided = self.can_tell || rose;
+        // And growth must have shown in the currents lately: where the
+        // slow rates and a pause read alike (thick ice), P(accreting)
+        // falls slowly after a stop, but no window supports growth.
+        let supported = self.history.support_age_s() < SUPPORT_S;
+        let decided = (self.can_tell || rose) && supported;
         if let Some(r) = self.rate {
             if r.p_accreting <= ACCRETING_OFF {
                 self.since_low_s = 0.0;
