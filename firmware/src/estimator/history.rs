@@ -8,7 +8,9 @@
 //! `HistoryParams::looks_per_mm` per mm of growth (and a little per hour of
 //! time), never once per update. The estimator's output multiplies the
 //! bank's posterior by this filter's thickness marginal (not fed back into
-//! the bank). It reads only the response table's dimensions and `fast_math`.
+//! the bank). It reads the response table's dimensions, the change look
+//! (`change.rs`) and `fast_math`; its transitions are in `history/predict.rs`,
+//! the icing rate's readout in `history/rate.rs`.
 //!
 //! States: level j ∈ 0..=[`ROWS`] (0 the dry face, j the bank's row j − 1),
 //! rate bin b (log-spaced [`RATE_MIN_MM_PER_H`] … [`RATE_MAX_MM_PER_H`]),
@@ -24,17 +26,13 @@ use super::fast_math;
 use super::params::HistoryParams;
 use super::response::{ROWS, STEP_MM};
 
+mod predict;
+mod rate;
+
+pub use rate::{RATE_BINS, RATE_MAX_MM_PER_H, RATE_MIN_MM_PER_H, Rate, prior_rate, rate_of_bin};
+
 /// Levels of the history: the dry face and the bank's rows.
 pub const LEVELS: usize = ROWS + 1;
-
-/// Rate bins of the history.
-pub const RATE_BINS: usize = 8;
-
-/// Slowest and fastest growth rate the history models, mm/h: a rate beyond
-/// the top is out of model (the output falls back to the bank's, wide).
-pub const RATE_MIN_MM_PER_H: f32 = 0.3;
-/// See [`RATE_MIN_MM_PER_H`].
-pub const RATE_MAX_MM_PER_H: f32 = 13.0;
 
 /// Parts of the change look, a share of the levels each (every rate bin):
 /// 19 parts of 4 levels keep its part within the worst second's budget.
@@ -56,34 +54,8 @@ const LOOKED: u8 = READY_TO_LOOK + 1;
 const APPLIED: u8 = READY_TO_LOOK + 2;
 const NORMALISED: u8 = READY_TO_LOOK + 3;
 
-/// The shed rate once the change look has seen the currents fall to a
-/// dry face's reading, per hour (a prediction every 10 s sheds 63 %: a
-/// fall that fits no growth is a shed).
-const SHED_SEEN_PER_H: f32 = 360.0;
-
-/// The share of `HistoryParams::shed_per_h` that acts while no fall is
-/// seen (a shed the windows missed: a gap in the frames).
-const SHED_UNSEEN: f32 = 0.05;
-
 /// A level's probability below this (relative to the sum) is set to zero.
 const FLOOR: f32 = 1e-20;
-
-/// The growth rate as the node reports it: meteorological icing.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Rate {
-    /// Mean growth rate now (0 while paused or dry), mm/h.
-    pub mean_mm_per_h: f32,
-    /// Its standard deviation, mm/h.
-    pub sigma_mm_per_h: f32,
-    /// Probability that ice accretes now.
-    pub p_accreting: f32,
-}
-
-/// Growth rate of bin `b`, mm/h.
-pub fn rate_of_bin(b: usize) -> f32 {
-    let step = fast_math::ln(RATE_MAX_MM_PER_H / RATE_MIN_MM_PER_H) / (RATE_BINS - 1) as f32;
-    RATE_MIN_MM_PER_H * fast_math::exp(step * b as f32)
-}
 
 /// The history filter (~5 KiB: one `f32` per state).
 #[derive(Debug, Clone)]
@@ -393,124 +365,6 @@ impl History {
         }
     }
 
-    /// Growth over the gathered time: whole rows per bin, the phase keeps
-    /// the rest; the transition probabilities of the later parts.
-    fn predict_growth(&mut self, p: &HistoryParams) {
-        let dt_h = self.pending_s / 3600.0;
-        self.pending_s = 0.0;
-        self.stage = 1;
-        let prob = |per_h: f32| {
-            if dt_h > 0.0 {
-                fast_math::one_minus_exp_neg(per_h * dt_h)
-            } else {
-                0.0
-            }
-        };
-        self.walk = 0.5 * prob(p.rate_walk_per_h);
-        let mut growth = 0.0f32;
-        let mut total = 0.0f32;
-        for b in 0..RATE_BINS {
-            let g = &mut self.grow[b];
-            let s: f32 = g.iter().sum();
-            total += s;
-            growth += s * self.rates[b] * dt_h;
-            let ph = self.phase[b] + self.rates[b] * dt_h / STEP_MM;
-            let whole = ph as u32 as f32;
-            self.phase[b] = ph - whole;
-            let n = (whole as usize).min(LEVELS - 1);
-            if n > 0 {
-                // The top level keeps what would grow beyond it.
-                let top: f32 = g[LEVELS - 1 - n..].iter().sum();
-                g.copy_within(0..LEVELS - 1 - n, n);
-                for v in g[..n].iter_mut() {
-                    *v = 0.0;
-                }
-                g[LEVELS - 1] = top;
-            }
-        }
-        for b in 0..RATE_BINS {
-            total += self.pause[b].iter().sum::<f32>();
-        }
-        let norm = if total > 0.0 { 1.0 / total } else { 1.0 };
-        self.growth_mm += growth * norm;
-        let restart = prob(p.restart_per_h);
-        // A shed is a jump of the currents to a dry face's reading: seen
-        // by the change look's windows, it is taken within a window; unseen,
-        // the ice stays (thick clear ice reads almost like a dry face, and
-        // at `shed_per_h` alone the looks at it had shed glaze at 10 mm/h
-        // and gain 0.85 within the hour in most accretions).
-        let shed = if self.change.fell_to_dry() {
-            prob(SHED_SEEN_PER_H)
-        } else {
-            SHED_UNSEEN * prob(p.shed_per_h)
-        };
-        self.switch = [
-            prob(p.pause_per_h),
-            prob(p.resume_per_h),
-            shed,
-            restart,
-            restart * (total / (2 * RATE_BINS * LEVELS) as f32),
-            prob(p.resume_ice_per_h),
-        ];
-    }
-
-    /// Pause / resume, shed, restart, level by level, over half `half` of
-    /// the rate bins.
-    fn predict_switches(&mut self, half: usize) {
-        self.stage = 2 + half as u8;
-        let [pause, resume_dry, shed, restart, restart_each, resume_ice] = self.switch;
-        let bins = if half == 0 {
-            0..RATE_BINS / 2
-        } else {
-            RATE_BINS / 2..RATE_BINS
-        };
-        for b in bins {
-            let (g, q) = (&mut self.grow[b], &mut self.pause[b]);
-            let mut shed_sum = 0.0f32;
-            for (j, (gv, qv)) in g.iter_mut().zip(q.iter_mut()).enumerate() {
-                let (a, c) = (*gv, *qv);
-                let resume = if j == 0 { resume_dry } else { resume_ice };
-                let mut ng = a * (1.0 - pause) + c * resume;
-                let mut nq = c * (1.0 - resume) + a * pause;
-                if j > 0 {
-                    shed_sum += (ng + nq) * shed;
-                    ng *= 1.0 - shed;
-                    nq *= 1.0 - shed;
-                }
-                *gv = ng * (1.0 - restart) + restart_each;
-                *qv = nq * (1.0 - restart) + restart_each;
-            }
-            // Shed: a dry face, paused (growth starts again by a resume).
-            q[0] += shed_sum;
-        }
-    }
-
-    /// The rate walks to the neighbouring bins (`mode` 0 growing, 1
-    /// paused); after the paused ones, the prediction's marginal.
-    fn predict_rate(&mut self, mode: usize) {
-        self.stage = 4 + mode as u8;
-        let walk = self.walk;
-        let keep = 1.0 - 2.0 * walk;
-        let rows = if mode == 0 {
-            &mut self.grow
-        } else {
-            &mut self.pause
-        };
-        let mut prev = rows[0];
-        for b in 0..RATE_BINS {
-            let cur = rows[b];
-            let next = match rows.get(b + 1) {
-                Some(n) => *n,
-                None => cur,
-            };
-            let below = if b == 0 { cur } else { prev };
-            for (((o, c), lo), hi) in rows[b].iter_mut().zip(&cur).zip(&below).zip(&next) {
-                *o = c * keep + walk * (lo + hi);
-            }
-            prev = cur;
-        }
-    }
-
     /// The look (at [`READY_TO_LOOK`], → [`LOOKED`]): the bank's thickness likelihood `lik` (sums to
     /// 1), tempered by the looks it is worth; `p_rime` the bank's
     /// probability of rime (the early trust). Also how well the
@@ -673,47 +527,12 @@ impl History {
     /// The growth rate: moments of r over the growing states (paused ones
     /// count 0), and P(growing).
     pub fn rate(&self) -> Rate {
-        let (mut p, mut m1, mut m2, mut total) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-        for b in 0..RATE_BINS {
-            let g: f32 = self.grow[b].iter().sum();
-            let q: f32 = self.pause[b].iter().sum();
-            let r = self.rates[b];
-            p += g;
-            m1 += g * r;
-            m2 += g * r * r;
-            total += g + q;
-        }
-        if total.is_nan() || total <= 0.0 {
-            return Rate {
-                mean_mm_per_h: 0.0,
-                sigma_mm_per_h: 0.0,
-                p_accreting: 0.0,
-            };
-        }
-        let inv = 1.0 / total;
-        let (m1, m2) = (m1 * inv, m2 * inv);
-        Rate {
-            mean_mm_per_h: m1,
-            sigma_mm_per_h: fast_math::sqrt((m2 - m1 * m1).max(0.0)),
-            p_accreting: (p * inv).clamp(0.0, 1.0),
-        }
-    }
-}
-
-/// The rate a history that is wrong would give: the rate bins' prior
-/// (log-uniform), growing with probability ½.
-pub fn prior_rate() -> Rate {
-    let (mut m1, mut m2) = (0.0f32, 0.0f32);
-    for b in 0..RATE_BINS {
-        let r = rate_of_bin(b);
-        m1 += r;
-        m2 += r * r;
-    }
-    let n = 2.0 * RATE_BINS as f32;
-    let (m1, m2) = (m1 / n, m2 / n);
-    Rate {
-        mean_mm_per_h: m1,
-        sigma_mm_per_h: fast_math::sqrt((m2 - m1 * m1).max(0.0)),
-        p_accreting: 0.5,
+        rate::from_bins(
+            self.grow
+                .iter()
+                .zip(&self.pause)
+                .zip(&self.rates)
+                .map(|((g, q), &r)| (g.iter().sum(), q.iter().sum(), r)),
+        )
     }
 }

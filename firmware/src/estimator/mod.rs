@@ -67,9 +67,12 @@
 //! `grid_summary` (a grid's moments, the mixture, the history's likelihood)
 //! reads `grid` (the grid filter: predict, update), which reads the response
 //! table through [`response`] and [`table_entry`]; [`history`] (the growth
-//! history: thickness × rate × growing/paused, the icing rate) reads
-//! [`params`], [`response`] and `change` (the change look: the currents'
-//! windows against paused and growing states); the generated [`table`]
+//! history: thickness × rate × growing/paused; its stages, its look, its
+//! marginal — with `history/predict.rs`, its transitions, and
+//! `history/rate.rs`, the icing rate read out) reads [`params`],
+//! [`response`] and `change` (the change look: the currents' windows
+//! against paused and growing states, and a fall to a dry face's reading);
+//! the generated [`table`]
 //! reads only [`table_entry`]. This file declares them and re-exports their
 //! items.
 
