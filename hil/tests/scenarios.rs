@@ -236,15 +236,11 @@ fn growth_history(outcomes: &[Outcome], rows: &[accuracy::AccuracyRow]) {
             } else {
                 c.flag_off_min
             };
-            // Miss: after the step the flag clears at 11 mm in 25.7 min
-            // (worst of the three; hil/README.md).
-            let limit = if name == "accuracy-history-rime-step" {
-                30.0
-            } else {
-                20.0
-            };
+            // After the step the flag clears at 11 mm in 16.4 min (worst
+            // of the three; 25.7 before the period ended without a window
+            // that supports growth; hil/README.md).
             assert!(
-                got.is_some_and(|m| m <= limit),
+                got.is_some_and(|m| m <= 20.0),
                 "{name}: growth stopped at {:.1} mm: {c:?}",
                 c.thickness_mm
             );

@@ -395,7 +395,7 @@ const FALL_KEEPS: f32 = 0.3;
 
 /// A window's change supports growth when the growing states' likelihood
 /// ratio against a pause is at least e^this, nats.
-const SUPPORT_NATS: f32 = 1.0;
+const SUPPORT_NATS: f32 = 0.5;
 
 /// The support's age saturates here, s (a day).
 const SUPPORT_AGE_MAX_S: f32 = 86_400.0;
