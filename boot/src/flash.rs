@@ -91,13 +91,11 @@ impl<const SECTOR: usize> PartitionFlash<SECTOR> {
     }
 
     fn check(&self, offset: u32, len: usize) -> Result<u32, FlashError> {
-        let end = offset
-            .checked_add(u32::try_from(len).map_err(|_| FlashError::OutOfBounds)?)
+        let at = self
+            .part
+            .range_offset(offset, len)
             .ok_or(FlashError::OutOfBounds)?;
-        if end > self.part.bytes() {
-            return Err(FlashError::OutOfBounds);
-        }
-        Ok(self.part.start() + offset)
+        Ok(FLASH_BASE + at)
     }
 }
 

@@ -80,13 +80,11 @@ impl<R, const SECTOR: usize> Slot<R, SECTOR> {
     /// The region's offset of the partition's byte `offset`, if
     /// `offset..offset + len` lies inside the partition.
     fn in_region(&self, offset: u32, len: usize) -> Result<u32, FlashError> {
-        let end = offset
-            .checked_add(u32::try_from(len).map_err(|_| FlashError::Size)?)
+        let at = self
+            .part
+            .range_offset(offset, len)
             .ok_or(FlashError::Size)?;
-        if end > self.part.bytes() {
-            return Err(FlashError::Size);
-        }
-        Ok(self.part.offset() - self.region_offset + offset)
+        Ok(at - self.region_offset)
     }
 }
 

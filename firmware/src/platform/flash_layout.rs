@@ -107,6 +107,16 @@ impl Partition {
         }
         true
     }
+    /// The bytes `offset..offset + len` (from the partition's start), if
+    /// they lie inside it: their offset from [`FLASH_BASE`] (`None` if they
+    /// run past its end or overflow).
+    pub fn range_offset(&self, offset: u32, len: usize) -> Option<u32> {
+        let end = offset.checked_add(u32::try_from(len).ok()?)?;
+        if end > self.bytes() {
+            return None;
+        }
+        Some(self.offset() + offset)
+    }
     /// The sector holding `offset` (from the partition's start), if inside.
     pub const fn sector_at(&self, offset: u32) -> Option<u8> {
         let mut i = 0;
@@ -193,6 +203,19 @@ const _: () = assert!(OLD_CONFIG_STORE.start() == DFU.start() && OLD_CONFIG_STOR
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_range_is_inside_a_partition_or_refused() {
+        let p = DFU;
+        assert_eq!(p.range_offset(0, 256), Some(p.offset()));
+        assert_eq!(
+            p.range_offset(p.bytes() - 4, 4),
+            Some(p.offset() + p.bytes() - 4)
+        );
+        assert_eq!(p.range_offset(p.bytes() - 4, 5), None);
+        assert_eq!(p.range_offset(u32::MAX, 1), None);
+        assert_eq!(p.range_offset(p.bytes(), 0), Some(p.offset() + p.bytes()));
+    }
 
     #[test]
     fn addresses_of_the_partitions() {
