@@ -5,6 +5,9 @@
 //! settings only on the thumb target: on the host the binary is a stub.
 use std::{env, fs, path::PathBuf};
 
+#[path = "memory_x.rs"]
+mod memory_x;
+
 fn main() {
     println!("cargo:rerun-if-changed=memory.x");
     println!("cargo:rerun-if-changed=build.rs");
@@ -12,13 +15,7 @@ fn main() {
     if !env::var("TARGET").is_ok_and(|t| t.starts_with("thumb")) {
         return;
     }
-    let Some(out) = env::var_os("OUT_DIR").map(PathBuf::from) else {
-        panic!("cargo sets OUT_DIR for build scripts");
-    };
-    if let Err(e) = fs::write(out.join("memory.x"), include_bytes!("memory.x")) {
-        panic!("cannot write memory.x into {}: {e}", out.display());
-    }
-    println!("cargo:rustc-link-search={}", out.display());
+    memory_x::place_memory_x(include_bytes!("memory.x"));
     println!("cargo:rustc-link-arg-bins=-Tdefmt.x");
 }
 
