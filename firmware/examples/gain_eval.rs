@@ -18,14 +18,16 @@
 //! every class with the gain taken as 1 ± 2 %, `EST_DESIGN=folded` with the
 //! gain's uncertainty folded into each state's covariance;
 //! `EST_HISTORY=off` without the growth history, `EST_HISTORY=nopause`
-//! without its pause state; `EST_TRACE=1` prints every 300 s of each run;
+//! without its pause state; `EST_TRACE=1` prints every 300 s of each run
+//! (`EST_TRACE_S` another period, s);
 //! `EST_MEDIUM_BINS=1` adds the medium right in 1–2, 2–4 and ≥ 4 mm;
 //! `EST_ODDS=1` prints the bank's ln odds of rime against glaze per 0.5 mm
 //! of steady growth.
 //! Settings: `EST_MEMORY` (gain memory, s), `EST_PERIOD` (update period,
 //! s), `EST_SWITCH`, `EST_WITHIN`, and the history's `EST_LOOKS`
 //! (looks per mm), `EST_EARLY`, `EST_LOOKS_PER_H`, `EST_WALK`,
-//! `EST_HPERIOD`, `EST_GAMMA` (output weight), `EST_ESCAPE`, the change
+//! `EST_HPERIOD`, `EST_GAMMA` (output weight), `EST_ESCAPE`, `EST_RESTART` (the
+//! history's restart share per hour), the change
 //! look's `EST_CWIN`, `EST_CNOISE`, `EST_CSLOPE`, `EST_CTEMPER` (0: the look as it
 //! was first), `EST_RESUME`, `EST_TELL`; the shedding rates `EST_SHED` (the bank's) and
 //! `EST_HSHED` (the history's).
@@ -246,6 +248,9 @@ fn params_from_env() -> EstimatorParams {
     if let Some(v) = get("EST_GAMMA") {
         p.history.output_weight = v;
     }
+    if let Some(v) = get("EST_RESTART") {
+        p.history.restart_per_h = v;
+    }
     if let Some(v) = get("EST_ESCAPE") {
         p.history.escape = v;
     }
@@ -346,7 +351,15 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
     let mut resumed_on = f64::NAN;
     let mut rate_done = false;
     if std::env::var("EST_TRACE").is_ok() {
-        for f in frames.iter().filter(|f| (f.t_s as u64).is_multiple_of(300)) {
+        let every_s: u64 = std::env::var("EST_TRACE_S")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .filter(|&v| v > 0)
+            .unwrap_or(300);
+        for f in frames
+            .iter()
+            .filter(|f| (f.t_s as u64).is_multiple_of(every_s))
+        {
             if let (Some(p), r) = (f.est, f.est_rate) {
                 println!(
                     "t {:6.0} d {:5.2} est {:5.2} ± {:4.2} {:?} {:.2} | rate {:5.2} true {:5.2} | {:?} acc {}",
