@@ -470,7 +470,7 @@ fn score(c: &Class, seed: u64, frame_s: f64, params: EstimatorParams) -> Score {
             s.medium_bins[bin].0 += 1;
             s.medium_bins[bin].1 += right;
         }
-        if d >= 4.0 && f64::from(est.thickness_mm) + 2.0 * sigma < d / 2.0 {
+        if confidently_thin(f64::from(est.thickness_mm), sigma, d) {
             s.thin += 1;
         }
         // RMS at 2, 5, 10 mm: the first growth only (a regrowth or a

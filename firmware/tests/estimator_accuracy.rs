@@ -337,7 +337,7 @@ fn a_rate_beyond_the_history_s_grid_widens_sigma() {
                 n += 1;
                 ok += u64::from((est - f.thickness_mm).abs() <= 2.0 * sd);
             }
-            if f.thickness_mm >= 4.0 && est + 2.0 * sd < f.thickness_mm / 2.0 {
+            if confidently_thin(est, sd, f.thickness_mm) {
                 thin += 1;
             }
         }
@@ -381,7 +381,11 @@ fn thick_clear_glaze_at_a_low_gain_stays_ice() {
             let p = f.est.expect("an estimate");
             ns += 1;
             gs += u64::from(p.medium().0 == fois_protocol::Medium::Glazed);
-            if f64::from(p.thickness_mm + 2.0 * p.sigma_mm) < f.thickness_mm / 2.0 {
+            if confidently_thin(
+                f64::from(p.thickness_mm),
+                f64::from(p.sigma_mm),
+                f.thickness_mm,
+            ) {
                 thin += 1;
             }
         }
@@ -427,4 +431,15 @@ fn the_icing_period_comes_back_when_growth_resumes_on_thick_rime() {
         let back = back.expect("the period comes back");
         assert!(back <= 15.0, "seed {seed}: back after {back} min");
     }
+}
+
+#[test]
+fn confidently_thin_is_the_goals_definition() {
+    // 1.0 + 2·0.4 = 1.8 mm below half of 5 mm: thin with confidence.
+    assert!(confidently_thin(1.0, 0.4, 5.0));
+    // 1.0 + 2·0.8 = 2.6 mm reaches beyond half of 5 mm: honest.
+    assert!(!confidently_thin(1.0, 0.8, 5.0));
+    // Below 4 mm the goal does not count.
+    assert!(!confidently_thin(0.0, 0.0, 3.9));
+    assert!(confidently_thin(0.0, 0.0, 4.0));
 }

@@ -127,6 +127,12 @@ pub struct FrameRecord {
     pub rime_odds: f32,
 }
 
+/// The goals' "confidently thin": at 4 mm or more, the estimate plus two
+/// standard deviations below half the true thickness.
+pub fn confidently_thin(est_mm: f64, sigma_mm: f64, true_mm: f64) -> bool {
+    true_mm >= 4.0 && est_mm + 2.0 * sigma_mm < true_mm / 2.0
+}
+
 pub fn medium_of(kind: Option<IceKind>) -> Medium {
     match kind {
         None => Medium::Dry,
