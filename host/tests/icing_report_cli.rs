@@ -112,6 +112,16 @@ fn bad_input_is_named_with_its_exit_code() {
     let (code, _, err) = foisctl(&["icing-report", "--log", &missing]);
     assert_eq!(code, Some(1));
     assert!(err.contains("nope.csv"), "{err}");
+    // A CSV that is not a log: the file, the line and its columns named.
+    let other = tmp.path().join("other.csv");
+    std::fs::write(&other, "not,a,log\n1,2,3\n").unwrap();
+    let (code, _, err) = foisctl(&["icing-report", "--log", &other.display().to_string()]);
+    assert_eq!(code, Some(1));
+    assert!(
+        err.contains("other.csv, line 1: no column `host_unix_ms`"),
+        "{err}"
+    );
+    assert!(err.contains("(columns: not, a, log)"), "{err}");
     let files = gateway_files();
     let (code, _, err) = foisctl(&["icing-report", "--plot", "x.pdf", "--log", &files[0]]);
     assert_eq!(code, Some(2), "{err}");

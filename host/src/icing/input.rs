@@ -185,7 +185,11 @@ impl LogSamples {
             col(n).ok_or_else(|| {
                 anyhow::anyhow!(
                     "{name}, line 1: no column `{n}`: not a foisctl monitor or gateway log (columns: {})",
-                    String::from_utf8_lossy(header.as_slice())
+                    header
+                        .iter()
+                        .map(String::from_utf8_lossy)
+                        .collect::<Vec<_>>()
+                        .join(", ")
                 )
             })
         };
